@@ -1,0 +1,253 @@
+"""The camera of a frame: extrinsics, intrinsics, per-pixel view geometry, and its file forms.
+
+Depict works in OpenGL camera space (+x right, +y up, the camera looks down -z). Three sources
+give a camera:
+
+* a camera JSON file from the user::
+
+      {"world_to_camera": [[...4 rows...]],      # OpenGL/Blender convention, column vectors
+       "fov_y_deg": 40.0,                        # or "focal_px": 1200.0
+       "projection": "perspective",              # or "orthographic" with "ortho_height": 2.0
+      }
+
+* the standard OpenEXR attributes ``worldToCamera`` / ``worldToNDC``. The OpenEXR spec's camera
+  space is left-handed with +z forward and its matrices multiply row vectors (Imath), so
+  ``M_gl = diag(1, 1, -1, 1) @ M_file.T``. Depict adds its intrinsics as ``depict/projection``,
+  ``depict/fovYDeg`` and ``depict/orthoHeight`` so it reads its own files without flags; without
+  them the field of view is recovered from ``worldToNDC``.
+* V-Ray's ``cameraTransform`` (camera-to-world, row vectors) and ``cameraFov`` (horizontal, degrees).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from gbuffer.errors import FrameError
+
+Projection = Literal["perspective", "orthographic"]
+
+#: OpenEXR camera space (+z forward) <-> OpenGL camera space (-z forward).
+FLIP_Z = np.diag([1.0, 1.0, -1.0, 1.0])
+
+
+@dataclass
+class Camera:
+    """A pinhole or orthographic camera.
+
+    Attributes
+    ----------
+    world_to_camera : (4, 4) float64 or None
+        World to OpenGL camera space, for column vectors. ``None`` when only camera-space
+        buffers are used (no world-space normals to convert).
+    projection : "perspective" or "orthographic"
+    fov_y_deg : float or None
+        Vertical field of view of the display window (perspective).
+    ortho_height : float or None
+        Height of the display window in scene units (orthographic).
+    """
+
+    world_to_camera: np.ndarray | None = None
+    projection: Projection = "perspective"
+    fov_y_deg: float | None = None
+    ortho_height: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.projection not in ("perspective", "orthographic"):
+            raise FrameError(
+                f"camera projection {self.projection!r} is not 'perspective' or 'orthographic'"
+            )
+        if self.world_to_camera is not None:
+            m = np.asarray(self.world_to_camera, dtype=np.float64)
+            if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+                raise FrameError("camera world_to_camera must be a finite 4x4 matrix (4 rows)")
+            self.world_to_camera = m
+        if self.fov_y_deg is not None and not 0.0 < self.fov_y_deg < 180.0:
+            raise FrameError(f"camera fov_y_deg={self.fov_y_deg} is outside (0, 180)")
+        if self.ortho_height is not None and not self.ortho_height > 0.0:
+            raise FrameError(f"camera ortho_height={self.ortho_height} must be > 0")
+
+    # -- intrinsics ---------------------------------------------------------------------------
+
+    def focal_px(self, display_height: int) -> float:
+        """Focal length in pixels for a display window ``display_height`` pixels high."""
+        if self.projection != "perspective" or self.fov_y_deg is None:
+            raise FrameError("focal length asked of a camera without a perspective field of view")
+        return 0.5 * display_height / math.tan(math.radians(self.fov_y_deg) / 2.0)
+
+    def pixel_size_at(self, depth: np.ndarray, display_height: int) -> np.ndarray:
+        """Scene-unit size of one pixel at planar ``depth`` (for sizes given in scene units)."""
+        if self.projection == "orthographic":
+            if self.ortho_height is None:
+                raise FrameError("orthographic camera without ortho_height")
+            return np.full_like(depth, self.ortho_height / display_height, dtype=np.float32)
+        return (depth / np.float32(self.focal_px(display_height))).astype(np.float32)
+
+    def view_vectors(
+        self,
+        shape: tuple[int, int],
+        display_size: tuple[int, int],
+        origin: tuple[int, int] = (0, 0),
+    ) -> np.ndarray:
+        """Unit vectors from each pixel's surface point towards the eye, camera space.
+
+        Parameters
+        ----------
+        shape : (H, W) of the frame's pixel grid (its data window).
+        display_size : (width, height) of the display window; intrinsics refer to it.
+        origin : (x, y) of the data window's top-left pixel inside the display window.
+
+        Returns
+        -------
+        (H, W, 3) float32. Orthographic cameras give (0, 0, 1) everywhere.
+        """
+        h, w = shape
+        out = np.empty((h, w, 3), np.float32)
+        if self.projection == "orthographic":
+            out[...] = (0.0, 0.0, 1.0)
+            return out
+        dw, dh = display_size
+        f = self.focal_px(dh)
+        xs = (np.arange(w, dtype=np.float32) + origin[0] + 0.5 - dw / 2.0) / f
+        ys = (np.arange(h, dtype=np.float32) + origin[1] + 0.5 - dh / 2.0) / f
+        # the eye is at the origin; the point is at (x, -y, -1) * depth: eye - point ∝ (-x, y, 1)
+        out[..., 0] = -xs[None, :]
+        out[..., 1] = ys[:, None]
+        out[..., 2] = 1.0
+        out /= np.linalg.norm(out, axis=2, keepdims=True)
+        return out
+
+    # -- JSON -------------------------------------------------------------------------------
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Camera:
+        """Build a camera from the camera JSON form (see the module docstring)."""
+        known = {"world_to_camera", "fov_y_deg", "focal_px", "projection", "ortho_height"}
+        unknown = sorted(set(data) - known - {"height"})
+        if unknown:
+            raise FrameError(
+                f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}"
+            )
+        projection = data.get("projection", "perspective")
+        fov = data.get("fov_y_deg")
+        if "focal_px" in data:
+            if "height" not in data:
+                raise FrameError(
+                    "camera JSON with focal_px also needs 'height' (the display height in "
+                    "pixels it refers to), or give fov_y_deg instead"
+                )
+            fov = math.degrees(2.0 * math.atan(0.5 * float(data["height"]) / data["focal_px"]))
+        if projection == "perspective" and fov is None:
+            raise FrameError("perspective camera JSON needs fov_y_deg or focal_px (+ height)")
+        if projection == "orthographic" and data.get("ortho_height") is None:
+            raise FrameError("orthographic camera JSON needs ortho_height (scene units)")
+        w2c = data.get("world_to_camera")
+        try:
+            return cls(
+                world_to_camera=None if w2c is None else np.array(w2c, dtype=np.float64),
+                projection=projection,
+                fov_y_deg=None if fov is None else float(fov),
+                ortho_height=data.get("ortho_height"),
+            )
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, FrameError):
+                raise
+            raise FrameError(f"camera JSON is not valid: {exc}") from exc
+
+    @classmethod
+    def from_json_file(cls, path: str | Path) -> Camera:
+        try:
+            data = json.loads(Path(path).read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise FrameError(f"cannot read camera file {path}: {exc}") from exc
+        if not isinstance(data, dict):
+            raise FrameError(f"camera file {path} must hold a JSON object")
+        return cls.from_dict(data)
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"projection": self.projection}
+        if self.world_to_camera is not None:
+            out["world_to_camera"] = self.world_to_camera.tolist()
+        if self.fov_y_deg is not None:
+            out["fov_y_deg"] = self.fov_y_deg
+        if self.ortho_height is not None:
+            out["ortho_height"] = self.ortho_height
+        return out
+
+    # -- EXR header ---------------------------------------------------------------------------
+
+    def projection_matrix(self, aspect: float, near: float = 0.1, far: float = 1000.0) -> np.ndarray:
+        """OpenGL-style projection (column vectors) of OpenGL camera space to clip space."""
+        p = np.zeros((4, 4))
+        if self.projection == "orthographic":
+            assert self.ortho_height is not None
+            top = self.ortho_height / 2.0
+            p[0, 0] = 1.0 / (top * aspect)
+            p[1, 1] = 1.0 / top
+            p[2, 2] = -2.0 / (far - near)
+            p[2, 3] = -(far + near) / (far - near)
+            p[3, 3] = 1.0
+        else:
+            assert self.fov_y_deg is not None
+            t = 1.0 / math.tan(math.radians(self.fov_y_deg) / 2.0)
+            p[0, 0] = t / aspect
+            p[1, 1] = t
+            p[2, 2] = (far + near) / (near - far)
+            p[2, 3] = 2.0 * far * near / (near - far)
+            p[3, 2] = -1.0
+        return p
+
+    def to_header(self, display_size: tuple[int, int]) -> dict[str, Any]:
+        """Header attributes: ``worldToCamera``, ``worldToNDC`` (OpenEXR convention), intrinsics."""
+        w2c = np.eye(4) if self.world_to_camera is None else self.world_to_camera
+        aspect = display_size[0] / display_size[1]
+        ndc = self.projection_matrix(aspect) @ w2c
+        attrs: dict[str, Any] = {
+            "worldToCamera": (FLIP_Z @ w2c).T.astype(np.float32),
+            "worldToNDC": ndc.T.astype(np.float32),
+            "depict/projection": self.projection,
+        }
+        if self.fov_y_deg is not None:
+            attrs["depict/fovYDeg"] = float(self.fov_y_deg)
+        if self.ortho_height is not None:
+            attrs["depict/orthoHeight"] = float(self.ortho_height)
+        return attrs
+
+    @classmethod
+    def from_header(cls, header: dict[str, Any]) -> Camera | None:
+        """The camera stored in an EXR header, or ``None`` when the header holds none."""
+        if "worldToCamera" in header:
+            w2c = FLIP_Z @ np.asarray(header["worldToCamera"], dtype=np.float64).T
+            projection = header.get("depict/projection", "perspective")
+            fov = header.get("depict/fovYDeg")
+            ortho = header.get("depict/orthoHeight")
+            if fov is None and ortho is None and "worldToNDC" in header:
+                ndc = np.asarray(header["worldToNDC"], dtype=np.float64).T
+                p = ndc @ np.linalg.inv(w2c)
+                if abs(p[3, 2]) > 1e-9:  # perspective: w = -z
+                    fov = math.degrees(2.0 * math.atan(1.0 / p[1, 1]))
+                else:
+                    projection = "orthographic"
+                    ortho = 2.0 / p[1, 1]
+            return cls(
+                world_to_camera=w2c,
+                projection=projection,
+                fov_y_deg=None if fov is None else float(fov),
+                ortho_height=None if ortho is None else float(ortho),
+            )
+        if "cameraTransform" in header:  # V-Ray: camera-to-world, row vectors, -z forward
+            c2w = np.asarray(header["cameraTransform"], dtype=np.float64).T
+            fov = None
+            if "cameraFov" in header and "displayWindow" in header:
+                (x0, y0), (x1, y1) = header["displayWindow"]
+                aspect = (x1 - x0 + 1) / (y1 - y0 + 1)
+                half_h = math.tan(math.radians(float(header["cameraFov"])) / 2.0) / aspect
+                fov = math.degrees(2.0 * math.atan(half_h))
+            return cls(world_to_camera=np.linalg.inv(c2w), fov_y_deg=fov)
+        return None

@@ -1,0 +1,179 @@
+"""The frame: named float32 buffers on one pixel grid, the camera, and what the file held.
+
+A :class:`Frame` is what every operator reads. Its ``buffers`` use canonical names (the table
+:data:`BUFFERS`) whatever the renderer called them; the preset that mapped them is recorded in
+``preset`` and where each came from in ``sources``. Everything read but not interpreted (other
+channels, parts, header attributes, windows, pixel types, compression) rides along in
+``passthrough`` so :func:`gbuffer.write` can give it back bit for bit. What an operator produces
+goes to ``outputs`` (EXR channel name -> (H, W) float32 array); writing puts ``outputs`` over
+the passthrough channels of the primary part.
+
+Pixel grid: the data window of the primary part (the part holding the interpreted buffers), row 0
+at the top. ``display_size`` and ``origin`` place it in the display window, to which the camera's
+intrinsics and all sizes "relative to the image height" refer.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from gbuffer.camera import Camera
+from gbuffer.errors import MissingBufferError, MissingCameraError
+
+#: Canonical buffers: name -> (components, description).
+BUFFERS: dict[str, tuple[int, str]] = {
+    "beauty": (3, "linear scene-referred RGB radiance"),
+    "alpha": (1, "alpha of the beauty"),
+    "coverage": (1, "fraction of the pixel covered by a trusted surface, 0..1"),
+    "normal": (3, "camera-space unit normal (OpenGL: +z towards the camera)"),
+    "depth": (1, "planar view depth (-z camera), positive, +inf on background"),
+    "position": (3, "camera-space position"),
+    "albedo": (3, "surface albedo (diffuse colour)"),
+    "roughness": (1, "specular roughness 0..1"),
+    "ao": (1, "ambient occlusion, 1 = unoccluded"),
+    "ambient": (3, "ambient lobe radiance"),
+    "diffuse": (3, "diffuse lobe radiance"),
+    "specular": (3, "specular lobe radiance"),
+    "transmission": (3, "transmission lobe radiance"),
+    "ambient.light": (3, "ambient lobe light without its colour"),
+    "diffuse.light": (3, "diffuse lobe light without its colour (e.g. DiffDir + DiffInd)"),
+    "specular.light": (3, "specular lobe light without its colour"),
+    "transmission.light": (3, "transmission lobe light without its colour"),
+    "ambient.color": (3, "ambient lobe colour"),
+    "diffuse.color": (3, "diffuse lobe colour (e.g. DiffCol)"),
+    "specular.color": (3, "specular lobe colour"),
+    "transmission.color": (3, "transmission lobe colour"),
+    "remainder": (3, "beauty minus the sum of lobes (emission, environment, ...)"),
+}
+
+#: Radiance lobes, in the order the beauty is rebuilt from them.
+LOBES: tuple[str, ...] = ("ambient", "diffuse", "specular", "transmission")
+
+
+@dataclass
+class Passthrough:
+    """The file as read, for a lossless write-back.
+
+    ``parts`` is a list of ``(header, channels)`` where ``header`` is the part's attribute dict
+    and ``channels`` maps channel names to ``OpenEXR.Channel`` objects holding the pixels in
+    their original type. ``primary`` indexes the part whose data window is the frame's grid.
+    """
+
+    parts: list[tuple[dict[str, Any], dict[str, Any]]] = field(default_factory=list)
+    primary: int = 0
+
+
+@dataclass
+class Frame:
+    """Named float32 buffers on one grid, plus the camera and the file's passthrough.
+
+    Attributes
+    ----------
+    buffers : canonical name -> (H, W) or (H, W, C) float32 array (see :data:`BUFFERS`).
+    camera : the camera, or ``None`` when unknown.
+    display_size : (width, height) of the display window.
+    origin : (x, y) of pixel (0, 0) of the grid inside the display window.
+    preset : name of the renderer preset that mapped the file (``"canonical"`` for renders).
+    sources : canonical name -> the file channels (or description) it came from.
+    outputs : EXR channel name -> (H, W) float32 array, written over the passthrough.
+    attributes : header attributes to add or replace in the primary part on write.
+    passthrough : the file as read (empty for frames built in memory).
+    """
+
+    buffers: dict[str, np.ndarray]
+    camera: Camera | None = None
+    display_size: tuple[int, int] | None = None
+    origin: tuple[int, int] = (0, 0)
+    preset: str = "canonical"
+    sources: dict[str, str] = field(default_factory=dict)
+    outputs: dict[str, np.ndarray] = field(default_factory=dict)
+    attributes: dict[str, Any] = field(default_factory=dict)
+    passthrough: Passthrough = field(default_factory=Passthrough)
+
+    def __post_init__(self) -> None:
+        shapes = {b.shape[:2] for b in self.buffers.values()}
+        if len(shapes) > 1:
+            raise ValueError(f"frame buffers have different sizes: {sorted(shapes)}")
+        if self.display_size is None:
+            h, w = self.shape
+            self.display_size = (w, h)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(H, W) of the pixel grid."""
+        for b in self.buffers.values():
+            return (int(b.shape[0]), int(b.shape[1]))
+        for o in self.outputs.values():
+            return (int(o.shape[0]), int(o.shape[1]))
+        raise ValueError("frame has no buffers")
+
+    @property
+    def image_height(self) -> int:
+        """Height of the display window: the unit of every size given relative to the image."""
+        assert self.display_size is not None
+        return self.display_size[1]
+
+    def has(self, name: str) -> bool:
+        return name in self.buffers
+
+    def need(self, name: str, why: str = "") -> np.ndarray:
+        """The buffer ``name``, or a :class:`MissingBufferError` that says who needs it."""
+        try:
+            return self.buffers[name]
+        except KeyError:
+            have = ", ".join(sorted(self.buffers)) or "none"
+            reason = f" ({why})" if why else ""
+            raise MissingBufferError(
+                f"the frame has no '{name}' buffer{reason}; buffers found: {have}. "
+                "Pass --preset or map the channel explicitly (--map {name}=LAYER)"
+            ) from None
+
+    def need_camera(self, why: str) -> Camera:
+        if self.camera is None:
+            raise MissingCameraError(
+                f"no camera in the file and none given ({why}); pass --camera CAM.json "
+                '({"world_to_camera": [[...4 rows...]], "fov_y_deg": 40})'
+            )
+        return self.camera
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(H, W) float32 in [0, 1]: where a surface is (coverage, else finite depth, else alpha)."""
+        if "coverage" in self.buffers:
+            return self.buffers["coverage"]
+        if "depth" in self.buffers:
+            return np.isfinite(self.buffers["depth"]).astype(np.float32)
+        if "alpha" in self.buffers:
+            return np.clip(self.buffers["alpha"], 0.0, 1.0)
+        return np.ones(self.shape, np.float32)
+
+    def view_vectors(self) -> np.ndarray:
+        """(H, W, 3) unit vectors towards the eye (orthographic default without a camera)."""
+        assert self.display_size is not None
+        if self.camera is None:
+            out = np.zeros((*self.shape, 3), np.float32)
+            out[..., 2] = 1.0
+            return out
+        return self.camera.view_vectors(self.shape, self.display_size, self.origin)
+
+    def set_layer(self, layer: str, channels: dict[str, np.ndarray]) -> None:
+        """Add output channels ``layer.<name>`` (e.g. ``set_layer("curvature", {"H": h})``)."""
+        for name, arr in channels.items():
+            self.outputs[f"{layer}.{name}" if layer else name] = np.asarray(arr, np.float32)
+
+    def copy(self) -> Frame:
+        """A shallow copy whose dicts can be changed without touching this frame."""
+        return Frame(
+            buffers=dict(self.buffers),
+            camera=self.camera,
+            display_size=self.display_size,
+            origin=self.origin,
+            preset=self.preset,
+            sources=dict(self.sources),
+            outputs=dict(self.outputs),
+            attributes=dict(self.attributes),
+            passthrough=self.passthrough,
+        )
