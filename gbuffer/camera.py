@@ -15,7 +15,7 @@ give a camera:
   ``M_gl = diag(1, 1, -1, 1) @ M_file.T``. Depict adds its intrinsics as ``depict/projection``,
   ``depict/fovYDeg`` and ``depict/orthoHeight`` so it reads its own files without flags; without
   them the field of view is recovered from ``worldToNDC``.
-* V-Ray's ``cameraTransform`` (camera-to-world, row vectors) and ``cameraFov`` (horizontal, degrees).
+* V-Ray's ``cameraTransform`` (camera-to-world, row vectors), ``cameraFov`` (horizontal, deg).
 """
 
 from __future__ import annotations
@@ -131,9 +131,7 @@ class Camera:
         known = {"world_to_camera", "fov_y_deg", "focal_px", "projection", "ortho_height"}
         unknown = sorted(set(data) - known - {"height"})
         if unknown:
-            raise FrameError(
-                f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}"
-            )
+            raise FrameError(f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}")
         projection = data.get("projection", "perspective")
         fov = data.get("fov_y_deg")
         if "focal_px" in data:
@@ -182,7 +180,9 @@ class Camera:
 
     # -- EXR header ---------------------------------------------------------------------------
 
-    def projection_matrix(self, aspect: float, near: float = 0.1, far: float = 1000.0) -> np.ndarray:
+    def projection_matrix(
+        self, aspect: float, near: float = 0.1, far: float = 1000.0
+    ) -> np.ndarray:
         """OpenGL-style projection (column vectors) of OpenGL camera space to clip space."""
         p = np.zeros((4, 4))
         if self.projection == "orthographic":

@@ -141,7 +141,7 @@ class Frame:
 
     @property
     def mask(self) -> np.ndarray:
-        """(H, W) float32 in [0, 1]: where a surface is (coverage, else finite depth, else alpha)."""
+        """(H, W) float32 in [0, 1]: surface presence (coverage, else finite depth, else alpha)."""
         if "coverage" in self.buffers:
             return self.buffers["coverage"]
         if "depth" in self.buffers:
@@ -177,3 +177,23 @@ class Frame:
             attributes=dict(self.attributes),
             passthrough=self.passthrough,
         )
+
+    def layer(self, name: str) -> dict[str, np.ndarray]:
+        """Channels of layer ``name`` (outputs first, then the primary part of the file).
+
+        ``layer("curvature")`` gives ``{"H": ..., "k1": ..., ...}``; a bare channel name such as
+        ``"Z"`` gives ``{"Z": ...}``. Arrays are float32 on the frame grid.
+        """
+        found: dict[str, np.ndarray] = {}
+        pools: list[dict[str, Any]] = [self.outputs]
+        if self.passthrough.parts:
+            pools.append(self.passthrough.parts[self.passthrough.primary][1])
+        prefix = f"{name}."
+        for pool in reversed(pools):  # outputs last, so they win
+            for channel, value in pool.items():
+                pixels = getattr(value, "pixels", value)
+                if channel == name:
+                    found[channel] = np.asarray(pixels, np.float32)
+                elif channel.startswith(prefix):
+                    found[channel[len(prefix) :]] = np.asarray(pixels, np.float32)
+        return found

@@ -1,0 +1,61 @@
+# Depict: `make run` (install + start with an example) and `make test` (install + the whole suite).
+# Everything is installed here on first use: Debian's libosmesa6 when missing (apt, as root or
+# with sudo), uv in .uv/, and the locked dependencies in .venv/ (uv.lock).
+
+PYTHON ?= python3
+VENV := .venv
+UV := .uv/bin/uv
+UV_VERSION := 0.13.8
+BIN := $(VENV)/bin
+export UV_PROJECT_ENVIRONMENT := $(VENV)
+export UV_PYTHON_DOWNLOADS := never
+export PYOPENGL_PLATFORM := osmesa
+
+.PHONY: install osmesa run example test lint typecheck pytest bench gallery openapi clean
+
+install: osmesa $(VENV)/.installed
+
+osmesa:
+	@if ! ldconfig -p | grep -q libOSMesa.so; then \
+		echo "installing Debian's libosmesa6 (OSMesa, for headless rendering)"; \
+		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libosmesa6 >/dev/null; \
+	fi
+
+$(UV):
+	$(PYTHON) -m venv .uv
+	.uv/bin/python -m pip install -q uv==$(UV_VERSION)
+
+$(VENV)/.installed: pyproject.toml uv.lock | $(UV)
+	$(UV) sync --frozen --python $(PYTHON)
+	@touch $@
+
+example: install
+	@mkdir -p example
+	$(BIN)/depict render examples/spot.obj -o example/gbuffer.exr --width 960 --height 720
+	$(BIN)/depict preview example/gbuffer.exr -o example/gbuffer.png
+	@echo "example ready: example/gbuffer.exr (preview example/gbuffer.png)"
+
+run: example
+	$(BIN)/depict inspect example/gbuffer.exr
+
+lint: install
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+
+typecheck: install
+	$(BIN)/mypy
+
+pytest: install
+	$(BIN)/pytest -q
+
+test: lint typecheck pytest
+
+bench: install
+	@for b in bench/bench_*.py; do $(BIN)/python -m bench.$$(basename $$b .py) || exit 1; done
+
+gallery: install
+	$(BIN)/python -m bench.gallery
+
+clean:
+	rm -rf $(VENV) .uv example gallery .pytest_cache .mypy_cache .ruff_cache

@@ -1,0 +1,95 @@
+"""8-bit pictures of any layer, for people: the only place Depict tone-maps.
+
+* radiance (beauty, lobes): exposure in stops, then the sRGB transfer function, clipped;
+* normals: ``0.5 * n + 0.5`` as RGB (camera space: +x red, +y green, +z blue);
+* depth: near bright, far dark, normalised over the covered range; background black;
+* one-channel data in [0, 1] (AO, coverage, alpha) as grey; signed data (curvature) on a
+  blue-white-red scale symmetric about 0.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from gbuffer.atomic import atomic_path
+from gbuffer.errors import FrameError
+from gbuffer.frame import BUFFERS, Frame
+
+RADIANCE = {
+    "beauty",
+    "ambient",
+    "diffuse",
+    "specular",
+    "transmission",
+    "remainder",
+    *(n for n in BUFFERS if n.endswith(".light") or n.endswith(".color")),
+    "albedo",
+}
+
+
+def srgb_encode(linear: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear radiance -> sRGB-encoded float in [0, 1] (IEC 61966-2-1), after ``2**exposure``."""
+    x = np.clip(linear * np.float32(2.0**exposure), 0.0, 1.0).astype(np.float32)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(
+        np.float32
+    )
+
+
+def _depth_picture(depth: np.ndarray) -> np.ndarray:
+    finite = np.isfinite(depth)
+    out = np.zeros(depth.shape, np.float32)
+    if finite.any():
+        near, far = float(depth[finite].min()), float(depth[finite].max())
+        span = far - near if far > near else 1.0
+        out[finite] = 1.0 - 0.8 * (depth[finite] - near) / span
+    return out
+
+
+def _signed_picture(values: np.ndarray) -> np.ndarray:
+    finite = np.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+    peak = float(np.percentile(np.abs(finite), 99.5)) or 1.0
+    t = np.clip(finite / peak, -1.0, 1.0)
+    pos, neg = np.clip(t, 0, 1), np.clip(-t, 0, 1)
+    return np.dstack([1.0 - neg, 1.0 - pos - neg, 1.0 - pos]).astype(np.float32)
+
+
+def _grey_or_signed(values: np.ndarray) -> np.ndarray:
+    v = np.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+    if v.min() < 0.0:
+        return _signed_picture(v)
+    hi = max(float(v.max()), 1.0)
+    return np.repeat((v / hi)[..., None], 3, axis=2)
+
+
+def picture(frame: Frame, layer: str = "beauty", exposure: float = 0.0) -> np.ndarray:
+    """An (H, W, 3) float32 RGB picture in [0, 1] of a canonical buffer or a file layer."""
+    if layer in frame.buffers:
+        data = frame.buffers[layer]
+        if layer == "normal":
+            return np.clip(0.5 * data + 0.5, 0.0, 1.0) * (frame.mask[..., None] > 0)
+        if layer == "depth":
+            return np.repeat(_depth_picture(data)[..., None], 3, axis=2)
+        if layer in RADIANCE:
+            return srgb_encode(data, exposure)
+        return _grey_or_signed(data)
+    channels = frame.layer(layer)
+    if not channels:
+        have = sorted(set(frame.buffers) | {c.split(".")[0] for c in frame.outputs})
+        raise FrameError(f"no layer '{layer}' in the frame; available: {', '.join(have)}")
+    names = list(channels)
+    for trio in (("R", "G", "B"), ("X", "Y", "Z")):
+        if all(c in channels for c in trio):
+            rgb = np.dstack([channels[c] for c in trio])
+            return srgb_encode(rgb, exposure) if trio[0] == "R" else _grey_or_signed(rgb)
+    return _grey_or_signed(channels[names[0]])
+
+
+def write_png(rgb: np.ndarray, path: str | Path) -> None:
+    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG, atomically."""
+    img = (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR)):
+            raise FrameError(f"cannot write PNG {path}")

@@ -1,0 +1,273 @@
+"""``depict``: the command line. Every command is a thin layer over gbuffer/ and the registry.
+
+Bad input (a bad file, a missing buffer or camera, an unknown operator or parameter) prints one
+line ``depict: error: ...`` on stderr and exits with code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from gbuffer.errors import FrameError
+from service.registry import PipelineError
+
+EXIT_USAGE = 2
+
+
+class UsageError(ValueError):
+    """A command line that cannot be honoured (bad flag value, missing file, ...)."""
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: JSON when it parses (numbers, booleans, lists), a comma list of such
+    values (``1,0.5,0.25``), else the plain string."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        pass
+    if "," in text:
+        return [parse_value(part) for part in text.split(",")]
+    return text
+
+
+class _OpAction(argparse.Action):
+    """``--op NAME`` starts a new pipeline step."""
+
+    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+        steps = getattr(ns, "steps", None) or []
+        steps.append({"op": value, "params": {}})
+        ns.steps = steps
+
+
+class _SetAction(argparse.Action):
+    """``--set key=value`` sets a parameter of the last ``--op``."""
+
+    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+        steps = getattr(ns, "steps", None)
+        if not steps:
+            parser.error("--set must follow an --op NAME")
+        key, sep, raw = str(value).partition("=")
+        if not sep or not key:
+            parser.error(f"--set {value!r}: expected key=value")
+        steps[-1]["params"][key.strip()] = parse_value(raw.strip())
+
+
+def add_read_options(p: argparse.ArgumentParser) -> None:
+    """Flags for reading a frame: preset, camera and mapping overrides."""
+    p.add_argument(
+        "--preset",
+        default="auto",
+        help="renderer preset: auto, canonical, blender, arnold, vray, renderman, karma",
+    )
+    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (overrides the file's)")
+    p.add_argument(
+        "--map",
+        action="append",
+        default=[],
+        metavar="BUFFER=CHANNELS",
+        help="map a canonical buffer to file channels, e.g. normal=MyLayer.N or depth=Z",
+    )
+    p.add_argument(
+        "--normal-space", choices=["world", "camera"], help="override the normals' space"
+    )
+
+
+def read_frame(args: argparse.Namespace, path: str) -> Any:
+    import gbuffer
+    from gbuffer.io import ReadOptions
+
+    mapping = {}
+    for item in args.map:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise UsageError(f"--map {item!r}: expected BUFFER=CHANNELS")
+        mapping[key.strip()] = value.strip()
+    options = ReadOptions(mapping=mapping, normal_space=args.normal_space)
+    return gbuffer.read(path, preset=args.preset, camera=args.camera, options=options)
+
+
+# -- commands ----------------------------------------------------------------------------------
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    from gbuffer import write
+    from gbuffer.camera import Camera
+    from gbuffer.render import auto_camera, load_mesh, render
+    from ops.shading import parse_light
+
+    mesh = load_mesh(args.mesh)
+    try:
+        lights = [parse_light(text) for text in args.light] or None
+    except ValueError as exc:
+        raise UsageError(f"--light: {exc}") from None
+    if args.camera:
+        camera = Camera.from_json_file(args.camera)
+    else:
+        camera = auto_camera(
+            mesh,
+            width=args.width,
+            height=args.height,
+            azimuth_deg=args.azimuth,
+            elevation_deg=args.elevation,
+        )
+    frame = render(mesh, args.width, args.height, camera=camera, lights=lights)
+    write(frame, args.output)
+    print(f"wrote {args.output} ({args.width}x{args.height})")
+    return 0
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from gbuffer.io import describe
+
+    frame = read_frame(args, args.file)
+    info = describe(frame, args.file)
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}")
+    print(f"  preset: {info['preset_reason']}")
+    print(f"  display window {info['display_window']}, data window {info['data_window']}")
+    for part in info["parts"]:
+        print(
+            f"  part {part['name'] or '(unnamed)'}: {len(part['channels'])} channels, "
+            f"{part['compression']}{', tiled' if part['tiled'] else ''}"
+        )
+    print("  buffers:")
+    for name, buf in info["buffers"].items():
+        print(f"    {name:<20s} <- {buf['source']}")
+    cam = info["camera"]
+    print(f"  camera: {json.dumps(cam) if cam else 'none (pass --camera CAM.json if needed)'}")
+    for warning in info.get("warnings", []):
+        print(f"  warning: {warning}")
+    return 0
+
+
+def cmd_preview(args: argparse.Namespace) -> int:
+    from gbuffer.preview import picture, write_png
+
+    frame = read_frame(args, args.file)
+    write_png(picture(frame, args.layer, exposure=args.exposure), args.output)
+    print(f"wrote {args.output} ({args.layer})")
+    return 0
+
+
+def cmd_ops(args: argparse.Namespace) -> int:
+    from service.registry import operators
+
+    ops = operators()
+    if args.json:
+        print(json.dumps([op.schema() for op in ops.values()], indent=2))
+        return 0
+    for op in ops.values():
+        print(f"{op.name}: {op.summary}")
+        print(f"  needs: {', '.join(op.needs) or '-'}; writes: {', '.join(op.writes)}")
+        for name, field in op.params.model_fields.items():
+            default = field.default if field.default is not None else "-"
+            print(f"    {name:<22s} = {default!s:<12s} {field.description or ''}")
+    return 0
+
+
+def cmd_enhance(args: argparse.Namespace) -> int:
+    import gbuffer
+    from service import pipeline
+
+    if args.pipeline and getattr(args, "steps", None):
+        raise UsageError("give either --pipeline or --op steps, not both")
+    if args.pipeline:
+        spec = pipeline.load(args.pipeline)
+    elif getattr(args, "steps", None):
+        spec = pipeline.parse(args.steps)
+    else:
+        spec = pipeline.DEFAULT_PIPELINE
+    pipeline.compile_steps(spec)  # refuse bad parameters before reading pixels
+    frame = read_frame(args, args.input)
+    out = pipeline.finish(
+        pipeline.run(frame, spec, debug_layers=args.debug_layers), args.output_layer
+    )
+    gbuffer.write(out, args.output)
+    print(f"wrote {args.output}")
+    return 0
+
+
+# -- parser ------------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="depict",
+        description="Depict shape in rendered images: EXR G-buffers in, enhanced EXR out.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    p = sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR")
+    p.add_argument("mesh", help="OBJ, PLY, STL, GLB or GLTF")
+    p.add_argument("-o", "--output", required=True, help="output EXR")
+    p.add_argument("--width", type=int, default=960)
+    p.add_argument("--height", type=int, default=720)
+    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (default: auto framing)")
+    p.add_argument("--azimuth", type=float, default=30.0, help="auto framing azimuth, degrees")
+    p.add_argument("--elevation", type=float, default=20.0, help="auto framing elevation, deg")
+    p.add_argument(
+        "--light",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="light, camera space: X,Y,Z (directional, towards the light) or point:X,Y,Z; "
+        "repeat for several",
+    )
+    p.set_defaults(func=cmd_render)
+
+    p = sub.add_parser("inspect", help="what Depict sees in an EXR: preset, buffers, camera")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true", help="stable JSON for other tools")
+    add_read_options(p)
+    p.set_defaults(func=cmd_inspect)
+
+    p = sub.add_parser("preview", help="an 8-bit PNG of any layer")
+    p.add_argument("file")
+    p.add_argument("-o", "--output", required=True, help="output PNG")
+    p.add_argument("--layer", default="beauty", help="buffer or layer (beauty, normal, ...)")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops (radiance)")
+    add_read_options(p)
+    p.set_defaults(func=cmd_preview)
+
+    p = sub.add_parser("ops", help="list operators with their parameters and defaults")
+    p.add_argument("--json", action="store_true", help="JSON schemas of every operator")
+    p.set_defaults(func=cmd_ops)
+
+    p = sub.add_parser("enhance", help="apply operators to an EXR frame")
+    p.add_argument("input")
+    p.add_argument("-o", "--output", required=True, help="output EXR")
+    p.add_argument("--op", action=_OpAction, metavar="NAME", help="add a pipeline step")
+    p.add_argument(
+        "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
+    )
+    p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
+    p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
+    p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
+    add_read_options(p)
+    p.set_defaults(func=cmd_enhance)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args))
+    except (FrameError, PipelineError, UsageError) as exc:
+        print(f"depict: error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except FileNotFoundError as exc:
+        print(f"depict: error: no such file: {exc.filename or exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

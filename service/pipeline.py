@@ -1,0 +1,123 @@
+"""Pipelines: JSON lists of operator steps, validated against the registry, run on a frame.
+
+A pipeline is ``{"steps": [{"op": "radiance_scaling", "params": {...}}, ...]}`` - the same spec
+for the CLI (``--pipeline PIPE.json`` or ``--op NAME --set k=v``), the HTTP API and batch runs.
+
+Python API::
+
+    import gbuffer, service.pipeline
+    frame = gbuffer.read("shot.exr", preset="auto")
+    out = service.pipeline.run(frame, [{"op": "radiance_scaling", "params": {"gamma": 2}}])
+    gbuffer.write(out, "shot_rs.exr")
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from gbuffer.frame import Frame
+from service.registry import Context, Operator, Params, PipelineError, get
+
+
+class Step(BaseModel):
+    """One step: an operator name and its parameters."""
+
+    model_config = ConfigDict(extra="forbid")
+    op: str = Field(description="operator name (see GET /v1/operators or `depict ops`)")
+    params: dict[str, Any] = Field(default_factory=dict, description="operator parameters")
+
+
+class PipelineSpec(BaseModel):
+    """A pipeline: steps applied in order."""
+
+    model_config = ConfigDict(extra="forbid")
+    steps: list[Step] = Field(min_length=1)
+
+
+DEFAULT_PIPELINE = PipelineSpec(steps=[Step(op="radiance_scaling")])
+
+
+def parse(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> PipelineSpec:
+    """A pipeline from a model, a dict, a list of steps or JSON text; PipelineError if invalid."""
+    if isinstance(spec, PipelineSpec):
+        return spec
+    try:
+        data = json.loads(spec) if isinstance(spec, str) else spec
+    except json.JSONDecodeError as exc:
+        raise PipelineError(f"pipeline is not valid JSON: {exc}") from None
+    if isinstance(data, list):
+        data = {"steps": data}
+    try:
+        return PipelineSpec.model_validate(data)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"])
+        raise PipelineError(
+            f"pipeline {loc}: {first['msg']}; expected "
+            '{"steps": [{"op": NAME, "params": {...}}, ...]}'
+        ) from None
+
+
+def load(path: str | Path) -> PipelineSpec:
+    """Read a pipeline JSON file."""
+    try:
+        text = Path(path).read_text()
+    except OSError as exc:
+        raise PipelineError(f"cannot read pipeline {path}: {exc.strerror}") from None
+    return parse(text)
+
+
+def compile_steps(spec: PipelineSpec) -> list[tuple[Operator, Params]]:
+    """Resolve operator names and validate every step's parameters before any pixel work."""
+    return [(get(step.op), get(step.op).parse(step.params)) for step in spec.steps]
+
+
+def run(
+    frame: Frame,
+    spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str,
+    *,
+    debug_layers: bool = False,
+    context: Context | None = None,
+) -> Frame:
+    """Apply the pipeline to a copy of ``frame`` and return it (``frame`` is not changed).
+
+    The enhanced image is ``out.buffers["beauty"]``; layers the operators wrote are in
+    ``out.outputs``. Call :func:`finish` to place the beauty into ``R,G,B,A`` for writing.
+    """
+    steps = compile_steps(parse(spec))
+    ctx = context or Context(debug_layers=debug_layers)
+    out = frame.copy()
+    for op, params in steps:
+        for buffer in op.needs:
+            out.need(buffer, f"needed by {op.name}")
+        if op.needs_camera:
+            out.need_camera(f"{op.name} needs the camera")
+        op.apply(out, params, ctx)
+    return out
+
+
+def finish(frame: Frame, output_layer: str | None = None) -> Frame:
+    """Put the frame's beauty into the output channels ``R,G,B,A`` (or ``LAYER.R`` ...).
+
+    When writing to ``R,G,B,A`` and the file already had channels of those names in its primary
+    part, those are kept, unchanged and with their pixel type, as ``input.R`` ... ``input.A``.
+    """
+    out = frame.copy()
+    beauty = out.need("beauty", "the enhanced image")
+    alpha = out.buffers.get("alpha", out.mask)
+    prefix = f"{output_layer}." if output_layer else ""
+    if not output_layer and out.passthrough.parts:
+        original = out.passthrough.parts[out.passthrough.primary][1]
+        for name in ("R", "G", "B", "A"):
+            if name in original and f"input.{name}" not in out.outputs:
+                out.outputs[f"input.{name}"] = original[name].pixels
+    for i, name in enumerate(("R", "G", "B")):
+        out.outputs[prefix + name] = np.ascontiguousarray(beauty[..., i], dtype=np.float32)
+    out.outputs[prefix + "A"] = np.asarray(alpha, np.float32)
+    return out

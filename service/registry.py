@@ -1,0 +1,144 @@
+"""The operator registry: one entry per operator, from which the CLI, HTTP schema and docs follow.
+
+An entry names the operator, its pydantic parameter model (ranges, defaults, units and
+descriptions live there), the frame buffers it needs, the layers it writes, and the function that
+applies it to a frame. Adding an operator means one function in ``ops/`` and one
+:func:`register` call in :mod:`service.operators`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from gbuffer.frame import Frame
+
+
+class Params(BaseModel):
+    """Base of every operator's parameters: unknown keys are refused, values validated."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+
+
+@dataclass
+class Context:
+    """What a pipeline run passes to every operator besides its parameters.
+
+    ``debug_layers``: also write intermediate layers (curvature, σ, multi-scale normals, ...).
+    ``pinned``: statistics pinned for a whole sequence (white levels, normalisations), keyed by
+    ``"<op>.<name>"``; an operator whose parameter is ``auto`` reads it from here when present
+    and records what it measured in ``measured`` so a batch can pin it for later frames.
+    """
+
+    debug_layers: bool = False
+    pinned: dict[str, float] = field(default_factory=dict)
+    measured: dict[str, float] = field(default_factory=dict)
+
+    def statistic(self, key: str, compute: Callable[[], float]) -> float:
+        """The pinned value of ``key``, else ``compute()`` (recorded in ``measured``)."""
+        if key in self.pinned:
+            return self.pinned[key]
+        value = float(compute())
+        self.measured[key] = value
+        return value
+
+
+Apply = Callable[[Frame, Any, Context], None]
+
+
+@dataclass(frozen=True)
+class Operator:
+    """A registered operator. ``apply(frame, params, context)`` edits ``frame`` in place:
+    it may replace ``frame.buffers["beauty"]`` and add output layers with ``frame.set_layer``."""
+
+    name: str
+    summary: str
+    params: type[Params]
+    needs: tuple[str, ...]
+    writes: tuple[str, ...]
+    apply: Apply
+    needs_camera: bool = False
+
+    def parse(self, values: dict[str, Any]) -> Params:
+        """Validate ``values`` into the parameter model, or raise :class:`PipelineError`."""
+        try:
+            return self.params.model_validate(values)
+        except ValidationError as exc:
+            raise PipelineError(describe_validation(self, exc)) from None
+
+    def schema(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "summary": self.summary,
+            "needs": list(self.needs),
+            "writes": list(self.writes),
+            "params": self.params.model_json_schema(),
+        }
+
+
+class PipelineError(ValueError):
+    """An unknown operator, unknown parameter or a value out of range; the message says which."""
+
+
+REGISTRY: dict[str, Operator] = {}
+
+
+def register(
+    name: str,
+    *,
+    summary: str,
+    params: type[Params],
+    needs: tuple[str, ...],
+    writes: tuple[str, ...],
+    needs_camera: bool = False,
+) -> Callable[[Apply], Apply]:
+    """Decorator registering ``apply`` as operator ``name``."""
+
+    def wrap(apply: Apply) -> Apply:
+        if name in REGISTRY:
+            raise RuntimeError(f"operator {name!r} registered twice")
+        REGISTRY[name] = Operator(name, summary, params, needs, writes, apply, needs_camera)
+        return apply
+
+    return wrap
+
+
+def get(name: str) -> Operator:
+    """The operator ``name``, or a :class:`PipelineError` listing the valid names."""
+    operators()  # make sure the built-in operators are registered
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise PipelineError(
+            f"unknown operator {name!r}; valid operators: {', '.join(sorted(REGISTRY))}"
+        ) from None
+
+
+def operators() -> dict[str, Operator]:
+    """All registered operators (importing the built-in ones on first use)."""
+    import service.operators  # noqa: F401  (registers the built-in operators)
+
+    return REGISTRY
+
+
+def describe_validation(op: Operator, exc: ValidationError) -> str:
+    """One line per problem: ``op: param=value: what is wrong (valid parameters: ...)``."""
+    fields = op.params.model_fields
+    problems = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"]) or "params"
+        if err["type"] == "extra_forbidden":
+            problems.append(
+                f"{op.name}: unknown parameter {loc!r}; valid parameters: {', '.join(fields)}"
+            )
+            continue
+        value = err.get("input")
+        desc = (
+            fields[str(err["loc"][0])].description if err["loc"] and err["loc"][0] in fields else ""
+        )
+        hint = f" ({desc})" if desc else ""
+        problems.append(f"{op.name}: {loc}={value!r}: {err['msg']}{hint}")
+    return "; ".join(problems)
