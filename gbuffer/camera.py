@@ -209,8 +209,9 @@ class Camera:
         aspect = display_size[0] / display_size[1]
         ndc = self.projection_matrix(aspect) @ w2c
         attrs: dict[str, Any] = {
-            "worldToCamera": (FLIP_Z @ w2c).T.astype(np.float32),
-            "worldToNDC": ndc.T.astype(np.float32),
+            # C order: the OpenEXR binding reads the buffer without looking at strides.
+            "worldToCamera": np.ascontiguousarray((FLIP_Z @ w2c).T, dtype=np.float32),
+            "worldToNDC": np.ascontiguousarray(ndc.T, dtype=np.float32),
             "depict/projection": self.projection,
         }
         if self.fov_y_deg is not None:

@@ -159,6 +159,30 @@ class Frame:
             return out
         return self.camera.view_vectors(self.shape, self.display_size, self.origin)
 
+    def positions(self) -> np.ndarray:
+        """(H, W, 3) camera-space positions: the ``position`` buffer, else rebuilt from depth.
+
+        Perspective: the point on the eye ray at planar depth d is −v·d/v_z (v towards the
+        eye). Orthographic: (x, y, −d) with x, y from the pixel's place in the display window.
+        """
+        if "position" in self.buffers:
+            return self.buffers["position"]
+        depth = self.need("depth", "to rebuild camera-space positions")
+        d = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
+        camera = self.camera
+        if camera is not None and camera.projection == "orthographic":
+            assert self.display_size is not None and camera.ortho_height is not None
+            dw, dh = self.display_size
+            px = camera.ortho_height / dh
+            h, w = self.shape
+            xs = (np.arange(w, dtype=np.float32) + self.origin[0] + 0.5 - dw / 2.0) * px
+            ys = (dh / 2.0 - np.arange(h, dtype=np.float32) - self.origin[1] - 0.5) * px
+            return np.dstack(
+                [np.broadcast_to(xs[None, :], (h, w)), np.broadcast_to(ys[:, None], (h, w)), -d]
+            ).astype(np.float32)
+        v = self.view_vectors()
+        return (-v * (d / np.maximum(v[..., 2], 1e-6))[..., None]).astype(np.float32)
+
     def set_layer(self, layer: str, channels: dict[str, np.ndarray]) -> None:
         """Add output channels ``layer.<name>`` (e.g. ``set_layer("curvature", {"H": h})``)."""
         for name, arr in channels.items():

@@ -1,0 +1,275 @@
+"""Frames from and to EXR files: ``read``, ``write``, ``describe``.
+
+``read`` = :func:`gbuffer.exr.read_parts` (every part, channel and attribute, with a pixel
+limit checked on the header) + :func:`gbuffer.presets.to_frame` (the renderer's names mapped to
+canonical buffers).
+
+``write`` gives the file back with the frame's ``outputs`` as channels of the primary part
+(the part whose data window is the frame grid) and ``attributes`` in its header:
+
+* an output named like an existing channel replaces its pixels and keeps its pixel type
+  (HALF stays HALF); a new output is a FLOAT channel;
+* the primary part keeps its compression, unless new channels are added to a part with lossy
+  compression (DWAA/DWAB/B44/B44A/PXR24): that part is then written with ZIP, so the data
+  layers are exact and the channels already there are not degraded a second time (lossy
+  codecs are not idempotent); ``depict/sourceCompression`` records the original and a warning
+  says so;
+* parts and channels that did not change are copied chunk for chunk (bit-identical).
+
+A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
+canonical channel names (DESIGN.md): radiance (beauty, alpha, albedo, lobes) as HALF unless it
+exceeds the half range, everything else (normals, depth, position, AO, coverage, outputs) as
+FLOAT, ZIP compression, the camera as ``worldToCamera``/``worldToNDC`` + ``depict/*``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import OpenEXR
+
+from gbuffer import exr
+from gbuffer.camera import Camera
+from gbuffer.errors import FrameError
+from gbuffer.frame import LOBES, Frame, Passthrough
+from gbuffer.presets import ReadOptions, canonical_channels, to_frame
+
+#: Header keys an output attribute may not replace (they describe the pixels).
+PROTECTED_ATTRIBUTES = frozenset(
+    {"channels", "chunkCount", "dataWindow", "type", "tiles", "name", "lineOrder"}
+)
+
+_HALF_MAX = 65000.0
+
+
+def _camera_arg(camera: Camera | dict[str, Any] | str | Path | None) -> Camera | None:
+    if camera is None or isinstance(camera, Camera):
+        return camera
+    if isinstance(camera, dict):
+        return Camera.from_dict(camera)
+    if isinstance(camera, str | Path):
+        return Camera.from_json_file(camera)
+    raise FrameError(
+        f"camera must be a Camera, a dict or a path to camera JSON, not {type(camera).__name__}"
+    )
+
+
+def read(
+    path: str | Path,
+    preset: str = "auto",
+    camera: Camera | dict[str, Any] | str | Path | None = None,
+    options: ReadOptions | dict[str, Any] | None = None,
+    max_pixels: int | None = None,
+) -> Frame:
+    """Read an EXR G-buffer into a :class:`Frame`.
+
+    Parameters
+    ----------
+    path : the EXR file.
+    preset : "auto" (detected from the header and channel names) or one of
+        :data:`gbuffer.presets.PRESETS` (blender, arnold, vray, renderman, karma, canonical).
+    camera : a :class:`Camera`, its JSON dict, or a path to camera JSON; it overrides the
+        file's camera.
+    options : :class:`gbuffer.presets.ReadOptions` (or its dict): mapping and convention
+        overrides.
+    max_pixels : refuse (LimitError) a part whose data window is larger, before decoding.
+
+    Raises
+    ------
+    FrameError (and its subclasses LimitError, MissingCameraError) with a one-line message.
+    """
+    cam = _camera_arg(camera)
+    passthrough = exr.read_parts(path, max_pixels)
+    return to_frame(passthrough, preset, cam, options)
+
+
+def _grid_shape(pt: Passthrough) -> tuple[int, int]:
+    header, channels = pt.parts[pt.primary]
+    x0, y0, x1, y1 = exr.window(header, "dataWindow", channels)
+    return (y1 - y0 + 1, x1 - x0 + 1)
+
+
+def _output_array(name: str, arr: Any, shape: tuple[int, int]) -> np.ndarray:
+    a = np.asarray(arr)
+    if a.shape != shape:
+        raise FrameError(
+            f"output '{name}' has shape {a.shape}; outputs are (H, W) = {shape} on the frame grid"
+        )
+    if a.dtype.kind not in "fiub":
+        raise FrameError(f"output '{name}' has dtype {a.dtype}; outputs are float32 arrays")
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
+def _check_attributes(attributes: dict[str, Any]) -> None:
+    bad = sorted(set(attributes) & PROTECTED_ATTRIBUTES)
+    if bad:
+        raise FrameError(
+            f"frame.attributes may not set {bad}: they describe the pixels "
+            f"(protected: {', '.join(sorted(PROTECTED_ATTRIBUTES))})"
+        )
+
+
+def write(frame: Frame, path: str | Path) -> list[str]:
+    """Write ``frame`` to ``path`` (see the module docstring for what goes where).
+
+    Returns
+    -------
+    Warnings (compression switched to lossless, mip-map levels dropped, ...).
+
+    Raises
+    ------
+    FrameError
+        An output of the wrong shape, an output over a UINT channel, a protected attribute,
+        or an I/O error.
+    """
+    _check_attributes(frame.attributes)
+    pt = frame.passthrough
+    if not pt.parts:
+        return _write_fresh(frame, path)
+    warnings: list[str] = []
+    parts = [(dict(h), dict(c)) for h, c in pt.parts]
+    header, channels = parts[pt.primary]
+    shape = _grid_shape(pt)
+    added = False
+    for name, arr in frame.outputs.items():
+        pixels = _output_array(name, arr, shape)
+        old = channels.get(name)
+        if old is not None:
+            old_pixels = getattr(old, "pixels", old)
+            if old_pixels.dtype == np.uint32:
+                raise FrameError(f"output '{name}' would overwrite a UINT channel of the file")
+            if getattr(old, "xSampling", 1) != 1 or getattr(old, "ySampling", 1) != 1:
+                raise FrameError(f"output '{name}' would overwrite a subsampled channel")
+            if old_pixels.dtype == np.float16:
+                pixels = pixels.astype(np.float16)
+            channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
+        else:
+            channels[name] = OpenEXR.Channel(name, pixels)
+            added = True
+    compression = header.get("compression")
+    if added and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
+        original = exr.compression_name(header)
+        header["compression"] = OpenEXR.ZIP_COMPRESSION
+        header["depict/sourceCompression"] = original
+        warnings.append(
+            f"part {pt.primary}: {original} is lossy; written with ZIP so the new data layers "
+            "are exact (the original compression is in depict/sourceCompression)"
+        )
+    for key, value in frame.attributes.items():
+        header[key] = value
+    new_pt = dataclasses.replace(pt, parts=parts)
+    warnings += exr.write_parts(new_pt, path)
+    return warnings
+
+
+def _radiance_keys() -> set[str]:
+    keys = {"beauty", "alpha", "albedo"}
+    for lobe in LOBES:
+        keys |= {lobe, f"{lobe}.light", f"{lobe}.color"}
+    return keys
+
+
+def _write_fresh(frame: Frame, path: str | Path) -> list[str]:
+    warnings: list[str] = []
+    channels = canonical_channels(frame)
+    radiance_names = set(canonical_channels(_subframe(frame, _radiance_keys())))
+    shape = frame.shape
+    pixels: dict[str, np.ndarray] = {}
+    for name, arr in channels.items():
+        a = np.ascontiguousarray(arr, dtype=np.float32)
+        if name in radiance_names:
+            finite = a[np.isfinite(a)]
+            if finite.size == 0 or float(np.abs(finite).max()) < _HALF_MAX:
+                a = a.astype(np.float16)
+        pixels[name] = a
+    for name, arr in frame.outputs.items():
+        pixels[name] = _output_array(name, arr, shape)
+    if not pixels:
+        raise FrameError(f"{path}: the frame has no buffers or outputs to write")
+    h, w = shape
+    assert frame.display_size is not None
+    dw, dh = frame.display_size
+    ox, oy = frame.origin
+    header: dict[str, Any] = {
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "dataWindow": exr.box2i(ox, oy, ox + w - 1, oy + h - 1),
+        "displayWindow": exr.box2i(0, 0, dw - 1, dh - 1),
+        "lineOrder": OpenEXR.INCREASING_Y,
+        "type": OpenEXR.scanlineimage,
+    }
+    cam = frame.camera
+    if cam is not None:
+        if cam.fov_y_deg is not None or cam.ortho_height is not None:
+            header.update(cam.to_header(frame.display_size))
+        else:
+            warnings.append("camera without field of view or ortho height: not written")
+    for key, value in frame.attributes.items():
+        header[key] = value
+    chans = {name: OpenEXR.Channel(name, a) for name, a in pixels.items()}
+    warnings += exr.write_parts(Passthrough(parts=[(header, chans)]), path)
+    return warnings
+
+
+def _subframe(frame: Frame, keys: set[str]) -> Frame:
+    sub = frame.copy()
+    sub.buffers = {k: v for k, v in frame.buffers.items() if k in keys}
+    return sub
+
+
+def describe(frame: Frame) -> dict[str, Any]:
+    """The stable JSON form of a frame (``depict inspect --json``).
+
+    Keys: ``file``, ``preset``, ``preset_reason``, ``size`` ([w, h] of the grid),
+    ``display_window`` and ``data_window`` ([xmin, ymin, xmax, ymax], inclusive), ``parts``
+    (name, channels, type, compression, tiled), ``buffers`` (name -> source, shape),
+    ``camera`` (camera JSON or null), ``warnings``.
+    """
+    pt = frame.passthrough
+    assert frame.display_size is not None
+    dw, dh = frame.display_size
+    parts = []
+    if pt.parts:
+        header, primary_channels = pt.parts[pt.primary]
+        x0, y0, x1, y1 = exr.window(header, "dataWindow", primary_channels)
+        if "displayWindow" in header:
+            display = list(exr.window(header, "displayWindow"))
+        else:
+            display = [0, 0, dw - 1, dh - 1]
+        data = [x0, y0, x1, y1]
+        size = [x1 - x0 + 1, y1 - y0 + 1]
+        for i, (h, channels) in enumerate(pt.parts):
+            kind = exr.storage_name(h)
+            parts.append(
+                {
+                    "name": h.get("name") or (f"part{i}" if len(pt.parts) > 1 else None),
+                    "channels": sorted(channels),
+                    "type": kind,
+                    "compression": exr.compression_name(h),
+                    "tiled": kind == "tiledimage",
+                }
+            )
+    else:
+        hh, ww = frame.shape
+        ox, oy = frame.origin
+        display = [0, 0, dw - 1, dh - 1]
+        data = [ox, oy, ox + ww - 1, oy + hh - 1]
+        size = [ww, hh]
+    buffers = {
+        name: {"source": frame.sources.get(name, ""), "shape": list(arr.shape)}
+        for name, arr in sorted(frame.buffers.items())
+    }
+    return {
+        "file": getattr(pt, "path", None) or None,
+        "preset": frame.preset,
+        "preset_reason": getattr(pt, "preset_reason", "") or "",
+        "size": size,
+        "display_window": display,
+        "data_window": data,
+        "parts": parts,
+        "buffers": buffers,
+        "camera": None if frame.camera is None else frame.camera.to_dict(),
+        "warnings": list(getattr(pt, "warnings", [])),
+    }

@@ -1,0 +1,621 @@
+"""Lights, vector helpers and BRDF terms on per-pixel fields, and a multi-light lobe shader.
+
+Conventions (DESIGN.md): OpenGL camera space, arrays float32, ``n`` the unit normal, ``l`` the unit
+direction from the surface **towards** the light, ``v`` the unit direction from the surface
+**towards** the eye. Vector fields are (H, W, 3); a direction that is the same everywhere (a
+directional light, an orthographic view) may be given as a (3,) vector instead. Every BRDF term
+returns an (H, W) float32 array, already multiplied by the cosine n·l where the model calls for
+it, so that ``radiance = colour * irradiance * term`` (terms are scaled by π where needed so that a
+white Lambertian surface under a unit light gives max(n·l, 0)).
+
+Where a model is used in the papers:
+
+* Phong lobes (Radiance Scaling §5.1: δ_j = ρ_j, so these terms stay in [0, 1]);
+* Ashikhmin-Shirley (Radiance Scaling §5.2, Eq. 3, with δ_d = ℓ·n and δ_s = h·n);
+* half-Lambertian shading (Exaggerated Shading, Rusinkiewicz et al. 2006, used as a baseline by
+  Local Light Alignment §7);
+* refraction / transmission (Radiance Scaling §5.4 Fig. 9 "simple one-bounce" refraction; Local
+  Light Alignment §6 uses the refracted view vector as the transmission guide).
+
+No shadows are cast: the shader is local, as in the papers' screen-space use.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+import numpy as np
+
+Vec3 = tuple[float, float, float]
+Model = Literal["lambert", "blinn_phong", "phong", "ggx", "ashikhmin_shirley"]
+MODELS: tuple[str, ...] = ("lambert", "blinn_phong", "phong", "ggx", "ashikhmin_shirley")
+
+_EPS = np.float32(1e-12)
+_ONES = np.ones((1, 3), np.float32)
+
+
+def _vec3(value: Sequence[float] | np.ndarray, name: str) -> Vec3:
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return (float(arr[0]), float(arr[1]), float(arr[2]))
+
+
+@dataclass(frozen=True)
+class Light:
+    """A light in camera space.
+
+    Attributes
+    ----------
+    kind : "directional" or "point"
+    vector : direction **towards** the light (directional; normalised on construction) or the
+        light's position (point), camera space.
+    color : linear RGB, each >= 0.
+    intensity : >= 0. A directional light gives irradiance ``color * intensity``; a point light
+        ``color * intensity / d²`` at distance d (inverse-square falloff).
+    """
+
+    kind: Literal["directional", "point"]
+    vector: Vec3
+    color: Vec3 = (1.0, 1.0, 1.0)
+    intensity: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("directional", "point"):
+            raise ValueError(f"light kind must be 'directional' or 'point', got {self.kind!r}")
+        vec = _vec3(self.vector, "light vector")
+        if self.kind == "directional":
+            norm = math.sqrt(sum(c * c for c in vec))
+            if norm < 1e-12:
+                raise ValueError("light vector of a directional light must not be (0, 0, 0)")
+            vec = (vec[0] / norm, vec[1] / norm, vec[2] / norm)
+        object.__setattr__(self, "vector", vec)
+        color = _vec3(self.color, "light color")
+        if min(color) < 0.0:
+            raise ValueError(f"light color must be >= 0 in each channel, got {color}")
+        object.__setattr__(self, "color", color)
+        if not (math.isfinite(self.intensity) and self.intensity >= 0.0):
+            raise ValueError(f"light intensity must be finite and >= 0, got {self.intensity}")
+        object.__setattr__(self, "intensity", float(self.intensity))
+
+
+_NUM = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+_TRIPLE = rf"\s*({_NUM})\s*,\s*({_NUM})\s*,\s*({_NUM})\s*"
+_LIGHT_RE = re.compile(
+    rf"^\s*(?:(dir|directional|point)\s*:)?{_TRIPLE}(?:@{_TRIPLE})?(?:\*\s*({_NUM}))?\s*$",
+    re.IGNORECASE,
+)
+LIGHT_SYNTAX = "[dir:|point:]X,Y,Z[@R,G,B][*INTENSITY]"
+
+
+def parse_light(text: str) -> Light:
+    """Parse a light from a CLI string ``[dir:|point:]X,Y,Z[@R,G,B][*INTENSITY]``.
+
+    ``X,Y,Z`` is the direction towards the light (``dir:``, the default) or the light position
+    (``point:``), camera space. ``@R,G,B`` sets the linear colour, ``*I`` the intensity.
+    Examples: ``"-1,1,1"``, ``"dir:0,0,1*0.5"``, ``"point:0,2,1@1,0.9,0.8*4"``.
+
+    Raises
+    ------
+    ValueError
+        When the text does not follow the syntax, or the values are out of range.
+    """
+    match = _LIGHT_RE.match(text) if isinstance(text, str) else None
+    if match is None:
+        raise ValueError(
+            f"light {text!r} is not of the form {LIGHT_SYNTAX} "
+            "(e.g. '-1,1,1', 'point:0,2,1@1,0.9,0.8*4')"
+        )
+    groups = match.groups()
+    kind: Literal["directional", "point"] = (
+        "point" if (groups[0] or "").lower() == "point" else "directional"
+    )
+    vector = (float(groups[1]), float(groups[2]), float(groups[3]))
+    color = (1.0, 1.0, 1.0)
+    if groups[4] is not None:
+        color = (float(groups[4]), float(groups[5]), float(groups[6]))
+    intensity = 1.0 if groups[7] is None else float(groups[7])
+    try:
+        return Light(kind=kind, vector=vector, color=color, intensity=intensity)
+    except ValueError as exc:
+        raise ValueError(f"light {text!r}: {exc}") from None
+
+
+# -- vector helpers ---------------------------------------------------------------------------
+
+
+def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per-pixel dot product of two (H, W, 3) fields, or of a field and a (3,) vector -> (H, W).
+
+    Uses ``cv2.transform`` (a 3-channel reduction), ≈10x faster than ``(a * b).sum(axis=2)``.
+    If both are (3,) vectors the result is a 0-d array.
+    """
+    a = np.asarray(a, np.float32)
+    b = np.asarray(b, np.float32)
+    if a.ndim == 1:
+        a, b = b, a
+    if a.ndim == 1:
+        return np.asarray(np.dot(a, b), np.float32)
+    a = np.ascontiguousarray(a)
+    if b.ndim == 1:
+        out = cv2.transform(a, b.reshape(1, 3))
+    else:
+        out = cv2.transform(cv2.multiply(a, np.ascontiguousarray(b, np.float32)), _ONES)
+    return np.asarray(out, np.float32).reshape(a.shape[:2])
+
+
+def normalize(v: np.ndarray) -> np.ndarray:
+    """Unit vectors along ``v`` (..., 3); zero vectors give (0, 0, 0)."""
+    v = np.asarray(v, np.float32)
+    if v.ndim == 1:
+        norm = float(np.linalg.norm(v))
+        return (v / norm).astype(np.float32) if norm > 1e-12 else np.zeros(3, np.float32)
+    len2 = dot(v, v)
+    inv = np.zeros_like(len2)
+    np.divide(1.0, np.sqrt(len2), out=inv, where=len2 > 1e-24)
+    return np.asarray(v * inv[..., None], np.float32)
+
+
+def _field(v: np.ndarray, like: np.ndarray) -> np.ndarray:
+    """``v`` as an (H, W, 3) float32 field shaped like ``like`` (broadcasting a (3,) vector)."""
+    v = np.asarray(v, np.float32)
+    if v.ndim == 1:
+        return np.broadcast_to(v, (*like.shape[:2], 3))
+    return v
+
+
+def reflect(v: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Mirror ``v`` about ``n``: r = 2(n·v)n − v (both pointing away from the surface).
+
+    ``reflect(l, n)`` is the mirror direction of the light (Phong); ``reflect(v, n)`` the
+    reflected view direction (environment lookups, Radiance Scaling §5.4).
+    """
+    n = np.asarray(n, np.float32)
+    v = _field(v, n)
+    return np.asarray(2.0 * dot(n, v)[..., None] * n - v, np.float32)
+
+
+def refract(v: np.ndarray, n: np.ndarray, ior: float) -> np.ndarray:
+    """Refracted direction of the view ray entering a medium of index ``ior`` (Snell's law).
+
+    ``v`` points from the surface towards the eye; the eye ray travels along −v and continues
+    into the surface along t = η(−v) + (η cosθ_i − √k) n with η = 1/ior, cosθ_i = n·v,
+    k = 1 − η²(1 − cos²θ_i). Total internal reflection (k < 0, possible when ior < 1) gives 0.
+    """
+    _check_ior(ior)
+    n = np.asarray(n, np.float32)
+    v = _field(v, n)
+    eta = np.float32(1.0 / ior)
+    cos_i = dot(n, v)
+    k = 1.0 - eta * eta * (1.0 - cos_i * cos_i)
+    root = np.sqrt(np.maximum(k, 0.0))
+    t = -eta * v + (eta * cos_i - root)[..., None] * n
+    t[k < 0.0] = 0.0
+    return np.asarray(t, np.float32)
+
+
+def _pos_pow(x: np.ndarray, p: float) -> np.ndarray:
+    """max(x, 0) ** p with cv2.pow (≈10x faster than np.power on float32)."""
+    x = np.maximum(x, np.float32(0.0))
+    return np.asarray(cv2.pow(x, float(p)), np.float32).reshape(x.shape)
+
+
+def _check_exponent(value: float, name: str) -> None:
+    if not (math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be > 0, got {value}")
+
+
+def _check_ior(ior: float) -> None:
+    if not (math.isfinite(ior) and ior > 0.0):
+        raise ValueError(f"ior must be > 0, got {ior}")
+
+
+def _dots(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(n·l, n·v, l·v): every lobe below is a function of these three scalar fields."""
+    n = np.asarray(n, np.float32)
+    nl = dot(n, l)
+    nv = dot(n, v)
+    lv = dot(l, v)
+    if lv.ndim == 0:
+        lv = np.full(nl.shape, lv, np.float32)
+    return nl, nv, lv
+
+
+def _half_cosines(nl: np.ndarray, nv: np.ndarray, lv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n·h, v·h) for h = (l + v)/|l + v|: n·h = (n·l + n·v)/|l + v|, v·h = |l + v|/2.
+
+    |l + v| = √(2 + 2 l·v); where l = −v (no half vector) both are 0.
+    """
+    length = np.sqrt(np.maximum(2.0 + 2.0 * lv, 0.0))
+    inv = np.zeros_like(length)
+    np.divide(1.0, length, out=inv, where=length > 1e-6)
+    return np.asarray((nl + nv) * inv, np.float32), np.asarray(0.5 * length, np.float32)
+
+
+# -- BRDF terms -------------------------------------------------------------------------------
+
+
+def lambert(n: np.ndarray, l: np.ndarray) -> np.ndarray:  # noqa: E741
+    """Lambertian term max(n·l, 0) (Lambert 1760; Radiance Scaling §5.1, diffuse ρ_d)."""
+    return np.maximum(dot(n, l), np.float32(0.0))
+
+
+def half_lambert(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    form: Literal["valve", "exaggerated"] = "valve",
+) -> np.ndarray:
+    """Half-Lambertian shading, which never goes to 0 on the unlit side.
+
+    ``form="valve"``: ((n·l + 1) / 2)² (Valve's Half-Lambert, Mitchell et al., "Shading in
+    Valve's Source Engine", SIGGRAPH 2006 course).
+    ``form="exaggerated"``: ½ (1 + clamp(n·l, −1, 1)), the clamped half-Lambertian of
+    Exaggerated Shading (Rusinkiewicz, Burns, DeCarlo, SIGGRAPH 2006, Eq. 1 per scale).
+    """
+    d = dot(n, l)
+    if form == "valve":
+        h = (d + 1.0) * 0.5
+        return np.asarray(h * h, np.float32)
+    if form == "exaggerated":
+        return np.asarray(0.5 * (1.0 + np.clip(d, -1.0, 1.0)), np.float32)
+    raise ValueError(f"half_lambert form must be 'valve' or 'exaggerated', got {form!r}")
+
+
+def _blinn_phong(nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, shininess: float) -> np.ndarray:
+    nh, _ = _half_cosines(nl, nv, lv)
+    term = _pos_pow(nh, shininess)
+    term[nl <= 0.0] = 0.0
+    return term
+
+
+def blinn_phong(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+    shininess: float,
+) -> np.ndarray:
+    """Blinn-Phong specular term (n·h)^s with h = (l + v)/|l + v|, 0 where n·l ≤ 0.
+
+    Blinn, "Models of light reflection for computer synthesized pictures", SIGGRAPH 1977.
+    Unnormalised, in [0, 1], as Radiance Scaling §5.1 needs (δ_s = ρ_s).
+    """
+    _check_exponent(shininess, "shininess")
+    return _blinn_phong(*_dots(n, l, v), shininess)
+
+
+def _phong(nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, shininess: float) -> np.ndarray:
+    term = _pos_pow(2.0 * nl * nv - lv, shininess)  # r·v with r = 2(n·l)n − l
+    term[nl <= 0.0] = 0.0
+    return term
+
+
+def phong(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+    shininess: float,
+) -> np.ndarray:
+    """Phong specular term (r·v)^s with r = 2(n·l)n − l, 0 where n·l ≤ 0.
+
+    Phong, "Illumination for computer generated pictures", CACM 1975; in [0, 1] (Radiance
+    Scaling §5.1, δ_s = ρ_s).
+    """
+    _check_exponent(shininess, "shininess")
+    return _phong(*_dots(n, l, v), shininess)
+
+
+def _fresnel_schlick(f0: float, cos_theta: np.ndarray) -> np.ndarray:
+    """Schlick's approximation F = f0 + (1 − f0)(1 − cosθ)⁵ (Schlick 1994)."""
+    m = np.clip(1.0 - cos_theta, 0.0, 1.0)
+    m2 = m * m
+    return np.asarray(f0 + (1.0 - f0) * (m2 * m2 * m), np.float32)
+
+
+def _check_unit(value: float, name: str, low_open: bool = False) -> None:
+    ok = math.isfinite(value) and (0.0 < value if low_open else 0.0 <= value) and value <= 1.0
+    if not ok:
+        raise ValueError(f"{name} must be in {'(0' if low_open else '[0'}, 1], got {value}")
+
+
+def _ggx(nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, roughness: float, f0: float) -> np.ndarray:
+    nh, vh = _half_cosines(nl, nv, lv)
+    a2 = np.float32(roughness**4)
+    nh = np.clip(nh, 0.0, 1.0)
+    denom = nh * nh * (a2 - 1.0) + 1.0
+    d = a2 / (np.float32(math.pi) * denom * denom)
+    nlc = np.maximum(nl, np.float32(0.0))
+    nvc = np.maximum(nv, np.float32(1e-6))
+    g1l = 2.0 * nlc / (nlc + np.sqrt(a2 + (1.0 - a2) * nlc * nlc) + _EPS)
+    g1v = 2.0 * nvc / (nvc + np.sqrt(a2 + (1.0 - a2) * nvc * nvc))
+    out = np.float32(math.pi / 4.0) * d * g1l * g1v * _fresnel_schlick(f0, vh) / nvc
+    out[(nl <= 0.0) | (nv <= 0.0)] = 0.0
+    return np.asarray(out, np.float32)
+
+
+def ggx(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+    roughness: float,
+    f0: float = 0.04,
+) -> np.ndarray:
+    """Cook-Torrance specular with GGX distribution, Smith-GGX masking, Schlick Fresnel, × n·l.
+
+    f = D G F / (4 (n·l)(n·v)), returned as π f (n·l) = π D G F / (4 n·v), with α = roughness²,
+    D = α² / (π ((n·h)²(α² − 1) + 1)²) (Walter et al., EGSR 2007, Eq. 33),
+    G = G₁(l) G₁(v), G₁(x) = 2 (n·x) / (n·x + √(α² + (1 − α²)(n·x)²)) (Walter et al. Eq. 34),
+    F = Schlick(f0, v·h). 0 where n·l ≤ 0 or n·v ≤ 0. Finite and ≥ 0 for roughness in (0, 1].
+    """
+    _check_unit(roughness, "roughness", low_open=True)
+    _check_unit(f0, "f0")
+    return _ggx(*_dots(n, l, v), roughness, f0)
+
+
+def _ashikhmin_shirley(
+    nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, exponent: float, rs: float
+) -> tuple[np.ndarray, np.ndarray]:
+    nh, hl = _half_cosines(nl, nv, lv)  # h·l = h·v
+    nlc = np.clip(nl, 0.0, 1.0)
+    nvc = np.clip(nv, 0.0, 1.0)
+    spec = np.float32((exponent + 1.0) / 8.0) * _pos_pow(nh, exponent) * _fresnel_schlick(rs, hl)
+    spec *= nlc / (np.maximum(hl, 1e-6) * np.maximum(np.maximum(nlc, nvc), 1e-6))
+    a = 1.0 - 0.5 * nlc
+    b = 1.0 - 0.5 * nvc
+    a2 = a * a
+    b2 = b * b
+    diff = np.float32(28.0 / 23.0 * (1.0 - rs)) * (1.0 - a2 * a2 * a) * (1.0 - b2 * b2 * b) * nlc
+    bad = (nl <= 0.0) | (nv <= 0.0)
+    spec[bad] = 0.0
+    diff[bad] = 0.0
+    return np.asarray(diff, np.float32), np.asarray(spec, np.float32)
+
+
+def ashikhmin_shirley(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+    exponent: float = 100.0,
+    rs: float = 0.05,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Isotropic Ashikhmin-Shirley BRDF, diffuse and specular parts, each × π (n·l).
+
+    Ashikhmin & Shirley, "An anisotropic Phong BRDF model", JGT 2000, Eqs. 4-5 with
+    n_u = n_v = ``exponent`` (used by Radiance Scaling §5.2, Eq. 3):
+
+    ρ_s = (e + 1)/(8π) (n·h)^e / ((h·l) max(n·l, n·v)) F(h·l),  F = Schlick(rs)
+    ρ_d = 28/(23π) R_d (1 − R_s) (1 − (1 − n·l/2)⁵)(1 − (1 − n·v/2)⁵)
+
+    Returns ``(diffuse, specular)``: π ρ_d (n·l) without the diffuse colour R_d, and π ρ_s (n·l).
+    Both are 0 where n·l ≤ 0 or n·v ≤ 0. Neither is bounded by 1 (which is why RS maps them with
+    δ_d = ℓ·n and δ_s = h·n instead).
+    """
+    _check_exponent(exponent, "exponent")
+    _check_unit(rs, "rs")
+    return _ashikhmin_shirley(*_dots(n, l, v), exponent, rs)
+
+
+def _transmission(
+    nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, ior: float, exponent: float
+) -> np.ndarray:
+    eta = np.float32(1.0 / ior)
+    k = 1.0 - eta * eta * (1.0 - nv * nv)
+    root = np.sqrt(np.maximum(k, 0.0))
+    tl = (eta * nv - root) * nl - eta * lv  # t·l with t = −ηv + (η n·v − √k) n
+    term = _pos_pow(tl, exponent)
+    term[k < 0.0] = 0.0
+    return term
+
+
+def transmission(
+    n: np.ndarray,
+    l: np.ndarray,  # noqa: E741
+    v: np.ndarray,
+    ior: float = 1.5,
+    exponent: float = 16.0,
+) -> np.ndarray:
+    """A back-lighting lobe: light seen through the surface along the refracted view ray.
+
+    t = refract(v, n, ior) is the eye ray's direction once it has entered the surface; assuming
+    it leaves the object unbent (the one-bounce refraction approximation of Radiance Scaling
+    §5.4, Fig. 9), light arrives to the eye from lights lying along t: the lobe is
+    max(t·l, 0)^exponent, in [0, 1], nonzero only for lights behind the surface. Local Light
+    Alignment §6 uses the same refracted vector t as the guide of transmission.
+    """
+    _check_exponent(exponent, "exponent")
+    _check_ior(ior)
+    return _transmission(*_dots(n, l, v), ior, exponent)
+
+
+# -- lights on fields -------------------------------------------------------------------------
+
+
+def light_vectors(light: Light, position: np.ndarray) -> np.ndarray:
+    """(H, W, 3) unit directions from each surface point towards ``light`` (camera space)."""
+    position = np.asarray(position, np.float32)
+    if light.kind == "directional":
+        out = np.empty((*position.shape[:2], 3), np.float32)
+        out[...] = light.vector
+        return out
+    return normalize(np.asarray(light.vector, np.float32) - position)
+
+
+def light_irradiance(light: Light, position: np.ndarray) -> np.ndarray:
+    """Irradiance ``color * intensity`` of ``light`` at each point, broadcastable to (H, W, 3).
+
+    A directional light gives a (3,) vector; a point light (H, W, 3) with inverse-square falloff
+    ``color * intensity / d²`` (d clamped at 1e-6).
+    """
+    rgb = np.asarray(light.color, np.float32) * np.float32(light.intensity)
+    if light.kind == "directional":
+        return rgb
+    offset = np.asarray(light.vector, np.float32) - np.asarray(position, np.float32)
+    d2 = np.maximum(dot(offset, offset), np.float32(1e-12))
+    return _outer(1.0 / d2, rgb)
+
+
+def _outer(s: np.ndarray, rgb: np.ndarray) -> np.ndarray:
+    """(H, W) × (3,) -> (H, W, 3) by cv2.merge of scaled planes (≈5x faster than broadcasting)."""
+    s = np.asarray(s, np.float32)
+    planes = [s * np.float32(c) for c in np.asarray(rgb, np.float32)]
+    return np.asarray(cv2.merge(planes), np.float32).reshape((*s.shape, 3))
+
+
+def _rgb(value: float | Sequence[float] | np.ndarray, name: str) -> np.ndarray:
+    arr = np.asarray(value, np.float32)
+    if arr.ndim == 0:
+        arr = np.full(3, float(arr), np.float32)
+    if arr.shape[-1:] != (3,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ValueError(f"{name} must be a finite value >= 0 or an RGB triple/field of them")
+    return arr
+
+
+def shade_lobes(
+    normal: np.ndarray,
+    position: np.ndarray,
+    view: np.ndarray,
+    albedo: float | Sequence[float] | np.ndarray,
+    lights: Sequence[Light],
+    *,
+    ambient: float = 0.1,
+    specular: float | Sequence[float] = 0.3,
+    shininess: float = 32.0,
+    ao: np.ndarray | None = None,
+    model: str = "blinn_phong",
+    transmission_weight: float = 0.0,
+    ior: float = 1.5,
+) -> dict[str, np.ndarray]:
+    """Shade per-pixel geometry with several lights into canonical radiance lobes.
+
+    Parameters
+    ----------
+    normal : (H, W, 3) camera-space unit normals; (0, 0, 0) marks pixels without a surface.
+    position : (H, W, 3) camera-space positions (used by point lights).
+    view : (H, W, 3) or (3,) unit directions towards the eye.
+    albedo : diffuse colour: a scalar, an RGB triple or an (H, W, 3) field.
+    lights : lights, camera space.
+    ambient : ambient light level (times ``ao`` when given), >= 0.
+    specular : specular colour (scalar or RGB), >= 0.
+    shininess : Phong / Blinn-Phong exponent s > 0. ``"ggx"`` uses α = √(2/(s + 2)) (the usual
+        Blinn-Phong ↔ Beckmann/GGX correspondence); ``"ashikhmin_shirley"`` uses e = s.
+    ao : optional (H, W) ambient occlusion in [0, 1], multiplied into the ambient light.
+    model : ``"lambert"`` (no specular), ``"blinn_phong"``, ``"phong"``, ``"ggx"`` or
+        ``"ashikhmin_shirley"`` (its own diffuse term; both lobes via
+        :func:`ashikhmin_shirley`). Lambert, Blinn-Phong and Phong use :func:`lambert`.
+    transmission_weight : > 0 adds the ``transmission`` lobes (:func:`transmission`, colour
+        ``albedo * transmission_weight``).
+    ior : index of refraction of the transmission lobe.
+
+    Returns
+    -------
+    dict of (H, W, 3) float32: ``"ambient"``, ``"diffuse"``, ``"specular"`` (radiance; plus
+    ``"transmission"`` when asked) and for each lobe X ``"X.light"`` (light without colour,
+    summed over the lights: Σ_i E_i term_i) and ``"X.color"`` (albedo for ambient / diffuse /
+    transmission, the specular colour for specular), with X = X.color × X.light. Pixels whose
+    normal is 0 are 0 in every output.
+
+    Notes
+    -----
+    For ``"ggx"`` and ``"ashikhmin_shirley"``, whose Fresnel term needs a reflectance f0 at
+    normal incidence, f0 = mean(specular) and the specular light is the term divided by f0, so
+    that specular = colour × light holds with colour = ``specular``.
+    """
+    if model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}; got {model!r}")
+    if not (math.isfinite(ambient) and ambient >= 0.0):
+        raise ValueError(f"ambient must be >= 0, got {ambient}")
+    _check_exponent(shininess, "shininess")
+    if not (math.isfinite(transmission_weight) and transmission_weight >= 0.0):
+        raise ValueError(f"transmission_weight must be >= 0, got {transmission_weight}")
+    _check_ior(ior)
+    normal = np.ascontiguousarray(normal, np.float32)
+    if normal.ndim != 3 or normal.shape[2] != 3:
+        raise ValueError(f"normal must be (H, W, 3), got shape {normal.shape}")
+    shape = normal.shape[:2]
+    mask = (dot(normal, normal) > 0.25).astype(np.float32)
+    alb = _rgb(albedo, "albedo")
+    if alb.ndim not in (1, 3) or (alb.ndim == 3 and alb.shape[:2] != shape):
+        raise ValueError(f"albedo must be a scalar, an RGB triple or (H, W, 3); got {alb.shape}")
+    spec_rgb = _rgb(specular, "specular")
+    if spec_rgb.ndim != 1:
+        raise ValueError("specular must be a scalar or an RGB triple")
+    f0 = float(np.mean(spec_rgb))
+    view_a = np.asarray(view, np.float32)
+    pos: np.ndarray | None = None
+    if any(light.kind == "point" for light in lights):
+        pos = np.where(mask[..., None] > 0, np.asarray(position, np.float32), np.float32(0.0))
+    nv = dot(normal, view_a)
+
+    diff_light = np.zeros((*shape, 3), np.float32)
+    spec_light = np.zeros((*shape, 3), np.float32)
+    trans_light = np.zeros((*shape, 3), np.float32) if transmission_weight > 0.0 else None
+    for light in lights:
+        if light.kind == "directional":
+            l_vec: np.ndarray = np.asarray(light.vector, np.float32)
+            e = light_irradiance(light, normal)
+        else:
+            assert pos is not None
+            l_vec = light_vectors(light, pos)
+            e = light_irradiance(light, pos)
+        nl = dot(normal, l_vec)
+        lv = dot(l_vec, view_a)
+        if lv.ndim == 0:
+            lv = np.full(shape, lv, np.float32)
+        s_term: np.ndarray | None = None
+        if model == "ashikhmin_shirley":
+            d_term, s_term = _ashikhmin_shirley(nl, nv, lv, shininess, min(f0, 1.0))
+            s_term *= np.float32(1.0 / max(f0, 1e-4))
+        else:
+            d_term = np.maximum(nl, np.float32(0.0))
+            if model == "blinn_phong":
+                s_term = _blinn_phong(nl, nv, lv, shininess)
+            elif model == "phong":
+                s_term = _phong(nl, nv, lv, shininess)
+            elif model == "ggx":
+                rough = (2.0 / (shininess + 2.0)) ** 0.25
+                s_term = _ggx(nl, nv, lv, rough, min(f0, 1.0))
+                s_term *= np.float32(1.0 / max(f0, 1e-4))
+        _accumulate(diff_light, d_term, e)
+        if s_term is not None:
+            _accumulate(spec_light, s_term, e)
+        if trans_light is not None:
+            _accumulate(trans_light, _transmission(nl, nv, lv, ior, 16.0) * mask, e)
+
+    amb = np.float32(ambient) * mask
+    if ao is not None:
+        amb *= np.asarray(ao, np.float32)
+    amb_light = _outer(amb, np.ones(3, np.float32))
+    if alb.ndim == 1:
+        alb_f = _outer(mask, alb)
+    else:
+        alb_f = np.asarray(np.ascontiguousarray(alb) * mask[..., None], np.float32)
+    spec_f = _outer(mask, spec_rgb)
+    out: dict[str, np.ndarray] = {}
+    parts: list[tuple[str, np.ndarray, np.ndarray]] = [
+        ("ambient", amb_light, alb_f),
+        ("diffuse", diff_light, alb_f),
+        ("specular", spec_light, spec_f),
+    ]
+    if trans_light is not None:
+        parts.append(("transmission", trans_light, alb_f * np.float32(transmission_weight)))
+    for name, light_f, color in parts:
+        out[f"{name}.light"] = light_f
+        out[f"{name}.color"] = color
+        out[name] = np.asarray(cv2.multiply(light_f, color), np.float32).reshape(light_f.shape)
+    return out
+
+
+def _accumulate(acc: np.ndarray, term: np.ndarray, irradiance: np.ndarray) -> None:
+    """acc += term × irradiance, irradiance (3,) or (H, W, 3)."""
+    if irradiance.ndim == 1:
+        acc += _outer(term, irradiance)
+    else:
+        acc += term[..., None] * irradiance
