@@ -1,0 +1,81 @@
+"""Benchmark: view-centred curvature (RS §4) and radiance scaling of lobes (RS Eq. 2/4) at 1080p.
+
+Run: ``.venv/bin/python -m bench.bench_curvature``. Targets (ratios to the copy unit):
+``principal_curvatures + isotropic`` <= 4x, ``principal_curvatures + scale_lobes`` (3 lobes) <= 8x.
+The frame is analytic (tests/analytic.py): two overlapping spheres (a depth jump) on a background,
+with lobes made from a Lambert and a Phong term so the scaling sees real lighting variation.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from bench.common import HD, Report
+from ops.curvature import isotropic, principal_curvatures
+from ops.scaling import scale_lobes
+from tests.analytic import two_spheres
+
+
+def _frame() -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]
+]:
+    h, w = HD
+    s = two_spheres(h, width=w)
+    n = s.normal
+    ell = np.array([0.4, 0.5, 0.77], np.float32)
+    ell /= np.linalg.norm(ell)
+    ndl = np.clip(n @ ell, 0.0, None).astype(np.float32)
+    hv = ell + np.array([0, 0, 1], np.float32)
+    hv /= np.linalg.norm(hv)
+    spec = (np.clip(n @ hv, 0.0, None) ** 40).astype(np.float32)
+    amb = (0.5 + 0.5 * n[..., 2]).astype(np.float32) * s.mask
+    lights = {
+        "ambient": np.repeat(amb[..., None], 3, axis=2),
+        "diffuse": np.repeat(ndl[..., None], 3, axis=2),
+        "specular": np.repeat(spec[..., None], 3, axis=2),
+    }
+    colour = {"ambient": (0.1, 0.1, 0.12), "diffuse": (0.8, 0.5, 0.3), "specular": (1, 1, 1)}
+    lobes = {k: (v * np.array(colour[k], np.float32)).astype(np.float32) for k, v in lights.items()}
+    return s.normal, s.depth, s.mask, lobes, lights
+
+
+def main() -> None:
+    normal, depth, mask, lobes, lights = _frame()
+    rep = Report(f"curvature + radiance scaling (cv2 threads: {cv2.getNumThreads()})")
+    rep.time("principal_curvatures", lambda: principal_curvatures(normal, depth, mask), repeat=15)
+    rep.time(
+        "principal_curvatures + isotropic",
+        lambda: isotropic(principal_curvatures(normal, depth, mask)),
+        repeat=15,
+        target_ratio=4,
+    )
+    curv = principal_curvatures(normal, depth, mask)
+    rep.time("  materialise k1, k2, dir, weight", lambda: _materialise(normal, depth, mask))
+    kappa = isotropic(curv)
+    whites = {"ambient": 1.0, "diffuse": 1.0, "specular": 1.0}
+    rep.time(
+        "scale_lobes (3 lobes, pinned whites)",
+        lambda: scale_lobes(lobes, lights, kappa, 0.5, 3.0, whites),
+    )
+    rep.time(
+        "principal_curvatures + scale_lobes (3 lobes)",
+        lambda: scale_lobes(
+            lobes, lights, isotropic(principal_curvatures(normal, depth, mask)), 0.5, 3.0, whites
+        ),
+        target_ratio=8,
+    )
+    rep.time(
+        "scale_lobes (3 lobes, white='auto')",
+        lambda: scale_lobes(lobes, lights, kappa, 0.5, 3.0, "auto", mask=mask),
+    )
+
+
+def _materialise(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) -> None:
+    c = principal_curvatures(normal, depth, mask)
+    for name in ("k1", "k2", "dir_x", "weight"):
+        getattr(c, name)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,602 @@
+"""View-centred curvature (Radiance Scaling §4) and its curvature mappings κ.
+
+Reference: R. Vergne, R. Pacanowski, P. Barla, X. Granier, C. Schlick, "Improving Shape Depiction
+under Arbitrary Rendering", IEEE TVCG 17(8), 2011 (``papers/radiance-scaling.txt``), §4.
+
+The paper computes, from the camera-space normal n, a relative depth gradient
+``g = -(n_x, n_y) / n_z^f`` (f: foreshortening) and its derivative ``H = ∇ᵀg`` (the Hessian of the
+depth field), whose eigenvalues are the principal curvatures κu ≥ κv. In Depict's OpenGL camera
+space (+z towards the viewer) ``-(n_x, n_y) / n_z`` is the gradient of z, the height *towards*
+the viewer, whose Hessian is negative on bumps. Depict differentiates
+``q = -g = (n_x, n_y) / n_z^f``, the gradient of the depth ``-z`` (what the paper's "Hessian of
+the depth field" and MeshLab's shader, which negates its sum, compute), so κ > 0 on convexities (a
+sphere seen from outside), κ < 0 in concavities, κ1 > 0 > κ2 on a saddle and 0 on a plane
+(DESIGN.md sign convention).
+
+Units and scale. Derivatives are taken per unit of *image height* (pixel derivatives times the
+image height in pixels), so a frame and its half-size proxy give the same values: an orthographic
+sphere of radius R spanning an image ``h`` scene units high has κ1 = κ2 = h / R (at f = 0, exactly;
+at the centre for any f). They are taken at a scale ``scale`` (relative to the image height): the
+normals are smoothed by a Gaussian of σ = scale · image_height pixels by normalised convolution,
+``n = G*(n·w) / G*w``, whose weight w excludes background and a band around depth discontinuities,
+so no smoothing mixes surfaces; then differentiated by central differences. When σ is several
+pixels the work runs on a box-downsampled grid where σ is about 1.5 pixels (the result is smooth at
+that scale anyway; the box and difference filters' own variance is subtracted from σ²), and the
+full-resolution fields are interpolated bilinearly (the direction from the interpolated
+doubled-angle vector), lazily, on first access (:class:`Curvature`).
+
+Discontinuities. A depth jump is a relative depth change ``|Δ log d| > depth_jump`` between
+neighbouring samples (MeshLab's Radiance Scaling shader likewise weights each of the 8 neighbours
+by its depth jump). Those pixels, widened by 1.5σ, and the background are cut out of the
+smoothing, and ``weight`` fades from 1 on reliable pixels to 0 about 1 + 1.65σ pixels from them
+(0 on background and on the first covered pixel), so no curvature appears at silhouettes or
+occlusion boundaries and nothing of one surface leaks into another.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Any
+
+import cv2
+import numpy as np
+
+#: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
+#: default kernels); same module, untyped.
+_cv: Any = cv2
+
+#: Default derivative scale, relative to the image height (σ = 3.2 px at 1080p).
+DEFAULT_SCALE = 0.003
+#: Default foreshortening f (0: curvature of the projected normal field; 1: Hessian of depth).
+DEFAULT_FORESHORTENING = 0.0
+#: Default relative depth jump |Δd|/d (as |Δ log d|) between neighbours that is a discontinuity.
+DEFAULT_DEPTH_JUMP = 0.03
+#: Default gain s of the mapping tanh(s·(κ1 + κ2)): a sphere spanning half the image height has
+#: κ1 + κ2 = 8 per unit image height, mapped to tanh(0.8) ≈ 0.66.
+DEFAULT_GAIN = 0.1
+
+_FLT_MAX = float(np.finfo(np.float32).max)
+_NZ_MIN = 1e-2  # n_z is clamped to this before n_z^f (f > 0); |q| ≤ 1 / _NZ_MIN^f
+_TARGET_SIGMA = 1.5  # downsample while σ stays >= this many working pixels
+_MIN_SIDE = 16  # never downsample below this many pixels per side
+_STRIP_ROWS = 96  # working-grid rows per strip
+
+
+@dataclass(init=False)
+class Curvature:
+    """Principal view-centred curvatures (RS §4) per unit of image height.
+
+    Attributes
+    ----------
+    k1, k2 : (H, W) float32
+        Principal curvatures, k1 >= k2, > 0 on convexities; per unit image height.
+    dir_x, dir_y : (H, W) float32
+        Unit direction of k1 in camera x (right) / y (up); defined up to sign (dir_y >= 0).
+    weight : (H, W) float32
+        Reliability in [0, 1]: 0 on background and near depth discontinuities, 1 inside.
+
+    Notes
+    -----
+    :func:`principal_curvatures` may compute on a coarser working grid; the full-resolution
+    fields are then interpolated on first access (k1, k2, weight bilinearly; the direction from
+    the bilinearly interpolated doubled-angle vector) and cached, so consumers that only need
+    :func:`isotropic` never pay for them. Constructing ``Curvature(k1, k2, dir_x, dir_y, weight)``
+    directly works as for any dataclass.
+    """
+
+    k1: np.ndarray
+    k2: np.ndarray
+    dir_x: np.ndarray
+    dir_y: np.ndarray
+    weight: np.ndarray
+
+    def __init__(
+        self,
+        k1: np.ndarray,
+        k2: np.ndarray,
+        dir_x: np.ndarray,
+        dir_y: np.ndarray,
+        weight: np.ndarray,
+    ) -> None:
+        self.k1, self.k2, self.dir_x, self.dir_y, self.weight = k1, k2, dir_x, dir_y, weight
+
+    @classmethod
+    def _lazy(cls, coarse: _Coarse) -> Curvature:
+        obj = cls.__new__(cls)
+        obj.__dict__["_coarse"] = coarse
+        return obj
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        # Only reached for attributes not yet set: the lazily interpolated fields.
+        coarse = self.__dict__.get("_coarse")
+        if coarse is None or name not in _FIELDS:
+            raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        if name in ("dir_x", "dir_y"):
+            self.dir_x, self.dir_y = coarse.directions()
+        else:
+            setattr(self, name, coarse.upsample(getattr(coarse, name)))
+        value: np.ndarray = self.__dict__[name]
+        return value
+
+    def _coarse_for(self, *names: str) -> _Coarse | None:
+        """The working-grid data, if none of ``names`` was materialised (and so maybe edited)."""
+        coarse: _Coarse | None = self.__dict__.get("_coarse")
+        if coarse is None or any(n in self.__dict__ for n in names):
+            return None
+        return coarse
+
+
+_FIELDS = ("k1", "k2", "dir_x", "dir_y", "weight")
+
+
+@dataclass
+class _Coarse:
+    """Working-grid results and the full size (H, W) they are interpolated to."""
+
+    k1: np.ndarray
+    k2: np.ndarray
+    d: np.ndarray  # (a - c) / 2 of the Hessian
+    b: np.ndarray  # its off-diagonal term
+    weight: np.ndarray
+    trace: np.ndarray
+    size: tuple[int, int]
+
+    def upsample(self, img: np.ndarray) -> np.ndarray:
+        h, w = self.size
+        if img.shape[:2] == (h, w):
+            return img
+        return cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
+
+    def directions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Direction of k1 from the interpolated (d, b): θ = ½·atan2(b, d)."""
+        phi = cv2.phase(self.upsample(self.d), self.upsample(self.b))
+        np.multiply(phi, np.float32(0.5), out=phi)
+        dx, dy = _cv.polarToCart(None, phi)
+        return dx, dy
+
+
+# -- validation ----------------------------------------------------------------------------------
+
+
+def _check_range(name: str, value: float, lo: float, hi: float, lo_open: bool = False) -> float:
+    v = float(value)
+    ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
+    if not ok:
+        bracket = "(" if lo_open else "["
+        raise ValueError(f"{name}={value!r} is outside the allowed range {bracket}{lo}, {hi}]")
+    return v
+
+
+def _check_buffers(
+    normal: np.ndarray, depth: np.ndarray, mask: np.ndarray | None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+    normal = np.asarray(normal)
+    depth = np.asarray(depth)
+    if normal.ndim != 3 or normal.shape[2] != 3:
+        raise ValueError(f"normal must have shape (H, W, 3), got {normal.shape}")
+    if depth.shape != normal.shape[:2]:
+        raise ValueError(f"depth must have shape {normal.shape[:2]}, got {depth.shape}")
+    if mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != depth.shape:
+            raise ValueError(f"mask must have shape {depth.shape}, got {mask.shape}")
+    normal = np.ascontiguousarray(normal, dtype=np.float32)
+    depth = np.ascontiguousarray(depth, dtype=np.float32)
+    return normal, depth, mask
+
+
+def _mask_u8(mask: np.ndarray) -> np.ndarray:
+    """255 where mask > 0.5 (bool: True), else 0."""
+    if mask.dtype == np.bool_:
+        return _cv.compare(np.ascontiguousarray(mask).view(np.uint8), 0, cv2.CMP_GT)
+    return _cv.compare(np.ascontiguousarray(mask, dtype=np.float32), 0.5, cv2.CMP_GT)
+
+
+def _valid_u8(depth: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    """255 where the pixel is covered (finite positive depth, mask > 0.5), else 0."""
+    valid = cv2.inRange(depth, 1e-30, _FLT_MAX)
+    if mask is not None:
+        cv2.bitwise_and(valid, _mask_u8(mask), dst=valid)
+    return valid
+
+
+def _downsample(img: np.ndarray, level: int, size: tuple[int, int]) -> np.ndarray:
+    """Box average over 2^level x 2^level blocks (``size`` = (w, h) of the result).
+
+    For exact halvings, bilinear resizing by 1/2 samples the middle of each 2x2 block, which is
+    their average (and faster than INTER_AREA); other sizes use INTER_AREA.
+    """
+    h, w = img.shape[:2]
+    k = 2**level
+    if h % k or w % k:
+        return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    for _ in range(level):
+        h, w = h // 2, w // 2
+        img = cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
+    return img
+
+
+# -- principal curvatures --------------------------------------------------------------------------
+
+
+def _working_level(sigma_px: float, shape: tuple[int, int]) -> int:
+    level = 0
+    while (
+        sigma_px / 2 ** (level + 1) >= _TARGET_SIGMA and min(shape) / 2 ** (level + 1) >= _MIN_SIDE
+    ):
+        level += 1
+    return level
+
+
+def _jump_band(depth_l: np.ndarray, cov: np.ndarray, depth_jump: float, radius: int) -> np.ndarray:
+    """uint8 255 on pixels within ``radius`` of a depth jump between two covered neighbours."""
+    off = cov == 0
+    logd = depth_l.copy()
+    np.copyto(logd, np.float32(1.0), where=off)  # cv2.log is slow on inf/NaN
+    cv2.log(logd, dst=logd)
+    lo = logd.copy()
+    np.copyto(lo, np.float32(np.inf), where=off)
+    np.copyto(logd, np.float32(-np.inf), where=off)
+    spread = cv2.subtract(_cv.dilate(logd, None), _cv.erode(lo, None))  # over covered 3x3
+    jump = _cv.compare(spread, float(depth_jump), cv2.CMP_GT)
+    if radius > 0 and cv2.countNonZero(jump):
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
+        jump = cv2.dilate(jump, k)
+    return jump
+
+
+def principal_curvatures(
+    normal: np.ndarray,
+    depth: np.ndarray,
+    mask: np.ndarray | None = None,
+    *,
+    scale: float = DEFAULT_SCALE,
+    foreshortening: float = DEFAULT_FORESHORTENING,
+    image_height: int | None = None,
+    depth_jump: float = DEFAULT_DEPTH_JUMP,
+) -> Curvature:
+    """View-centred principal curvatures (Radiance Scaling §4).
+
+    Computes ``q = (n_x, n_y) / n_z^f`` from the smoothed camera-space normal (the paper's
+    ``g = -(n_x, n_y) / n_z^f`` with the sign that makes convexities positive, see the module
+    docstring), ``H = ∇q`` in camera x/y per unit image height (rows grow downward:
+    ∂/∂y = -∂/∂row), symmetrised, and its eigen-decomposition in closed form::
+
+        H = [[a, b], [b, c]],  κ1,2 = (a + c)/2 ± sqrt(((a - c)/2)² + b²),
+        dir(κ1) = (cos θ, sin θ),  θ = ½·atan2(b, (a - c)/2)
+
+    Parameters
+    ----------
+    normal : (H, W, 3) float32
+        Camera-space unit normals (OpenGL, +z towards the camera).
+    depth : (H, W) float32
+        Planar depth, positive, +inf (or NaN, <= 0) on background.
+    mask : (H, W) bool or float, optional
+        Coverage; pixels with mask <= 0.5 are background.
+    scale : float
+        Derivative scale relative to the image height, in [0, 0.1]: Gaussian σ = scale ·
+        image_height pixels (0: plain central differences).
+    foreshortening : float
+        f in [0, 1]; n_z is clamped to >= 0.01 before n_z^f.
+    image_height : int, optional
+        Height in pixels of the full image these buffers belong to (a crop or tile passes the full
+        height); default ``H``. Sets the units (per image height) and σ in pixels.
+    depth_jump : float
+        Relative depth jump ``|Δ log d|`` between neighbouring samples above which they belong to
+        different surfaces, in (0, 10].
+
+    Returns
+    -------
+    Curvature
+        k1 >= k2 per unit image height, the direction of k1, and the reliability weight.
+    """
+    scale = _check_range("scale", scale, 0.0, 0.1)
+    f = _check_range("foreshortening", foreshortening, 0.0, 1.0)
+    depth_jump = _check_range("depth_jump", depth_jump, 0.0, 10.0, lo_open=True)
+    normal, depth, mask = _check_buffers(normal, depth, mask)
+    hgt, wid = depth.shape
+    img_h = float(hgt if image_height is None else image_height)
+    if not img_h >= 1:
+        raise ValueError(f"image_height={image_height!r} must be a positive pixel count")
+
+    sigma_px = scale * img_h
+    level = _working_level(sigma_px, (hgt, wid))
+    k = 2**level
+    exact = hgt % k == 0 and wid % k == 0
+    h_l, w_l = (hgt // k, wid // k) if exact else (max(1, round(hgt / k)), max(1, round(wid / k)))
+    box_var = (k * k - 1) / 12.0
+    # σ in working pixels, less the smoothing of the box downsampling and the central difference.
+    var = sigma_px * sigma_px - box_var - k * k / 3.0
+    sigma_l = math.sqrt(var) / k if var > 0.0 else 0.0
+    if not exact:  # working-grid inputs for the whole frame at once
+        whole = _working_inputs(normal, depth, mask, level, (w_l, h_l))
+
+    def inputs(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Working-grid normal, coverage and depth of working rows a0..a1."""
+        if not exact:
+            return whole[0][a0:a1], whole[1][a0:a1], whole[2][a0:a1]
+        rows = slice(a0 * k, a1 * k)  # box blocks never straddle strips
+        m = None if mask is None else mask[rows]
+        return _working_inputs(normal[rows], depth[rows], m, level, (w_l, a1 - a0))
+
+    radius = max(1, round(1.5 * sigma_l))
+    ks = 2 * math.ceil(2.5 * sigma_l) + 1 if sigma_l > 0.0 else 1
+    prm = _Params(
+        f=f,
+        sigma=sigma_l,
+        ksize=ks,
+        radius=radius,
+        depth_jump=depth_jump,
+        sx=0.5 * img_h * w_l / wid,  # [-1, 0, 1] spans 2 working pixels
+        sy=0.5 * img_h * h_l / hgt,
+    )
+    # Row strips (with a halo covering every neighbourhood the chain uses) keep the working
+    # set in cache and run on parallel threads; the result is the same as one whole pass.
+    halo = 3 + radius + max(ks // 2, 2)
+    outs = [np.empty((h_l, w_l), np.float32) for _ in range(6)]
+
+    def strip(r0: int) -> None:
+        r1 = min(h_l, r0 + _STRIP_ROWS)
+        a0, a1 = max(0, r0 - halo), min(h_l, r1 + halo)
+        res = _hessian_rows(*inputs(a0, a1), prm)
+        for o, x in zip(outs, res, strict=True):
+            o[r0:r1] = x[r0 - a0 : r1 - a0]
+
+    starts = range(0, h_l, _STRIP_ROWS)
+    workers = max(1, min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1))
+    if workers == 1:
+        for r0 in starts:
+            strip(r0)
+    else:
+        with ThreadPoolExecutor(workers) as pool:
+            list(pool.map(strip, starts))
+    k1, k2, d, b, wgt, trace = outs
+    return Curvature._lazy(
+        _Coarse(k1=k1, k2=k2, d=d, b=b, weight=wgt, trace=trace, size=(hgt, wid))
+    )
+
+
+def _working_inputs(
+    normal: np.ndarray,
+    depth: np.ndarray,
+    mask: np.ndarray | None,
+    level: int,
+    size: tuple[int, int],
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normals box-averaged over 2^level blocks, coverage (uint8 255 where the whole block is
+    covered) and depth sampled once per block (nearest: a jump stays a jump)."""
+    if level == 0:
+        return normal, _valid_u8(depth, mask), depth
+    k = 2**level
+    nl = _downsample(normal, level, size)
+    # Non-finite depth (inf/NaN) propagates through the box average; the mask's 255 only
+    # survives when the whole block is 255.
+    cov = cv2.inRange(_downsample(depth, level, size), 1e-30, _FLT_MAX)
+    if mask is not None:
+        m = _downsample(_mask_u8(mask), level, size)
+        cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
+    if depth.shape[0] % k == 0 and depth.shape[1] % k == 0:
+        depth_l = np.ascontiguousarray(depth[::k, ::k])
+    else:
+        depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
+    return nl, cov, depth_l
+
+
+@dataclass(frozen=True)
+class _Params:
+    f: float  # foreshortening
+    sigma: float  # Gaussian σ in working pixels
+    ksize: int  # its kernel size
+    radius: int  # widening of depth jumps, working pixels
+    depth_jump: float
+    sx: float  # derivative scales (per unit image height, sign of camera y included below)
+    sy: float
+
+
+def _hessian_rows(
+    nl: np.ndarray, cov: np.ndarray, depth_l: np.ndarray, prm: _Params
+) -> tuple[np.ndarray, ...]:
+    """(k1, k2, d, b, weight, trace) on a block of working-grid rows (RS §4, see
+    :func:`principal_curvatures`)."""
+    band = _jump_band(depth_l, cov, prm.depth_jump, prm.radius)
+    covp = cv2.subtract(cov, band)  # covered and away from depth jumps (saturating)
+    wmap = np.multiply(covp, np.float32(1.0 / 255.0), dtype=np.float32)
+
+    # Normalised convolution of the normals with the weight map: G*(n·w) / G*w.
+    chans = list(cv2.split(np.ascontiguousarray(nl)))
+    if prm.f == 0.0:
+        chans = chans[:2]  # n_z is not needed
+    ks, sigma = prm.ksize, prm.sigma
+    for i, ch in enumerate(chans):
+        cv2.patchNaNs(ch, 0.0)
+        cv2.multiply(ch, wmap, dst=ch)
+        if sigma > 0.0:
+            chans[i] = cv2.GaussianBlur(ch, (ks, ks), sigma)
+    wsm = cv2.GaussianBlur(wmap, (ks, ks), sigma) if sigma > 0.0 else wmap
+
+    # q = n_xy / n_z^f of the smoothed normal n = N / W.
+    inv = np.maximum(wsm, np.float32(1e-6))
+    np.divide(np.float32(1.0), inv, out=inv)
+    if prm.f > 0.0:
+        nzs = cv2.multiply(chans[2], inv)
+        np.maximum(nzs, np.float32(_NZ_MIN), out=nzs)
+        cv2.multiply(inv, cv2.pow(nzs, -prm.f), dst=inv)
+    qx = cv2.multiply(chans[0], inv)
+    qy = cv2.multiply(chans[1], inv)
+
+    # H = ∇q per unit image height; rows grow downward (∂/∂y = -∂/∂row).
+    a = _deriv(qx, 1, prm.sx)
+    c = _deriv(qy, 0, -prm.sy)
+    b = _deriv(qx, 0, -0.5 * prm.sy)
+    cv2.add(b, _deriv(qy, 1, 0.5 * prm.sx), dst=b)
+
+    trace = cv2.add(a, c)
+    d = cv2.addWeighted(a, 0.5, c, -0.5, 0.0)
+    r = cv2.magnitude(d, b)
+    k1 = cv2.scaleAdd(trace, 0.5, r)
+    k2 = cv2.scaleAdd(r, -2.0, k1)
+
+    # Weight: 0 on the border pixels of the coverage (whose derivative stencil reaches outside
+    # it; this also keeps an interpolated weight off the background), rising to 1 over about
+    # 1.65 σ inside: a smoothstep of the smoothed coverage W (smoothed over >= 1 px) between the
+    # values W takes 1 px and 1 + 1.65σ px inside a straight edge, Φ(1/σ) and Φ(1/σ + 1.65).
+    sigma_w = sigma
+    if sigma < 1.0:
+        sigma_w = 1.0
+        wsm = cv2.GaussianBlur(wmap, (5, 5), 1.0)
+    w0, w1 = _phi(1.0 / sigma_w), _phi(1.0 / sigma_w + 1.65)
+    wgt = cv2.addWeighted(wsm, 1.0 / (w1 - w0), wsm, 0.0, -w0 / (w1 - w0))
+    np.clip(wgt, 0.0, 1.0, out=wgt)
+    wgt = wgt * wgt * (3.0 - 2.0 * wgt)
+    inner = _cv.erode(covp, None, borderType=cv2.BORDER_REPLICATE)
+    wgt = _cv.multiply(wgt, inner, scale=1.0 / 255.0, dtype=cv2.CV_32F)
+    return k1, k2, d, b, wgt, trace
+
+
+def _phi(x: float) -> float:
+    """Standard normal CDF."""
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
+def _deriv(img: np.ndarray, axis: int, scale: float) -> np.ndarray:
+    """``scale`` · (img[+1] - img[-1]) along columns (axis=1) or rows (axis=0); one-sided
+    (doubled) on the first and last column/row."""
+    kern = np.array([-scale, 0.0, scale], np.float32)
+    kern = kern[None, :] if axis == 1 else kern[:, None]
+    out = np.asarray(
+        cv2.filter2D(img, cv2.CV_32F, kern, borderType=cv2.BORDER_REPLICATE), np.float32
+    )
+    if img.shape[axis] >= 2:  # replicate gives half the one-sided difference on the edges
+        edge = (slice(None), [0, -1]) if axis == 1 else ([0, -1], slice(None))
+        out[edge] *= 2.0
+    return out
+
+
+# -- curvature mappings ----------------------------------------------------------------------------
+
+
+def _tanh_scaled(x: np.ndarray, s: float) -> np.ndarray:
+    """tanh(s·x) as 1 - 2 / (exp(2 s x) + 1) with cv2 (float32, saturates cleanly)."""
+    e = np.multiply(x, np.float32(2.0 * s), dtype=np.float32)
+    cv2.exp(e, dst=e)
+    np.add(e, np.float32(1.0), out=e)
+    np.divide(np.float32(-2.0), e, out=e)
+    np.add(e, np.float32(1.0), out=e)
+    return e
+
+
+def _check_gain(gain: float) -> float:
+    return _check_range("gain", gain, 0.0, 1e6)
+
+
+def isotropic(curv: Curvature, gain: float = DEFAULT_GAIN) -> np.ndarray:
+    """Isotropic curvature mapping κ = tanh(s·(κ1 + κ2)) · weight (Radiance Scaling §4).
+
+    The paper writes κ(p) = tanh(κu + κv), "mean curvature mapped to [-1, 1]"; κ1 + κ2 is twice
+    the mean curvature. ``gain`` s in [0, 1e6] rescales it since κ is per unit image height (a
+    sphere spanning half the image height has κ1 + κ2 = 8; the default 0.1 maps it to 0.66).
+
+    Returns
+    -------
+    (H, W) float32 in [-1, 1], 0 where ``curv.weight`` is 0.
+    """
+    s = _check_gain(gain)
+    coarse = curv._coarse_for("k1", "k2", "weight")
+    if coarse is not None:  # map on the working grid, interpolate once
+        kappa = _tanh_scaled(coarse.trace, s)
+        cv2.multiply(kappa, coarse.weight, dst=kappa)
+        return coarse.upsample(kappa)
+    kappa = _tanh_scaled(cv2.add(curv.k1, curv.k2), s)
+    cv2.multiply(kappa, curv.weight, dst=kappa)
+    return kappa
+
+
+def anisotropic(
+    curv: Curvature,
+    light_dir: np.ndarray,
+    gain: float = DEFAULT_GAIN,
+    lam: float = 0.0,
+) -> np.ndarray:
+    """Anisotropic curvature mapping κ(p, ℓ) (Radiance Scaling §4)::
+
+        κ(p, ℓ) = tanh((H + λΔκ)·ℓu² + (H − λΔκ)·ℓv² + H·ℓz²),  H = κu + κv,  Δκ = κu − κv
+
+    with ℓ = (ℓu, ℓv, ℓz) the unit light direction in the frame of the principal directions u (of
+    κ1), v and the view axis z, and λ ∈ [-1, 1]: λ = 0 gives the isotropic tanh(H) for every ℓ,
+    λ = 1 favours the curvature along the light's projection, λ = -1 the one across it. As ℓ is
+    unit, the argument is H + λΔκ(ℓu² − ℓv²). (The paper's "κ(p, u) = tanh(κu)" for λ = 1 reads
+    tanh(2κu) with H = κu + κv as written; Depict keeps the formula, so that λ = 0 matches the
+    isotropic mapping.) The argument is multiplied by ``gain`` and the result by ``curv.weight``.
+
+    Parameters
+    ----------
+    curv : Curvature
+    light_dir : (3,) or (H, W, 3)
+        Camera-space direction towards the light (normalised here).
+    gain : float
+        s in [0, 1e6], as in :func:`isotropic`.
+    lam : float
+        λ in [-1, 1].
+    """
+    s = _check_gain(gain)
+    lam = _check_range("lam", lam, -1.0, 1.0)
+    ell = np.asarray(light_dir, dtype=np.float32)
+    if ell.shape == (3,):
+        norm = float(np.linalg.norm(ell))
+        if not norm > 0.0 or not math.isfinite(norm):
+            raise ValueError("light_dir must be a non-zero finite 3-vector")
+        lx, ly = float(ell[0]) / norm, float(ell[1]) / norm
+        # With θ the angle of u and φ = 2θ: ℓu² − ℓv² = (lx² − ly²)·cos φ + 2·lx·ly·sin φ, and
+        # Δκ·(cos φ, sin φ) = 2·(d, b) for the Hessian's (a − c)/2 = d and off-diagonal b.
+        cx, cy = lx * lx - ly * ly, 2.0 * lx * ly
+        coarse = curv._coarse_for(*_FIELDS)
+        if coarse is not None:  # on the working grid, interpolated once
+            arg = cv2.addWeighted(coarse.d, 2.0 * lam * cx, coarse.b, 2.0 * lam * cy, 0.0)
+            cv2.add(arg, coarse.trace, dst=arg)
+            kappa = _tanh_scaled(arg, s)
+            cv2.multiply(kappa, coarse.weight, dst=kappa)
+            return coarse.upsample(kappa)
+        c2 = cv2.subtract(
+            cv2.multiply(curv.dir_x, curv.dir_x), cv2.multiply(curv.dir_y, curv.dir_y)
+        )
+        s2 = cv2.multiply(curv.dir_x, curv.dir_y, scale=2.0)
+        proj = cv2.addWeighted(c2, cx, s2, cy, 0.0)
+    elif ell.shape == (*curv.k1.shape, 3):
+        ex, ey, ez = cv2.split(np.ascontiguousarray(ell))
+        inv = cv2.magnitude(cv2.magnitude(ex, ey), ez)
+        np.maximum(inv, np.float32(1e-20), out=inv)
+        np.divide(np.float32(1.0), inv, out=inv)
+        lu = cv2.add(cv2.multiply(ex, curv.dir_x), cv2.multiply(ey, curv.dir_y))
+        lv = cv2.subtract(cv2.multiply(ey, curv.dir_x), cv2.multiply(ex, curv.dir_y))
+        cv2.multiply(lu, inv, dst=lu)
+        cv2.multiply(lv, inv, dst=lv)
+        proj = cv2.subtract(cv2.multiply(lu, lu), cv2.multiply(lv, lv))
+    else:
+        raise ValueError(
+            f"light_dir must have shape (3,) or {(*curv.k1.shape, 3)}, got {ell.shape}"
+        )
+    trace = cv2.add(curv.k1, curv.k2)
+    delta = cv2.subtract(curv.k1, curv.k2)
+    arg = cv2.add(trace, cv2.multiply(delta, proj, scale=lam))
+    kappa = _tanh_scaled(arg, s)
+    cv2.multiply(kappa, curv.weight, dst=kappa)
+    return kappa
+
+
+def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[str, np.ndarray]:
+    """Output layers of the ``curvature`` operator.
+
+    Returns ``{"H": isotropic(curv, gain), "k1": k1·weight, "k2": k2·weight, "dir.X": dir_x,
+    "dir.Y": dir_y}`` (float32, (H, W)); H is the mapped curvature tanh(s·(κ1 + κ2)) in [-1, 1]
+    (Radiance Scaling §4), k1/k2 are per unit image height and 0 where the weight is 0.
+    """
+    return {
+        "H": isotropic(curv, gain),
+        "k1": cv2.multiply(curv.k1, curv.weight),
+        "k2": cv2.multiply(curv.k2, curv.weight),
+        "dir.X": curv.dir_x.copy(),
+        "dir.Y": curv.dir_y.copy(),
+    }

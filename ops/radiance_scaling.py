@@ -1,0 +1,430 @@
+"""Radiance Scaling in the rendering scenarios of §5 (Vergne et al., TVCG 2011).
+
+Each function shades (or re-weights precomputed radiance) with the scaled reflected-radiance
+equation, Eq. 1, L'(p→e) = ∫ ρ(e,ℓ)(n·ℓ) σ(p,e,ℓ) L(p←ℓ) dℓ, specialised as the paper does:
+
+* :func:`phong` — §5.1, one or several lights, Phong lobes with δ_j = ρ_j (ambient ρ_a = 1,
+  diffuse ρ_d = n·ℓ, specular ρ_s = (r·ℓ)^η with r the mirror view direction), a separate γ per
+  lobe; the sub-Lambertian material ρ_sl = (n·ℓ)^ζ (δ_sl = ρ_sl) and toon shading (quantise the
+  scaled intensity) are options of the same function;
+* :func:`ashikhmin_shirley` — §5.2, Eq. 3: δ_d = ℓ·n, δ_s = h·n;
+* :func:`precomputed_diffuse` — §5.3.1: L' ≈ σ̄ ρ_d A(p) L̄(n) with δ̄_d = L̄(n)/L̄*, for ambient
+  occlusion and a prefiltered environment (irradiance from spherical harmonics);
+* :func:`lit_sphere` — §5.3.1, a Lit Sphere / matcap: L' = σ̄ L_ls(n), δ̄ = L_ls(n)/L*_ls;
+* :func:`environment` — §5.3.2, perfect mirror or refraction: L' = σ̄ L_env(r),
+  δ̄_s = L_env(r)/L*_env with r the reflected / refracted view direction.
+
+The renderer-lobe post-process (Eq. 4 on a renderer's own passes) is
+:func:`ops.scaling.scale_lobes`. κ is the mapped view-centred curvature of :mod:`ops.curvature`
+(isotropic, or anisotropic per light when ``lam`` ≠ 0) and σ is :func:`ops.scaling.sigma`.
+
+All directions are camera space (OpenGL). Environment maps are equirectangular (lat-long) images
+with +y up; ``camera_to_world`` (3×3) turns camera-space directions into the map's frame.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ops.color import luminance
+from ops.curvature import Curvature, anisotropic, isotropic
+from ops.scaling import sigma
+from ops.shading import (
+    Light,
+    dot,
+    light_irradiance,
+    light_vectors,
+    normalize,
+    reflect,
+    refract,
+)
+from ops.shading import ashikhmin_shirley as as_brdf
+
+
+@dataclass(frozen=True)
+class Scaled:
+    """Enhanced radiance per lobe, their sum, and the mean σ of each lobe (for debug layers)."""
+
+    lobes: dict[str, np.ndarray]
+    sigmas: dict[str, np.ndarray]
+
+    @property
+    def beauty(self) -> np.ndarray:
+        total = np.zeros_like(next(iter(self.lobes.values())))
+        for lobe in self.lobes.values():
+            total += lobe
+        return total
+
+
+def _kappa(curv: Curvature, light_dir: np.ndarray, gain: float, lam: float) -> np.ndarray:
+    """κ for one light: isotropic when λ = 0, else the anisotropic mapping of §4."""
+    if lam == 0.0:
+        return isotropic(curv, gain)
+    return anisotropic(curv, light_dir, gain, lam)
+
+
+def _check_levels(levels: int) -> None:
+    if levels < 0 or levels == 1:
+        raise ValueError(f"toon_levels={levels} must be 0 (off) or >= 2")
+
+
+def quantise(intensity: np.ndarray, levels: int) -> np.ndarray:
+    """Toon quantisation of an intensity in [0, 1] into ``levels`` bands (0 → 0, 1 → 1)."""
+    bands = np.minimum(np.floor(np.clip(intensity, 0.0, 1.0) * levels), levels - 1)
+    return (bands / np.float32(levels - 1)).astype(np.float32)
+
+
+def phong(
+    normal: np.ndarray,
+    position: np.ndarray,
+    view: np.ndarray,
+    lights: Sequence[Light],
+    curv: Curvature,
+    *,
+    albedo: np.ndarray | Sequence[float] = (0.8, 0.8, 0.8),
+    ambient: float = 0.1,
+    specular: float = 0.3,
+    shininess: float = 32.0,
+    alpha: float = 0.5,
+    gamma_ambient: float = 1.0,
+    gamma_diffuse: float = 1.0,
+    gamma_specular: float = 1.0,
+    gain: float = 1.0,
+    lam: float = 0.0,
+    zeta: float = 1.0,
+    toon_levels: int = 0,
+) -> Scaled:
+    """Radiance Scaling of Phong shading, §5.1 (Vergne et al. 2011).
+
+    L'(p→e) = Σ_j ρ_j(e, ℓ) σ_j(p, e, ℓ) L_j(ℓ) for j ∈ {a, d, s}, with the reflectance mapping
+    δ_j = ρ_j: ρ_a = 1, ρ_d = (n·ℓ)^ζ (ζ = 1: Lambert; ζ ∈ [0, 1): the sub-Lambertian material
+    ρ_sl of §5.1), ρ_s = (r·ℓ)^η with r = 2(n·e)n − e. Several lights are summed. With
+    ``toon_levels`` ≥ 2 the scaled diffuse intensity ρ_d σ_d is quantised ("one only has to
+    quantize the scaled reflected intensity", §5.1).
+
+    Parameters
+    ----------
+    normal, position, view : (H, W, 3) camera-space normal, position, unit vector to the eye.
+    lights : directional / point lights (:class:`ops.shading.Light`).
+    curv : view-centred curvature of the frame.
+    albedo : (H, W, 3) or RGB diffuse colour; ``ambient`` and ``specular`` are k_a and k_s.
+    alpha, gamma_* : σ's invariant point and the magnitude per lobe (Eq. 2).
+    gain, lam : curvature gain of the tanh mapping and anisotropy λ ∈ [−1, 1] (§4).
+    """
+    if not 0.0 <= zeta <= 1.0:
+        raise ValueError(f"zeta={zeta} is outside [0, 1] (1 = Lambert, < 1 sub-Lambertian)")
+    _check_levels(toon_levels)
+    covered = np.linalg.norm(normal, axis=2) > 0.5
+    alb = np.broadcast_to(np.asarray(albedo, np.float32), normal.shape)
+    r = normalize(reflect(view, normal))
+    k_iso = isotropic(curv, gain)
+    ones = np.ones(normal.shape[:2], np.float32)
+    sig_a = sigma(k_iso, ones, alpha, gamma_ambient)
+    amb = alb * (np.float32(ambient) * sig_a)[..., None]
+    diff = np.zeros_like(alb)
+    spec = np.zeros_like(alb)
+    sig_d = np.zeros_like(ones)
+    sig_s = np.zeros_like(ones)
+    for light in lights:
+        ell = light_vectors(light, position)
+        e = np.broadcast_to(light_irradiance(light, position), normal.shape)
+        kappa = _kappa(curv, ell, gain, lam)
+        nl = np.clip(dot(normal, ell), 0.0, 1.0)
+        rho_d = nl if zeta == 1.0 else np.power(nl, np.float32(zeta))
+        s_d = sigma(kappa, rho_d, alpha, gamma_diffuse)
+        d_term = rho_d * s_d
+        if toon_levels:
+            d_term = quantise(d_term, toon_levels)
+        rho_s = np.power(np.clip(dot(r, ell), 0.0, 1.0), np.float32(shininess)) * (nl > 0)
+        s_s = sigma(kappa, rho_s, alpha, gamma_specular)
+        diff += alb * d_term[..., None] * e
+        spec += np.float32(specular) * (rho_s * s_s)[..., None] * e
+        sig_d += s_d / len(lights)
+        sig_s += s_s / len(lights)
+    lobes = {"ambient": amb, "diffuse": diff, "specular": spec}
+    for lobe in lobes.values():
+        lobe[~covered] = 0.0
+    return Scaled(lobes, {"ambient": sig_a, "diffuse": sig_d, "specular": sig_s})
+
+
+def ashikhmin_shirley(
+    normal: np.ndarray,
+    position: np.ndarray,
+    view: np.ndarray,
+    lights: Sequence[Light],
+    curv: Curvature,
+    *,
+    albedo: np.ndarray | Sequence[float] = (0.8, 0.8, 0.8),
+    exponent: float = 100.0,
+    rs: float = 0.05,
+    alpha: float = 0.5,
+    gamma_diffuse: float = 1.0,
+    gamma_specular: float = 1.0,
+    gain: float = 1.0,
+    lam: float = 0.0,
+) -> Scaled:
+    """Radiance Scaling with the Ashikhmin-Shirley BRDF and N lights, §5.2, Eq. 3.
+
+    L' = Σ_i ρ_d(ℓ_i) σ_d(p, ℓ_i) L(ℓ_i) + Σ_i ρ_s(e, ℓ_i) σ_s(p, e, ℓ_i) L(ℓ_i), where the lobes
+    may leave [0, 1], so the reflectance mappings use each lobe's reference direction:
+    δ_d = ℓ_i·n and δ_s = h_i·n (h_i the half vector of ℓ_i and e).
+    """
+    alb = np.broadcast_to(np.asarray(albedo, np.float32), normal.shape)
+    diff = np.zeros(normal.shape, np.float32)
+    spec = np.zeros(normal.shape, np.float32)
+    sig_d = np.zeros(normal.shape[:2], np.float32)
+    sig_s = np.zeros(normal.shape[:2], np.float32)
+    for light in lights:
+        ell = light_vectors(light, position)
+        e = np.broadcast_to(light_irradiance(light, position), normal.shape)
+        kappa = _kappa(curv, ell, gain, lam)
+        rho_d, rho_s = as_brdf(normal, ell, view, exponent=exponent, rs=rs)
+        h = normalize(ell + view)
+        s_d = sigma(kappa, np.clip(dot(ell, normal), 0.0, 1.0), alpha, gamma_diffuse)
+        s_s = sigma(kappa, np.clip(dot(h, normal), 0.0, 1.0), alpha, gamma_specular)
+        diff += alb * (rho_d * s_d)[..., None] * e
+        spec += (rho_s * s_s)[..., None] * e
+        sig_d += s_d / len(lights)
+        sig_s += s_s / len(lights)
+    return Scaled({"diffuse": diff, "specular": spec}, {"diffuse": sig_d, "specular": sig_s})
+
+
+# -- precomputed radiance (§5.3) -----------------------------------------------------------------
+
+
+def latlong_lookup(env: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Bilinear lookup of an equirectangular map (+y up, u = 0 at −z, increasing towards +x).
+
+    ``directions`` are (H, W, 3) unit vectors in the map's frame; returns (H, W, C) float32.
+    """
+    x, y, z = directions[..., 0], directions[..., 1], directions[..., 2]
+    h, w = env.shape[:2]
+    phi = cv2.phase(-z, x)  # 0 at -z, pi/2 at +x, in [0, 2pi)
+    u = phi * np.float32(w / (2.0 * np.pi)) - 0.5
+    v = np.arccos(np.clip(y, -1.0, 1.0)) * np.float32(h / np.pi) - 0.5
+    out = cv2.remap(
+        np.ascontiguousarray(env, np.float32),
+        u.astype(np.float32),
+        v.astype(np.float32),
+        cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_WRAP,
+    )
+    return out if out.ndim == 3 else out[..., None]
+
+
+def rotate_directions(d: np.ndarray, camera_to_world: np.ndarray | None) -> np.ndarray:
+    """(H, W, 3) directions rotated by the 3×3 ``camera_to_world`` (unchanged when ``None``)."""
+    if camera_to_world is None:
+        return d
+    m = np.asarray(camera_to_world, np.float32)[:3, :3]
+    return cv2.transform(np.ascontiguousarray(d, np.float32), m)
+
+
+def sh_irradiance(env: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Irradiance / π of an equirectangular environment for unit ``directions`` (H, W, 3).
+
+    Order-2 spherical harmonics (9 coefficients), Ramamoorthi & Hanrahan, "An efficient
+    representation for irradiance environment maps", SIGGRAPH 2001, Eqs. 10-13. This is L̄(n) of
+    §5.3.1 (the prefiltered environment), normalised so a constant environment L gives L.
+    """
+    h, w = env.shape[:2]
+    v = (np.arange(h, dtype=np.float64) + 0.5) / h * np.pi
+    u = (np.arange(w, dtype=np.float64) + 0.5) / w * 2.0 * np.pi
+    st, ct = np.sin(v)[:, None], np.cos(v)[:, None]
+    x, y, z = st * np.sin(u)[None, :], np.broadcast_to(ct, (h, w)), -st * np.cos(u)[None, :]
+    basis = np.stack(
+        [
+            0.282095 * np.ones((h, w)),
+            0.488603 * y,
+            0.488603 * z,
+            0.488603 * x,
+            1.092548 * x * y,
+            1.092548 * y * z,
+            0.315392 * (3 * z * z - 1),
+            1.092548 * x * z,
+            0.546274 * (x * x - y * y),
+        ]
+    )  # (9, h, w)
+    d_omega = (2 * np.pi / w) * (np.pi / h) * np.broadcast_to(st, (h, w))
+    env3 = env.reshape(h, w, -1).astype(np.float64)
+    coeff = np.einsum("khw,hwc->kc", basis * d_omega, env3)  # (9, C)
+    a = np.array([np.pi, *(2 * np.pi / 3,) * 3, *(np.pi / 4,) * 5])
+    coeff *= a[:, None] / np.pi
+    dx, dy, dz = directions[..., 0], directions[..., 1], directions[..., 2]
+    terms = [
+        0.282095 * np.ones_like(dx),
+        0.488603 * dy,
+        0.488603 * dz,
+        0.488603 * dx,
+        1.092548 * dx * dy,
+        1.092548 * dy * dz,
+        0.315392 * (3 * dz * dz - 1),
+        1.092548 * dx * dz,
+        0.546274 * (dx * dx - dy * dy),
+    ]
+    out = np.zeros((*dx.shape, coeff.shape[1]), np.float32)
+    for k, t in enumerate(terms):
+        out += t[..., None].astype(np.float32) * coeff[k].astype(np.float32)
+    return np.maximum(out, 0.0)
+
+
+def precomputed_diffuse(
+    normal: np.ndarray,
+    curv: Curvature,
+    *,
+    ao: np.ndarray | None = None,
+    irradiance: np.ndarray | None = None,
+    albedo: np.ndarray | Sequence[float] = (1.0, 1.0, 1.0),
+    alpha: float = 0.5,
+    gamma: float = 1.0,
+    gain: float = 1.0,
+    white: float | None = None,
+) -> Scaled:
+    """Radiance Scaling of precomputed diffuse radiance, §5.3.1 (Eq. 4 with ρ = ρ_d).
+
+    L'(p→e) ≈ σ̄(p, e) ρ_d A(p) L̄(n), δ̄_d = L̄(n)/L̄*, with A the ambient occlusion and L̄ the
+    prefiltered irradiance (``irradiance``, (H, W, 3): e.g. :func:`sh_irradiance` of an
+    environment map at the world-space normals). L̄* is ``white`` or, by default, the maximum
+    of L̄'s luminance. Without ``irradiance`` the environment is uniform (L̄ = 1, δ̄ = 1) and the
+    result is the ambient occlusion scaled by σ(κ, 1): mean-curvature shading of AO (Fig. 8b).
+    """
+    shape = normal.shape[:2]
+    a = np.ones(shape, np.float32) if ao is None else ao.astype(np.float32)
+    if irradiance is None:
+        irr = np.ones((*shape, 3), np.float32)
+        delta = np.ones(shape, np.float32)
+    else:
+        irr = irradiance.astype(np.float32)
+        lum = luminance(irr)
+        peak = float(white) if white else float(lum.max()) or 1.0
+        delta = np.clip(lum / np.float32(peak), 0.0, 1.0)
+    s = sigma(isotropic(curv, gain), delta, alpha, gamma)
+    alb = np.broadcast_to(np.asarray(albedo, np.float32), (*shape, 3))
+    diffuse = alb * irr * (a * s)[..., None]
+    return Scaled({"diffuse": diffuse}, {"diffuse": s})
+
+
+def _scaled_lookup(
+    radiance: np.ndarray, curv: Curvature, alpha: float, gamma: float, gain: float, peak: float
+) -> Scaled:
+    delta = np.clip(luminance(radiance) / np.float32(peak or 1.0), 0.0, 1.0)
+    s = sigma(isotropic(curv, gain), delta, alpha, gamma)
+    return Scaled({"specular": radiance * s[..., None]}, {"specular": s})
+
+
+def lit_sphere(
+    normal: np.ndarray,
+    curv: Curvature,
+    sphere: np.ndarray,
+    *,
+    alpha: float = 0.5,
+    gamma: float = 1.0,
+    gain: float = 1.0,
+) -> Scaled:
+    """Radiance Scaling of a Lit Sphere / matcap, §5.3.1 (Sloan et al. 2001's Lit Sphere).
+
+    The shading is the painted sphere looked up by the camera-space normal (u = ½ + ½ n_x,
+    v = ½ − ½ n_y over the image of the sphere), L' = σ̄ L_ls(n) with δ̄ = L_ls(n)/L*_ls and L*_ls
+    the brightest luminance of the sphere image.
+    """
+    h, w = sphere.shape[:2]
+    u = ((0.5 + 0.5 * normal[..., 0]) * w - 0.5).astype(np.float32)
+    v = ((0.5 - 0.5 * normal[..., 1]) * h - 0.5).astype(np.float32)
+    src = np.ascontiguousarray(sphere, np.float32)
+    looked = cv2.remap(src, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    looked = looked if looked.ndim == 3 else np.repeat(looked[..., None], 3, axis=2)
+    looked[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
+    peak = float(luminance(np.atleast_3d(src)[..., :3]).max())
+    return _scaled_lookup(looked, curv, alpha, gamma, gain, peak)
+
+
+def environment(
+    normal: np.ndarray,
+    view: np.ndarray,
+    curv: Curvature,
+    env: np.ndarray,
+    *,
+    mode: str = "mirror",
+    ior: float = 1.5,
+    camera_to_world: np.ndarray | None = None,
+    alpha: float = 0.5,
+    gamma: float = 1.0,
+    gain: float = 1.0,
+) -> Scaled:
+    """Radiance Scaling of a perfect mirror or refraction, §5.3.2.
+
+    L'(p→e) = σ̄(p, e) L_env(r), δ̄_s = L_env(r)/L*_env, r the reflected (``mode="mirror"``) or
+    refracted (``mode="refraction"``, one bounce, relative index ``ior``) view direction and
+    L*_env the maximum luminance of the environment map.
+    """
+    if mode == "mirror":
+        r = reflect(view, normal)
+    elif mode == "refraction":
+        r = refract(view, normal, ior)
+    else:
+        raise ValueError(f"mode={mode!r} must be 'mirror' or 'refraction'")
+    radiance = latlong_lookup(env, rotate_directions(normalize(r), camera_to_world))
+    radiance = np.array(np.broadcast_to(radiance, normal.shape), np.float32)
+    radiance[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
+    peak = float(luminance(np.atleast_3d(env.astype(np.float32))[..., :3]).max())
+    return _scaled_lookup(radiance, curv, alpha, gamma, gain, peak)
+
+
+# -- default images for the lit-sphere and environment scenarios ---------------------------------
+
+
+def studio_matcap(size: int = 256) -> np.ndarray:
+    """A neutral clay Lit Sphere: Blinn-Phong shading of a sphere under a warm key light from the
+    upper left and a cool rim from the right, (size, size, 3) linear RGB; black outside."""
+    c = (np.arange(size, dtype=np.float32) + 0.5) / size * 2.0 - 1.0
+    x, y = np.meshgrid(c, -c)
+    r2 = x * x + y * y
+    n = np.dstack([x, y, np.sqrt(np.clip(1.0 - r2, 0.0, 1.0))]).astype(np.float32)
+    view = np.zeros_like(n)
+    view[..., 2] = 1.0
+    key = normalize(np.array([-0.5, 0.6, 0.65], np.float32))
+    rim = normalize(np.array([0.9, 0.1, -0.3], np.float32))
+    diffuse = np.clip(dot(n, np.broadcast_to(key, n.shape)), 0, 1)
+    h = normalize(np.broadcast_to(key, n.shape) + view)
+    spec = np.power(np.clip(dot(n, h), 0, 1), 40.0)
+    back = np.clip(dot(n, np.broadcast_to(rim, n.shape)), 0, 1)
+    out = (
+        diffuse[..., None] * np.array([0.78, 0.72, 0.66], np.float32)
+        + spec[..., None] * 0.5
+        + back[..., None] * np.array([0.15, 0.2, 0.3], np.float32)
+        + 0.06
+    )
+    out[r2 > 1.0] = 0.0
+    return out.astype(np.float32)
+
+
+def sky_environment(width: int = 256) -> np.ndarray:
+    """A simple outdoor environment, (width/2, width, 3) equirectangular linear RGB: a blue sky
+    brightening to the horizon, a darker ground, and a small bright sun high in front-left."""
+    h = width // 2
+    v = (np.arange(h, dtype=np.float32) + 0.5) / h  # 0 at +y
+    elevation = (0.5 - v) * np.pi
+    sky = (
+        np.array([0.35, 0.5, 0.9], np.float32)
+        + np.array([0.5, 0.4, 0.1], np.float32) * np.exp(-np.abs(elevation) * 3)[:, None]
+    )
+    ground = np.array([0.25, 0.22, 0.18], np.float32)
+    col = np.where((elevation > 0)[:, None], sky, ground).astype(np.float32)
+    env = np.repeat(col[:, None, :], width, axis=1)
+    u = (np.arange(width, dtype=np.float32) + 0.5) / width * 2 * np.pi
+    dirs = np.dstack(
+        [
+            np.cos(elevation)[:, None] * np.sin(u)[None, :],
+            np.broadcast_to(np.sin(elevation)[:, None], (h, width)),
+            -np.cos(elevation)[:, None] * np.cos(u)[None, :],
+        ]
+    ).astype(np.float32)
+    sun = normalize(np.array([-0.4, 0.7, -0.6], np.float32))
+    env += (np.power(np.clip(dot(dirs, np.broadcast_to(sun, dirs.shape)), 0, 1), 800.0) * 40.0)[
+        ..., None
+    ]
+    return env.astype(np.float32)

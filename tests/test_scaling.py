@@ -1,0 +1,247 @@
+"""Scaling function σ (Radiance Scaling Eq. 2) and lobe scaling (Eq. 4), ops.scaling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ops.curvature import isotropic, principal_curvatures
+from ops.scaling import luminance, reflectance_delta, scale_lobes, sigma, white_level
+from tests import analytic
+
+ALPHAS = (0.1, 0.25, 0.5, 0.8)
+GAMMAS = (0.5, 3.0, 10.0, 30.0)
+
+
+def _grid() -> tuple[np.ndarray, np.ndarray]:
+    k = np.linspace(-1.0, 1.0, 129, dtype=np.float32)
+    d = (np.arange(257) / 256.0).astype(np.float32)  # 1 - d is exact in float32
+    kk, dd = np.meshgrid(k, d)
+    return kk, dd
+
+
+def _paper_eq2(kappa: np.ndarray, delta: np.ndarray, a: float, g: float) -> np.ndarray:
+    """Eq. 2 exactly as printed, float64, with the paper's curvature -κ (module docstring)."""
+    e = np.exp(g * -kappa.astype(np.float64))
+    d = delta.astype(np.float64)
+    return (a * e + d * (1 - a * (1 + e))) / (a + d * (e - a * (1 + e)))
+
+
+@pytest.mark.parametrize("alpha", ALPHAS)
+@pytest.mark.parametrize("gamma", GAMMAS)
+def test_sigma_properties(alpha: float, gamma: float) -> None:
+    kk, dd = _grid()
+    s32 = sigma(kk, dd, alpha, gamma)
+    assert s32.dtype == np.float32 and s32.shape == kk.shape
+    s = s32.astype(np.float64)
+    # σ = 1 where κ = 0 or δ = α.
+    np.testing.assert_allclose(sigma(np.zeros_like(dd), dd, alpha, gamma), 1.0, rtol=1e-6)
+    np.testing.assert_allclose(
+        sigma(kk, np.full_like(kk, np.float32(alpha)), alpha, gamma), 1.0, rtol=1e-6
+    )
+    # Reciprocity of convex and concave: σ(κ, δ) σ(-κ, δ) = 1.
+    np.testing.assert_allclose(s * sigma(-kk, dd, alpha, gamma), 1.0, rtol=1e-6)
+    # Symmetry in α: σ_α(κ, 1 - δ) = 1 / σ_{1-α}(κ, δ).
+    np.testing.assert_allclose(
+        sigma(kk, 1.0 - dd, alpha, gamma) * sigma(kk, dd, 1.0 - alpha, gamma), 1.0, rtol=1e-6
+    )
+    # End points: σ(κ, 0) = e^{-γκ}, σ(κ, 1) = e^{γκ}.
+    k = kk[0].astype(np.float64)
+    np.testing.assert_allclose(sigma(kk[0], 0.0, alpha, gamma), np.exp(-gamma * k), rtol=1e-5)
+    np.testing.assert_allclose(sigma(kk[0], 1.0, alpha, gamma), np.exp(gamma * k), rtol=1e-5)
+
+
+@pytest.mark.parametrize("alpha", ALPHAS)
+@pytest.mark.parametrize("gamma", (0.5, 3.0, 10.0))
+def test_sigma_is_the_printed_equation(alpha: float, gamma: float) -> None:
+    kk, dd = _grid()
+    inner = dd < 0.99  # the printed form itself cancels badly at δ -> 1
+    np.testing.assert_allclose(
+        sigma(kk, dd, alpha, gamma)[inner], _paper_eq2(kk, dd, alpha, gamma)[inner], rtol=1e-5
+    )
+
+
+@pytest.mark.parametrize("alpha", ALPHAS)
+def test_sigma_is_monotonic_in_delta(alpha: float) -> None:
+    """Applied to a ramp of δ, σ makes no new extremum: increasing on convexities, decreasing in
+    concavities (convexities brighten what is above α and darken what is below, RS §4)."""
+    ramp = np.linspace(0.0, 1.0, 4097, dtype=np.float32)
+    for kappa in (-1.0, -0.3, 0.3, 1.0):
+        s = sigma(kappa, ramp, alpha, 5.0).astype(np.float64)
+        steps = np.diff(s)
+        if kappa > 0:
+            assert (steps > 0).all()
+            assert s[ramp > alpha + 1e-3].min() > 1.0 > s[ramp < alpha - 1e-3].max()
+        else:
+            assert (steps < 0).all()
+            assert s[ramp > alpha + 1e-3].max() < 1.0 < s[ramp < alpha - 1e-3].min()
+
+
+def test_gamma_zero_is_identity_and_inputs_are_clipped() -> None:
+    kk, dd = _grid()
+    assert (sigma(kk, dd, 0.3, 0.0) == 1.0).all()
+    # δ outside [0, 1] and κ outside [-1, 1] are clipped; NaN δ counts as 0, NaN κ as 0.
+    np.testing.assert_array_equal(
+        sigma(0.5, [-2.0, 3.0], 0.3, 4.0), sigma(0.5, [0.0, 1.0], 0.3, 4.0)
+    )
+    np.testing.assert_array_equal(
+        sigma([5.0, -7.0], 0.9, 0.3, 4.0), sigma([1.0, -1.0], 0.9, 0.3, 4.0)
+    )
+    assert sigma(0.5, np.nan, 0.3, 4.0) == sigma(0.5, 0.0, 0.3, 4.0)
+    assert sigma(np.nan, 0.7, 0.3, 4.0) == 1.0
+    # Huge γ stays finite.
+    assert np.isfinite(sigma(kk, dd, 0.5, 1e4)).all()
+    assert sigma(2.0, 0.25, 0.5, 1.0).shape == ()
+
+
+@pytest.mark.parametrize(
+    ("alpha", "gamma", "word"),
+    [
+        (0.0, 1.0, "alpha"),
+        (1.0, 1.0, "alpha"),
+        (-0.5, 1.0, "alpha"),
+        (0.5, -1.0, "gamma"),
+        (0.5, float("inf"), "gamma"),
+        (float("nan"), 1.0, "alpha"),
+    ],
+)
+def test_sigma_rejects_bad_parameters(alpha: float, gamma: float, word: str) -> None:
+    with pytest.raises(ValueError, match=rf"{word}=.*allowed range"):
+        sigma(0.5, 0.5, alpha, gamma)
+
+
+# -- δ̄ and white levels --------------------------------------------------------------------------
+
+
+def test_luminance_and_reflectance_delta() -> None:
+    rng = np.random.default_rng(1)
+    rgb = rng.random((8, 9, 3), dtype=np.float32) * 2.0
+    y = luminance(rgb)
+    np.testing.assert_allclose(y, rgb @ np.array([0.2126, 0.7152, 0.0722]), rtol=1e-5)
+    d = reflectance_delta(rgb, 1.5)
+    np.testing.assert_allclose(d, np.clip(y / 1.5, 0, 1), rtol=1e-5, atol=1e-7)
+    bad = rgb.copy()
+    bad[0, 0] = np.nan
+    bad[0, 1] = np.inf
+    bad[0, 2] = -1.0
+    d = reflectance_delta(bad, 1.0)
+    assert d[0, 0] == 0.0 and d[0, 1] == 1.0 and d[0, 2] == 0.0
+    for white in (0.0, -1.0, float("inf")):
+        with pytest.raises(ValueError, match="white"):
+            reflectance_delta(rgb, white)
+
+
+def test_white_level_is_a_robust_percentile_of_covered_pixels() -> None:
+    rng = np.random.default_rng(2)
+    y = rng.random((64, 64)).astype(np.float32)
+    mask = np.zeros((64, 64), bool)
+    mask[8:56, 8:56] = True
+    y_bg = y.copy()
+    y_bg[~mask] = 1000.0  # bright background must not count
+    y_bg[10, 10] = np.nan
+    y_bg[11, 11] = np.inf
+    expect = np.percentile(np.delete(y[mask], [np.ravel_multi_index((2, 2), (48, 48))]), 99)
+    assert white_level(y_bg, mask) == pytest.approx(expect, rel=2e-2)
+    assert white_level(y_bg, mask.astype(np.float32), 50.0) == pytest.approx(
+        np.percentile(y[mask], 50), rel=2e-2
+    )
+    rgb = np.repeat(y[..., None], 3, axis=2)
+    assert white_level(rgb, None, 100.0) == pytest.approx(float(y.max()), rel=1e-5)
+    assert white_level(np.zeros((4, 4), np.float32), None) == 1.0  # nothing lit
+    with pytest.raises(ValueError, match="percentile"):
+        white_level(y, None, 0.0)
+
+
+# -- scale_lobes -----------------------------------------------------------------------------------
+
+
+def _lobes(shape: tuple[int, int], seed: int = 0) -> tuple[dict[str, np.ndarray], ...]:
+    rng = np.random.default_rng(seed)
+    lights = {n: rng.random((*shape, 3), dtype=np.float32) * 1.2 for n in ("diffuse", "specular")}
+    colour = {"diffuse": (0.8, 0.4, 0.2), "specular": (1.0, 1.0, 1.0)}
+    lobes = {n: lights[n] * np.array(colour[n], np.float32) for n in lights}
+    return lobes, lights
+
+
+def test_scale_lobes_is_identity_without_scaling() -> None:
+    shape = (24, 32)
+    lobes, lights = _lobes(shape)
+    rng = np.random.default_rng(3)
+    kappa = rng.uniform(-1, 1, shape).astype(np.float32)
+    remainder = rng.random((*shape, 3), dtype=np.float32) * 0.1
+    beauty = lobes["diffuse"] + lobes["specular"] + remainder
+    out, sig = scale_lobes(lobes, lights, kappa, 0.5, 0.0, 1.0, remainder)
+    np.testing.assert_allclose(out, beauty, rtol=1e-6)
+    assert all((s == 1.0).all() for s in sig.values())
+
+
+def test_scale_lobes_on_a_plane_is_identity() -> None:
+    s = analytic.plane(64, tilt_x_deg=30.0, tilt_y_deg=10.0)
+    kappa = isotropic(principal_curvatures(s.normal, s.depth, s.mask))
+    lobes, lights = _lobes(s.shape)
+    out, _ = scale_lobes(lobes, lights, kappa, 0.3, 8.0, "auto", mask=s.mask)
+    np.testing.assert_allclose(out, lobes["diffuse"] + lobes["specular"], rtol=1e-5, atol=1e-6)
+
+
+def test_scale_lobes_applies_sigma_per_lobe() -> None:
+    shape = (150, 37)  # several row strips
+    lobes, lights = _lobes(shape, seed=4)
+    kappa = np.random.default_rng(5).uniform(-1, 1, shape).astype(np.float32)
+    alpha = {"diffuse": 0.3, "specular": 0.7}
+    gamma = {"diffuse": 2.0, "specular": 6.0}
+    white: dict[str, float | str] = {"diffuse": 1.1, "specular": "auto"}
+    mask = np.ones(shape, bool)
+    out, sig = scale_lobes(lobes, lights, kappa, alpha, gamma, white, mask=mask)
+    w_spec = white_level(lights["specular"], mask)
+    s_d = sigma(kappa, reflectance_delta(lights["diffuse"], 1.1), 0.3, 2.0)
+    s_s = sigma(kappa, reflectance_delta(lights["specular"], w_spec), 0.7, 6.0)
+    np.testing.assert_allclose(sig["diffuse"], s_d, rtol=1e-5)
+    np.testing.assert_allclose(sig["specular"], s_s, rtol=1e-5)
+    expect = lobes["diffuse"] * s_d[..., None] + lobes["specular"] * s_s[..., None]
+    np.testing.assert_allclose(out, expect, rtol=1e-5, atol=1e-6)
+    # δ̄ uses the light without colour: tinting a lobe does not change its σ.
+    tinted = dict(lobes, diffuse=lobes["diffuse"] * np.float32(0.1))
+    _, sig2 = scale_lobes(tinted, lights, kappa, alpha, gamma, white, mask=mask)
+    np.testing.assert_array_equal(sig2["diffuse"], sig["diffuse"])
+    # A lobe without a light uses its own radiance.
+    _, sig3 = scale_lobes(lobes, {}, kappa, 0.5, 2.0, 1.0)
+    np.testing.assert_allclose(
+        sig3["diffuse"], sigma(kappa, reflectance_delta(lobes["diffuse"], 1.0), 0.5, 2.0), rtol=1e-5
+    )
+
+
+def test_scale_lobes_enhances_a_lit_sphere() -> None:
+    """On a convex sphere, lit parts (δ > α) brighten and dim parts darken: more contrast."""
+    s = analytic.sphere(96)
+    kappa = isotropic(principal_curvatures(s.normal, s.depth, s.mask))
+    ell = np.array([0.5, 0.5, 0.7071], np.float32)
+    light = np.repeat(np.clip(s.normal @ ell, 0, None)[..., None], 3, axis=2).astype(np.float32)
+    out, sig = scale_lobes({"diffuse": light}, {"diffuse": light}, kappa, 0.5, 4.0, 1.0)
+    inner = s.interior(0.05)
+    y_in, y_out = light[..., 0][inner], out[..., 0][inner]
+    assert (y_out[y_in > 0.55] > y_in[y_in > 0.55]).all()
+    assert (y_out[(y_in < 0.45) & (y_in > 0.01)] < y_in[(y_in < 0.45) & (y_in > 0.01)]).all()
+    assert y_out.std() > 1.1 * y_in.std()
+    assert (sig["diffuse"][~s.mask] == 1.0).all()  # no curvature, no change on the background
+
+
+def test_scale_lobes_rejects_bad_input() -> None:
+    shape = (6, 7)
+    lobes, lights = _lobes(shape)
+    kappa = np.zeros(shape, np.float32)
+    with pytest.raises(ValueError, match=r"alpha\['specular'\]"):
+        scale_lobes(lobes, lights, kappa, {"diffuse": 0.5, "specular": 1.5}, 1.0, 1.0)
+    with pytest.raises(ValueError, match="alpha has no value"):
+        scale_lobes(lobes, lights, kappa, {"diffuse": 0.5}, 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"gamma\['diffuse'\]"):
+        scale_lobes(lobes, lights, kappa, 0.5, -1.0, 1.0)
+    with pytest.raises(ValueError, match="white"):
+        scale_lobes(lobes, lights, kappa, 0.5, 1.0, "bright")
+    with pytest.raises(ValueError, match="white"):
+        scale_lobes(lobes, lights, kappa, 0.5, 1.0, 0.0)
+    with pytest.raises(ValueError, match="remainder"):
+        scale_lobes(lobes, lights, kappa, 0.5, 1.0, 1.0, np.zeros((6, 7, 4), np.float32))
+    with pytest.raises(ValueError, match="kappa"):
+        scale_lobes(lobes, lights, kappa[None], 0.5, 1.0, 1.0)
+    with pytest.raises(ValueError, match=r"lobes\['diffuse'\]"):
+        scale_lobes({"diffuse": np.zeros((6, 8, 3))}, {}, kappa, 0.5, 1.0, 1.0)
