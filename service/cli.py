@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -94,6 +95,8 @@ def read_frame(args: argparse.Namespace, path: str) -> Any:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    if getattr(args, "server", None):
+        return run_remote(args)
     from gbuffer import write
     from gbuffer.camera import Camera
     from gbuffer.render import auto_camera, load_mesh, render
@@ -172,6 +175,8 @@ def cmd_ops(args: argparse.Namespace) -> int:
 
 
 def cmd_enhance(args: argparse.Namespace) -> int:
+    if getattr(args, "server", None):
+        return run_remote(args)
     import gbuffer
     from service import pipeline
 
@@ -191,6 +196,86 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     gbuffer.write(out, args.output)
     print(f"wrote {args.output}")
     return 0
+
+
+# -- service: remote mode, serve, batch (service/client.py, service/api.py, service/batch.py) --
+
+
+def add_server_option(p: argparse.ArgumentParser) -> None:
+    """``--server URL``: run the command on a Depict server instead of locally."""
+    p.add_argument(
+        "--server",
+        metavar="URL",
+        default=os.environ.get("DEPICT_SERVER") or None,
+        help="run on this Depict server (env DEPICT_SERVER; key from DEPICT_API_KEY)",
+    )
+
+
+def run_remote(args: argparse.Namespace) -> int:
+    """Route ``args.command`` through the HTTP client; server errors exit like local ones."""
+    from service import client
+
+    remote = {"enhance": client.remote_enhance, "render": client.remote_render}
+    try:
+        return remote[args.command](args)
+    except client.DepictError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def cmd_serve(args: argparse.Namespace) -> int:
+    from service.api import serve
+    from service.settings import Settings
+
+    overrides = {"host": args.host, "port": args.port, "workers": args.workers}
+    try:
+        settings = Settings(**{k: v for k, v in overrides.items() if v is not None})
+    except ValueError as exc:
+        raise UsageError(str(exc).replace("\n", " ")) from None
+    serve(settings)
+    return 0
+
+
+def cmd_batch(args: argparse.Namespace) -> int:
+    from service.batch import BatchError
+    from service.batch import cmd_batch as run
+
+    try:
+        return run(args)
+    except BatchError as exc:
+        raise UsageError(str(exc)) from None
+
+
+def add_service_commands(sub: Any) -> None:
+    p = sub.add_parser("serve", help="run the HTTP service (settings from DEPICT_* variables)")
+    p.add_argument("--host", help="address to bind (DEPICT_HOST, default 127.0.0.1)")
+    p.add_argument("--port", type=int, help="port (DEPICT_PORT, default 8000)")
+    p.add_argument("--workers", type=int, help="parallel jobs (DEPICT_WORKERS, default 2)")
+    p.set_defaults(func=cmd_serve)
+
+    p = sub.add_parser("batch", help="enhance a frame sequence on a Dask cluster")
+    p.add_argument("input", help="input pattern: shot.####.exr, shot.%%04d.exr or shot.@.exr")
+    p.add_argument("-o", "--output", required=True, help="output pattern, same tokens")
+    p.add_argument("--frames", help="frames: 1-100, 1-100x2, 1,5,9 (default: existing inputs)")
+    p.add_argument("--op", action=_OpAction, metavar="NAME", help="add a pipeline step")
+    p.add_argument(
+        "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
+    )
+    p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
+    p.add_argument(
+        "--scheduler", metavar="tcp://HOST:8786", help="Dask scheduler (default: local cluster)"
+    )
+    p.add_argument("--workers", type=int, help="local cluster worker processes (default: cores)")
+    p.add_argument("--skip-existing", action="store_true", help="skip frames whose output exists")
+    p.add_argument(
+        "--pinned",
+        metavar="STATS.json",
+        help="pinned statistics: reused when the file exists, else measured and written there",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
+    p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
+    add_read_options(p)
+    p.set_defaults(func=cmd_batch)
 
 
 # -- parser ------------------------------------------------------------------------------------
@@ -219,6 +304,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="light, camera space: X,Y,Z (directional, towards the light) or point:X,Y,Z; "
         "repeat for several",
     )
+    add_server_option(p)
     p.set_defaults(func=cmd_render)
 
     p = sub.add_parser("inspect", help="what Depict sees in an EXR: preset, buffers, camera")
@@ -250,7 +336,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
     p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
     add_read_options(p)
+    add_server_option(p)
     p.set_defaults(func=cmd_enhance)
+
+    add_service_commands(sub)
     return parser
 
 

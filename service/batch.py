@@ -1,0 +1,387 @@
+"""``depict batch``: frame sequences on a Dask cluster, with farm conventions.
+
+Patterns name one file per frame with a frame token:
+
+* ``####`` (or any run of ``#``): the frame, zero-padded to the run's length (``####`` -> 0007);
+* ``@`` (or a run of ``@``): the same, padded to the run's length (``@`` -> 7, ``@@@`` -> 007);
+* ``%04d``, ``%d``: printf style.
+
+``--frames`` takes ranges with steps and lists: ``1-100``, ``1-100x2`` (every 2nd), ``1,5,9``,
+``1-10,20-30x5``. Without it, the frames are those whose input file exists.
+
+Workers receive paths, not pixels: each task reads its input, runs the pipeline and writes its
+output. Statistics-dependent parameters (white levels, normalisations: what operators record in
+:attr:`service.registry.Context.measured`) are measured once, on the first frame processed, and
+pinned for every other frame, so the sequence does not flicker; ``--pinned FILE`` stores them (or
+reuses them when FILE exists) so several runs (farm chunks) share them.
+
+Without ``--scheduler`` the frames run on a local Dask cluster with one single-threaded worker
+process per core (``--workers N`` to change); with ``--scheduler tcp://HOST:8786`` on an existing
+Dask distributed cluster (``dask scheduler`` + ``dask worker tcp://HOST:8786`` with the same
+Depict installed and the files on a shared path).
+
+Render farms (one task per chunk of frames)
+-------------------------------------------
+
+Measure the statistics once, before the chunks, then let every chunk reuse them::
+
+    # pre-task (Deadline: a "pre job script" or a first one-frame job; OpenCue: a first layer)
+    depict batch shot.####.exr -o out/shot.####.exr --frames 1 --pinned out/shot.pins.json
+    # per chunk (Deadline "Command Line" job, chunk size 10)
+    depict batch shot.####.exr -o out/shot.####.exr --frames <STARTFRAME>-<ENDFRAME> \\
+        --pinned out/shot.pins.json --skip-existing --workers 1
+    # OpenCue: the same command with --frames #FRAME_START#-#FRAME_END# and a chunk size
+
+A chunk's exit status is 0 only when all its frames were written (or skipped), so the farm
+retries failed chunks; ``--skip-existing`` makes the retry cheap.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import re
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from gbuffer.atomic import atomic_path
+
+_TOKEN = re.compile(r"#+|@+|%(0?)(\d*)d")
+
+
+class BatchError(ValueError):
+    """A bad pattern, frame range or option; the message says which."""
+
+
+# -- patterns and frame ranges -----------------------------------------------------------------
+
+
+def _token(pattern: str) -> re.Match[str]:
+    matches = list(_TOKEN.finditer(pattern))
+    if not matches:
+        raise BatchError(
+            f"pattern {pattern!r} has no frame token; use #### (padded), @ or %04d, "
+            "e.g. shot.####.exr"
+        )
+    if len(matches) > 1:
+        raise BatchError(f"pattern {pattern!r} has {len(matches)} frame tokens; use exactly one")
+    return matches[0]
+
+
+def expand(pattern: str, frame: int) -> str:
+    """The file name of ``frame``: ``expand("shot.####.exr", 7) == "shot.0007.exr"``."""
+    m = _token(pattern)
+    text = m.group(0)
+    if text[0] in "#@":
+        width = len(text)
+    else:
+        width = int(m.group(2) or 0)
+    number = f"{frame:0{width}d}" if frame >= 0 else f"-{-frame:0{width}d}"
+    return pattern[: m.start()] + number + pattern[m.end() :]
+
+
+def parse_frames(text: str) -> list[int]:
+    """Frames of ``1-100x2,120,130-140``: ranges (inclusive) with an optional step, in order."""
+    frames: list[int] = []
+    for raw in text.split(","):
+        part = raw.strip()
+        m = re.fullmatch(r"(-?\d+)(?:\s*-\s*(-?\d+)(?:\s*[x:by]+\s*(\d+))?)?", part)
+        if not m:
+            raise BatchError(
+                f"--frames {text!r}: {part!r} is not FRAME, FIRST-LAST or FIRST-LASTxSTEP"
+            )
+        first = int(m.group(1))
+        last = int(m.group(2)) if m.group(2) is not None else first
+        step = int(m.group(3)) if m.group(3) is not None else 1
+        if step < 1:
+            raise BatchError(f"--frames {text!r}: step must be >= 1, got {step}")
+        if last < first:
+            raise BatchError(f"--frames {text!r}: range {part!r} ends before it starts")
+        frames.extend(range(first, last + 1, step))
+    return list(dict.fromkeys(frames))  # first occurrence of each frame, in order
+
+
+def find_frames(pattern: str) -> list[int]:
+    """Frames whose file exists for ``pattern`` (sorted; padding must match the pattern's)."""
+    m = _token(pattern)
+    prefix, suffix = pattern[: m.start()], pattern[m.end() :]
+    rx = re.compile(re.escape(prefix) + r"(-?\d+)" + re.escape(suffix))
+    found = set()
+    for path in glob.glob(glob.escape(prefix) + "*" + glob.escape(suffix)):
+        hit = rx.fullmatch(path)
+        if hit and expand(pattern, int(hit.group(1))) == path:
+            found.add(int(hit.group(1)))
+    return sorted(found)
+
+
+# -- one frame, on a worker --------------------------------------------------------------------
+
+
+def process_frame(
+    frame: int,
+    in_path: str,
+    out_path: str,
+    spec_json: str,
+    read: dict[str, Any],
+    write: dict[str, Any],
+    pinned: dict[str, float],
+) -> dict[str, Any]:
+    """Enhance one frame (on a Dask worker). Never raises: failures come back as data."""
+    from service.jobs import enhance_file
+    from service.problems import from_exception
+
+    t0 = time.perf_counter()
+    try:
+        out = enhance_file(in_path, out_path, spec_json, read, write, pinned=pinned)
+        return {
+            "frame": frame,
+            "status": "done",
+            "measured": out["measured"],
+            "seconds": time.perf_counter() - t0,
+        }
+    except Exception as exc:  # one bad frame must not stop the sequence
+        problem = from_exception(exc)
+        detail = problem.detail if problem.kind != "internal" else f"{type(exc).__name__}: {exc}"
+        return {
+            "frame": frame,
+            "status": "failed",
+            "error": detail,
+            "seconds": time.perf_counter() - t0,
+        }
+
+
+# -- the sequence ------------------------------------------------------------------------------
+
+
+@dataclass
+class Summary:
+    """What a batch did: frames done, skipped and failed (frame -> message), pinned statistics."""
+
+    done: list[int] = field(default_factory=list)
+    skipped: list[int] = field(default_factory=list)
+    failed: dict[int, str] = field(default_factory=dict)
+    pinned: dict[str, float] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        return not self.failed
+
+
+def _load_pinned(path: Path) -> dict[str, float]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise BatchError(f"cannot read pinned statistics {path}: {exc}") from None
+    if not isinstance(data, dict) or not all(isinstance(v, int | float) for v in data.values()):
+        raise BatchError(f"pinned statistics {path} must be a JSON object of numbers")
+    return {str(k): float(v) for k, v in data.items()}
+
+
+def _cluster(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
+    """A Dask client on ``scheduler``, or on a new local cluster (returned to be closed)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="20s"), None
+        except OSError as exc:
+            raise BatchError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(
+        n_workers=n,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address=None,
+        scheduler_kwargs={"dashboard_address": ":0"},  # its health routes: any free port
+        silence_logs=40,  # logging.ERROR
+    )
+    return Client(cluster), cluster
+
+
+def run_batch(
+    in_pattern: str,
+    out_pattern: str,
+    *,
+    spec_json: str,
+    frames: Sequence[int] | None = None,
+    read: dict[str, Any] | None = None,
+    write: dict[str, Any] | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    skip_existing: bool = False,
+    pinned_file: str | Path | None = None,
+    progress: bool = True,
+) -> Summary:
+    """Enhance every frame of a sequence on a Dask cluster; see the module docstring.
+
+    ``spec_json``: the pipeline as JSON text. ``read``/``write``: as for
+    :func:`service.jobs.enhance_file`. The first frame to process is run alone to measure the
+    statistics that are then pinned for all others (unless ``pinned_file`` already exists).
+    """
+    from service import pipeline
+
+    pipeline.compile_steps(pipeline.parse(spec_json))  # bad pipelines fail before any work
+    _token(in_pattern)
+    _token(out_pattern)
+    if in_pattern == out_pattern:
+        raise BatchError("the output pattern is the input pattern; write elsewhere")
+    frame_list = list(frames) if frames is not None else find_frames(in_pattern)
+    if not frame_list:
+        raise BatchError(f"no frames: no file matches {in_pattern!r} (or pass --frames)")
+    read, write = dict(read or {}), dict(write or {})
+    summary = Summary()
+    t_start = time.perf_counter()
+    todo = []
+    for f in frame_list:
+        if skip_existing and os.path.exists(expand(out_pattern, f)):
+            summary.skipped.append(f)
+        else:
+            todo.append(f)
+    pinned_path = Path(pinned_file) if pinned_file else None
+    pinned: dict[str, float] | None = None
+    if pinned_path is not None and pinned_path.exists():
+        pinned = _load_pinned(pinned_path)
+    if not todo:
+        summary.pinned = pinned or {}
+        summary.seconds = time.perf_counter() - t_start
+        return summary
+
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
+
+    client, cluster = _cluster(scheduler, workers)
+    columns = (
+        TextColumn("[bold]depict batch"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[failed]} failed"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    try:
+        with Progress(*columns, disable=not progress, transient=False) as bar:
+            task = bar.add_task("frames", total=len(todo), failed=0)
+
+            def record(result: dict[str, Any]) -> None:
+                if result["status"] == "done":
+                    summary.done.append(result["frame"])
+                else:
+                    summary.failed[result["frame"]] = result.get("error", "failed")
+                bar.update(task, advance=1, failed=len(summary.failed))
+
+            def submit(f: int, pins: dict[str, float]) -> Any:
+                return client.submit(
+                    process_frame,
+                    f,
+                    expand(in_pattern, f),
+                    expand(out_pattern, f),
+                    spec_json,
+                    read,
+                    write,
+                    pins,
+                    key=f"depict-frame-{f}-{os.urandom(4).hex()}",
+                    pure=False,
+                )
+
+            def gather(future: Any, f: int) -> dict[str, Any]:
+                try:
+                    return dict(future.result())
+                except Exception as exc:  # worker died, cancelled, ...
+                    return {"frame": f, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+
+            queue = list(todo)
+            while pinned is None and queue:  # sample frames one by one until one succeeds
+                f = queue.pop(0)
+                result = gather(submit(f, {}), f)
+                record(result)
+                if result["status"] == "done":
+                    pinned = dict(result.get("measured") or {})
+                    if pinned_path is not None:
+                        with atomic_path(pinned_path) as tmp:
+                            tmp.write_text(json.dumps(pinned, indent=2, sort_keys=True))
+            from distributed import as_completed
+
+            futures = {submit(f, pinned or {}): f for f in queue}
+            for future in as_completed(futures):
+                record(gather(future, futures[future]))
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    summary.done.sort()
+    summary.failed = dict(sorted(summary.failed.items()))
+    summary.pinned = pinned or {}
+    summary.seconds = time.perf_counter() - t_start
+    return summary
+
+
+def print_summary(summary: Summary, total: int) -> None:
+    """The end-of-run report: counts, pinned statistics and one line per failed frame."""
+    print(
+        f"batch: {len(summary.done)} done, {len(summary.skipped)} skipped, "
+        f"{len(summary.failed)} failed (of {total} frames) in {summary.seconds:.1f} s"
+    )
+    if summary.pinned:
+        pins = ", ".join(f"{k}={v:.6g}" for k, v in sorted(summary.pinned.items()))
+        print(f"  pinned: {pins}")
+    for frame, error in summary.failed.items():
+        print(f"  frame {frame} failed: {error}")
+
+
+def cmd_batch(args: Any) -> int:
+    """``depict batch``: wired from :mod:`service.cli`; exit 1 when a frame failed."""
+    from service import pipeline
+
+    if args.pipeline and getattr(args, "steps", None):
+        raise BatchError("give either --pipeline or --op steps, not both")
+    if args.pipeline:
+        spec = pipeline.load(args.pipeline)
+    elif getattr(args, "steps", None):
+        spec = pipeline.parse(args.steps)
+    else:
+        spec = pipeline.DEFAULT_PIPELINE
+    mapping = {}
+    for item in args.map:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise BatchError(f"--map {item!r}: expected BUFFER=CHANNELS")
+        mapping[key.strip()] = value.strip()
+    if args.camera and not os.path.isfile(args.camera):
+        raise BatchError(f"--camera {args.camera}: no such file")
+    read = {
+        "preset": args.preset,
+        "camera": os.path.abspath(args.camera) if args.camera else None,
+        "mapping": mapping,
+        "normal_space": args.normal_space,
+    }
+    write = {"debug_layers": args.debug_layers, "output_layer": args.output_layer}
+    frames = parse_frames(args.frames) if args.frames else None
+    if args.workers is not None and args.workers < 1:
+        raise BatchError(f"--workers must be >= 1, got {args.workers}")
+    summary = run_batch(
+        os.path.abspath(args.input),
+        os.path.abspath(args.output),
+        spec_json=spec.model_dump_json(),
+        frames=frames,
+        read=read,
+        write=write,
+        scheduler=args.scheduler,
+        workers=args.workers,
+        skip_existing=args.skip_existing,
+        pinned_file=args.pinned,
+        progress=not args.no_progress,
+    )
+    total = len(summary.done) + len(summary.skipped) + len(summary.failed)
+    print_summary(summary, total)
+    return 0 if summary.ok else 1

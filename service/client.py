@@ -1,0 +1,324 @@
+"""Python client of the Depict HTTP service (httpx); also what ``depict ... --server URL`` uses.
+
+Example::
+
+    from service.client import Client
+
+    with Client("http://127.0.0.1:8000", api_key="secret") as depict:
+        print([op["name"] for op in depict.operators()])
+        depict.enhance("shot.0001.exr", "shot_rs.0001.exr",
+                       pipeline={"steps": [{"op": "radiance_scaling", "params": {"gamma": 2}}]})
+        depict.enhance("shot.0001.exr", "preview.png", preview=True)
+        depict.render("bunny.obj", "bunny.exr", width=640, height=480, lights=["-1,1,1"])
+
+``Client.from_env()`` reads the URL from ``DEPICT_SERVER`` and the key from ``DEPICT_API_KEY``.
+Errors raise :class:`DepictError` whose message is the server's ``detail`` (problem+json) and
+whose ``status`` is the HTTP status (0 when the server could not be reached). A 429 answer is
+retried after its ``Retry-After`` delay, ``retries`` times (default 5). Outputs are written to a
+temporary file renamed into place, so no reader sees half a file.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
+from typing import Any
+
+import httpx
+
+from gbuffer.atomic import atomic_path
+
+
+class DepictError(Exception):
+    """An error answer of the server (``status``, ``problem`` body) or a connection failure."""
+
+    def __init__(self, message: str, status: int = 0, problem: dict[str, Any] | None = None):
+        super().__init__(message)
+        self.status = status
+        self.problem = problem or {}
+
+
+def _pipeline_json(pipeline: Any) -> str | None:
+    """A pipeline (PipelineSpec, dict, list of steps or JSON text) as JSON text."""
+    if pipeline is None:
+        return None
+    if hasattr(pipeline, "model_dump_json"):
+        return str(pipeline.model_dump_json())
+    if isinstance(pipeline, str):
+        return pipeline
+    return json.dumps(pipeline)
+
+
+def _camera_json(camera: Any) -> str | None:
+    """A camera (dict, Camera, or path of a camera JSON file) as JSON text."""
+    if camera is None:
+        return None
+    if isinstance(camera, Mapping):
+        return json.dumps(dict(camera))
+    if hasattr(camera, "to_dict"):
+        return json.dumps(camera.to_dict())
+    try:
+        return Path(camera).read_text()
+    except OSError as exc:
+        raise DepictError(f"cannot read camera file {camera}: {exc.strerror}") from None
+
+
+class Client:
+    """A connection to a Depict server.
+
+    Parameters
+    ----------
+    url : base URL, e.g. ``http://127.0.0.1:8000``.
+    api_key : sent as ``Authorization: Bearer``; default ``$DEPICT_API_KEY``.
+    timeout : seconds for one request (upload, processing and download).
+    retries : how many times a 429 (queue full) is retried after its ``Retry-After``.
+    transport : an httpx transport (tests: ``httpx.ASGITransport``); default a real socket.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        *,
+        api_key: str | None = None,
+        timeout: float = 600.0,
+        retries: int = 5,
+        transport: httpx.BaseTransport | None = None,
+    ) -> None:
+        if not url.startswith(("http://", "https://")):
+            raise DepictError(f"server URL {url!r} must start with http:// or https://")
+        key = api_key if api_key is not None else os.environ.get("DEPICT_API_KEY") or None
+        headers = {"Authorization": f"Bearer {key}"} if key else {}
+        self.url = url.rstrip("/")
+        self.retries = retries
+        self._http = httpx.Client(
+            base_url=self.url, headers=headers, timeout=timeout, transport=transport
+        )
+
+    @classmethod
+    def from_env(cls, url: str | None = None, **kwargs: Any) -> Client:
+        """A client for ``url`` or ``$DEPICT_SERVER``, with ``$DEPICT_API_KEY``."""
+        url = url or os.environ.get("DEPICT_SERVER")
+        if not url:
+            raise DepictError("no server URL: pass --server URL or set DEPICT_SERVER")
+        return cls(url, **kwargs)
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._http.close()
+
+    # -- plumbing ------------------------------------------------------------------------------
+
+    def _error(self, response: httpx.Response) -> DepictError:
+        try:
+            body = json.loads(response.read())
+        except (ValueError, httpx.HTTPError):
+            body = {}
+        detail = body.get("detail") if isinstance(body, dict) else None
+        text = detail or response.reason_phrase or "error"
+        return DepictError(
+            f"server answered {response.status_code}: {text}",
+            response.status_code,
+            body if isinstance(body, dict) else {},
+        )
+
+    @contextmanager
+    def _stream(
+        self,
+        method: str,
+        path: str,
+        *,
+        files: Mapping[str, Path] | None = None,
+        data: Mapping[str, str] | None = None,
+        params: Mapping[str, Any] | None = None,
+    ) -> Iterator[httpx.Response]:
+        """A successful streamed response (retrying 429s), else :class:`DepictError`."""
+        attempt = 0
+        while True:
+            with ExitStack() as stack:
+                upload = {
+                    name: (p.name, stack.enter_context(open(p, "rb")))
+                    for name, p in (files or {}).items()
+                }
+                try:
+                    response = stack.enter_context(
+                        self._http.stream(
+                            method,
+                            path,
+                            files=upload or None,
+                            data=dict(data or {}) or None,
+                            params=dict(params or {}) or None,
+                        )
+                    )
+                except httpx.TransportError as exc:
+                    raise DepictError(f"cannot reach {self.url}: {exc}") from None
+                except FileNotFoundError as exc:
+                    raise DepictError(f"no such file: {exc.filename}") from None
+                if response.status_code == 429 and attempt < self.retries:
+                    attempt += 1
+                    delay = response.headers.get("retry-after", "1")
+                    time.sleep(min(60.0, float(delay) if delay.isdigit() else 1.0))
+                    continue
+                if response.status_code >= 400:
+                    raise self._error(response)
+                yield response
+                return
+
+    def _json(self, path: str) -> Any:
+        with self._stream("GET", path) as response:
+            return json.loads(response.read())
+
+    def _download(self, response: httpx.Response, output: str | Path) -> Path:
+        with atomic_path(output) as tmp, open(tmp, "wb") as out:
+            for chunk in response.iter_bytes(1 << 20):
+                out.write(chunk)
+        return Path(output)
+
+    # -- API -----------------------------------------------------------------------------------
+
+    def health(self) -> dict[str, Any]:
+        """``GET /healthz``."""
+        return dict(self._json("/healthz"))
+
+    def ready(self) -> dict[str, Any]:
+        """``GET /readyz`` (raises :class:`DepictError` 503 when not ready)."""
+        return dict(self._json("/readyz"))
+
+    def operators(self) -> list[dict[str, Any]]:
+        """``GET /v1/operators``: every operator with the JSON schema of its parameters."""
+        return list(self._json("/v1/operators"))
+
+    def enhance(
+        self,
+        input: str | Path,
+        output: str | Path,
+        *,
+        pipeline: Any = None,
+        preset: str = "auto",
+        camera: Any = None,
+        mapping: Mapping[str, str] | None = None,
+        normal_space: str | None = None,
+        debug_layers: bool = False,
+        output_layer: str | None = None,
+        preview: bool = False,
+        exposure: float = 0.0,
+    ) -> Path:
+        """``POST /v1/enhance``: write the enhanced EXR (or a PNG with ``preview``) to ``output``.
+
+        ``pipeline``: a PipelineSpec, dict, list of steps or JSON text (default: the server's
+        default, Radiance Scaling). ``camera``: a dict, a Camera or a camera JSON path.
+        """
+        data = {"preset": preset, "debug_layers": "true" if debug_layers else "false"}
+        optional = {
+            "pipeline": _pipeline_json(pipeline),
+            "camera": _camera_json(camera),
+            "map": json.dumps(dict(mapping)) if mapping else None,
+            "normal_space": normal_space,
+            "output_layer": output_layer,
+        }
+        data.update({k: v for k, v in optional.items() if v is not None})
+        params: dict[str, Any] = {"preview": "png", "exposure": exposure} if preview else {}
+        with self._stream(
+            "POST", "/v1/enhance", files={"file": Path(input)}, data=data, params=params
+        ) as response:
+            return self._download(response, output)
+
+    def render(
+        self,
+        mesh: str | Path,
+        output: str | Path,
+        *,
+        width: int = 960,
+        height: int = 720,
+        camera: Any = None,
+        azimuth: float = 30.0,
+        elevation: float = 20.0,
+        lights: Sequence[str] = (),
+    ) -> Path:
+        """``POST /v1/render``: render ``mesh`` to a canonical G-buffer EXR at ``output``."""
+        scene: dict[str, Any] = {
+            "width": width,
+            "height": height,
+            "azimuth": azimuth,
+            "elevation": elevation,
+            "lights": list(lights),
+        }
+        cam = _camera_json(camera)
+        if cam is not None:
+            scene["camera"] = json.loads(cam)
+        with self._stream(
+            "POST", "/v1/render", files={"mesh": Path(mesh)}, data={"scene": json.dumps(scene)}
+        ) as response:
+            return self._download(response, output)
+
+    def score(self, input: str | Path, **options: Any) -> dict[str, Any]:
+        """``POST /v1/score``: the congruence score of a frame (when the server has it)."""
+        data = {k: json.dumps(v) if not isinstance(v, str) else v for k, v in options.items()}
+        with self._stream("POST", "/v1/score", files={"file": Path(input)}, data=data) as r:
+            return dict(json.loads(r.read()))
+
+
+# -- the CLI's remote mode ----------------------------------------------------------------------
+
+
+def _mapping(items: Sequence[str]) -> dict[str, str]:
+    mapping = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise DepictError(f"--map {item!r}: expected BUFFER=CHANNELS")
+        mapping[key.strip()] = value.strip()
+    return mapping
+
+
+def remote_enhance(args: Any) -> int:
+    """``depict enhance ... --server URL``: same flags and output as the local command."""
+    from service import pipeline
+
+    if args.pipeline and getattr(args, "steps", None):
+        raise DepictError("give either --pipeline or --op steps, not both")
+    if args.pipeline:
+        spec = pipeline.load(args.pipeline)
+    elif getattr(args, "steps", None):
+        spec = pipeline.parse(args.steps)
+    else:
+        spec = None  # the server's default
+    with Client.from_env(args.server) as client:
+        client.enhance(
+            args.input,
+            args.output,
+            pipeline=spec,
+            preset=args.preset,
+            camera=args.camera,
+            mapping=_mapping(args.map),
+            normal_space=args.normal_space,
+            debug_layers=args.debug_layers,
+            output_layer=args.output_layer,
+        )
+    print(f"wrote {args.output}")
+    return 0
+
+
+def remote_render(args: Any) -> int:
+    """``depict render ... --server URL``: same flags and output as the local command."""
+    with Client.from_env(args.server) as client:
+        client.render(
+            args.mesh,
+            args.output,
+            width=args.width,
+            height=args.height,
+            camera=args.camera,
+            azimuth=args.azimuth,
+            elevation=args.elevation,
+            lights=args.light,
+        )
+    print(f"wrote {args.output} ({args.width}x{args.height})")
+    return 0

@@ -1,0 +1,375 @@
+"""The service's job pool: CPU work in worker processes, a bounded queue, a time limit per job.
+
+Requests never decode pixels on the event loop: a route saves the upload to a temporary file and
+submits a job (:func:`enhance_job`, :func:`render_job`, ...) that receives *paths*, reads, runs
+and writes to another temporary path, and returns a small dict. :class:`JobPool` admits at most
+``workers + queue`` jobs at a time (one more is refused: 429 with ``Retry-After``) and gives each a
+deadline of ``timeout_s`` from its submission (queue wait included): the worker stops the job at
+the deadline (``SIGALRM`` between two Python steps) and the route answers 504; a job stuck inside
+one C call is still answered 504 at the deadline, and its worker slot stays counted until the
+call returns, so the queue limit stays honest.
+
+Job functions return ``{"ok": True, ...}`` or ``{"ok": False, "kind": KIND, "detail": TEXT}``
+(:mod:`service.problems` kinds), so no exception has to survive pickling.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import ctypes
+import gc
+import json
+import logging
+import math
+import multiprocessing
+import os
+import signal
+import time
+import traceback
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future, ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+from service.problems import Problem, from_exception
+
+log = logging.getLogger("depict.jobs")
+
+#: A worker answers 504 at the deadline; the server waits this much longer for it before
+#: answering 504 itself (a job stuck in one long C call).
+GRACE_S = 2.0
+
+
+class JobTimeout(Exception):
+    """Raised inside a worker when its job passes its deadline."""
+
+
+# -- inside the worker processes ---------------------------------------------------------------
+
+
+def init_worker() -> None:
+    """Worker start: OSMesa for rendering; ^C is for the server, which stops the pool."""
+    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _on_alarm(signum: int, frame: Any) -> None:
+    raise JobTimeout
+
+
+@contextlib.contextmanager
+def _deadline(deadline: float) -> Iterator[None]:
+    remaining = deadline - time.time()
+    if remaining <= 0:
+        raise JobTimeout
+    previous = signal.signal(signal.SIGALRM, _on_alarm)
+    signal.setitimer(signal.ITIMER_REAL, remaining)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _trim_memory() -> None:
+    """Give freed memory back to the system (glibc keeps large freed arenas otherwise)."""
+    gc.collect()
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+
+
+def run_job(fn: Callable[..., dict[str, Any]], deadline: float, *args: Any) -> dict[str, Any]:
+    """Run ``fn(*args)`` in a worker under ``deadline``; errors become problem kinds."""
+    t0 = time.perf_counter()
+    try:
+        with _deadline(deadline):
+            out = fn(*args)
+        out["ok"] = True
+    except JobTimeout:
+        out = {"ok": False, "kind": "timeout", "detail": "job passed its time limit"}
+    except Exception as exc:  # every error leaves the worker as data, never as a crash
+        problem = from_exception(exc)
+        if problem.kind == "internal" and type(exc) is ValueError:
+            # the project's convention: a plain ValueError names a bad parameter or input
+            problem = Problem("invalid-request", str(exc))
+        if problem.kind == "internal":
+            log.error("job failed: %s", "".join(traceback.format_exception(exc)))
+        out = {"ok": False, "kind": problem.kind, "detail": problem.detail}
+    finally:
+        _trim_memory()
+    out["job_s"] = time.perf_counter() - t0
+    return out
+
+
+def probe_job() -> dict[str, Any]:
+    """Readiness: render a tiny mesh through OSMesa (and import everything a job needs)."""
+    import trimesh
+
+    import gbuffer.io  # noqa: F401  (import the frame I/O once, off the request path)
+    from gbuffer.render import render
+
+    try:
+        render(trimesh.creation.icosahedron(), 8, 8)
+    except Exception as exc:
+        return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
+    return {"osmesa": True}
+
+
+def read_frame(path: str, read: dict[str, Any], max_pixels: int | None = None) -> Any:
+    """Read a frame exactly as the CLI does (same preset, camera, mapping).
+
+    ``read``: ``preset``, ``camera`` (path of a camera JSON file), ``mapping`` (buffer ->
+    channels), ``normal_space``.
+    """
+    from gbuffer.io import ReadOptions
+    from gbuffer.io import read as read_exr
+
+    options = ReadOptions(mapping=read.get("mapping") or {}, normal_space=read.get("normal_space"))
+    return read_exr(
+        path,
+        preset=read.get("preset") or "auto",
+        camera=read.get("camera"),
+        options=options,
+        max_pixels=max_pixels,
+    )
+
+
+def enhance_file(
+    in_path: str,
+    out_path: str,
+    spec_json: str,
+    read: dict[str, Any],
+    write: dict[str, Any],
+    max_pixels: int | None = None,
+    pinned: dict[str, float] | None = None,
+) -> dict[str, Any]:
+    """Read ``in_path``, run the pipeline, write the EXR (or a PNG preview) to ``out_path``.
+
+    The same steps as ``depict enhance``, so the output is bit for bit the CLI's.
+    ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``.
+    ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`).
+    Returns ``op_s`` (seconds per operator), ``size`` and the statistics ``measured``.
+    """
+    from gbuffer.io import write as write_exr
+    from service import pipeline
+    from service.registry import Context
+
+    spec = pipeline.parse(spec_json)
+    pipeline.compile_steps(spec)
+    frame = read_frame(in_path, read, max_pixels)
+    context = Context(debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}))
+    op_s: list[tuple[str, float]] = []
+    out = frame
+    for step in spec.steps:  # one step at a time, to time each operator
+        t0 = time.perf_counter()
+        out = pipeline.run(out, pipeline.PipelineSpec(steps=[step]), context=context)
+        op_s.append((step.op, time.perf_counter() - t0))
+    out = pipeline.finish(out, write.get("output_layer"))
+    if write.get("preview"):
+        from gbuffer.preview import picture, write_png
+
+        write_png(picture(out, "beauty", exposure=float(write.get("exposure", 0.0))), out_path)
+    else:
+        write_exr(out, out_path)
+    h, w = out.shape
+    return {"op_s": op_s, "size": [w, h], "measured": dict(context.measured)}
+
+
+def enhance_job(
+    in_path: str,
+    out_path: str,
+    spec_json: str,
+    read: dict[str, Any],
+    write: dict[str, Any],
+    max_pixels: int,
+) -> dict[str, Any]:
+    """``POST /v1/enhance`` on a worker: :func:`enhance_file` under the pixel limit."""
+    return enhance_file(in_path, out_path, spec_json, read, write, max_pixels)
+
+
+def render_job(mesh_path: str, out_path: str, scene: dict[str, Any]) -> dict[str, Any]:
+    """Render a mesh to a canonical G-buffer EXR, as ``depict render`` does."""
+    from gbuffer.camera import Camera
+    from gbuffer.io import write
+    from gbuffer.render import auto_camera, load_mesh, render
+    from ops.shading import parse_light
+
+    mesh = load_mesh(mesh_path)
+    try:
+        lights = [parse_light(text) for text in scene.get("lights") or []] or None
+    except ValueError as exc:
+        raise Problem("invalid-request", f"scene.lights: {exc}") from None
+    width, height = int(scene["width"]), int(scene["height"])
+    if scene.get("camera") is not None:
+        camera = Camera.from_dict(scene["camera"])
+    else:
+        camera = auto_camera(
+            mesh,
+            width=width,
+            height=height,
+            azimuth_deg=float(scene.get("azimuth", 30.0)),
+            elevation_deg=float(scene.get("elevation", 20.0)),
+        )
+    frame = render(mesh, width, height, camera=camera, lights=lights)
+    write(frame, out_path)
+    return {"size": [width, height]}
+
+
+def score_job(
+    in_path: str,
+    spec_json: str | None,
+    read: dict[str, Any],
+    options: dict[str, Any],
+    max_pixels: int,
+) -> dict[str, Any]:
+    """``depict score`` on a worker: the congruence score (LLA Eq. 2) of the frame's beauty
+    (:func:`service.compare.score_frame`), after the pipeline ``spec_json`` when given."""
+    from service import pipeline
+    from service.compare import score_frame
+    from service.registry import Context
+
+    frame = read_frame(in_path, read, max_pixels)
+    op_s: list[tuple[str, float]] = []
+    if spec_json:
+        spec = pipeline.parse(spec_json)
+        pipeline.compile_steps(spec)
+        context = Context()
+        for step in spec.steps:
+            t0 = time.perf_counter()
+            frame = pipeline.run(frame, pipeline.PipelineSpec(steps=[step]), context=context)
+            op_s.append((step.op, time.perf_counter() - t0))
+    out = score_frame(frame, maps=False, **options)
+    return {
+        "score": float(out["score"]),
+        "analysis_shape": [int(v) for v in out["analysis_shape"]],
+        "image_shape": [int(v) for v in out["image_shape"]],
+        "params": {k: float(v) for k, v in out["params"].items()},
+        "op_s": op_s,
+    }
+
+
+# -- in the server -----------------------------------------------------------------------------
+
+
+class JobPool:
+    """Worker processes with admission control: ``workers`` running + ``queue`` waiting."""
+
+    def __init__(self, workers: int, queue: int, timeout_s: float, metrics: Any = None) -> None:
+        self.workers = workers
+        self.capacity = workers + queue
+        self.timeout_s = timeout_s
+        self.metrics = metrics
+        self.active = 0  # admitted jobs not finished on their worker (waiting or running)
+        self.recent_s = 1.0  # running mean of job times, for Retry-After
+        self.executor = ProcessPoolExecutor(
+            max_workers=workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=init_worker,
+        )
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self.ready: dict[str, Any] | None = None
+        self._probe_lock: asyncio.Lock | None = None
+
+    def _gauges(self) -> None:
+        if self.metrics is not None:
+            self.metrics.running.set(min(self.active, self.workers))
+            self.metrics.queued.set(max(0, self.active - self.workers))
+
+    def _release(self, _: Future[Any]) -> None:
+        assert self._loop is not None
+
+        def done() -> None:
+            self.active -= 1
+            self._gauges()
+
+        with contextlib.suppress(RuntimeError):  # loop closed at shutdown
+            self._loop.call_soon_threadsafe(done)
+
+    def retry_after(self) -> int:
+        """Seconds a refused client should wait: the queue ahead divided by the throughput."""
+        waits = self.active / self.workers * self.recent_s
+        return max(1, min(60, math.ceil(waits)))
+
+    async def submit(
+        self,
+        kind: str,
+        fn: Callable[..., dict[str, Any]],
+        *args: Any,
+        on_abandon: Callable[[], None] | None = None,
+    ) -> dict[str, Any]:
+        """Run ``fn(*args)`` on a worker; :class:`Problem` 429 / 504 / 4xx on failure.
+
+        ``on_abandon`` runs when a job the request gave up on (504) finally leaves its worker
+        (to remove its files only then).
+        """
+        self._loop = asyncio.get_running_loop()
+        if self.active >= self.capacity:
+            if self.metrics is not None:
+                self.metrics.jobs.labels(kind, "refused").inc()
+            raise Problem(
+                "busy",
+                f"all {self.workers} workers are busy and the queue of "
+                f"{self.capacity - self.workers} jobs is full; retry after the delay given",
+                headers={"Retry-After": str(self.retry_after())},
+            )
+        deadline = time.time() + self.timeout_s
+        self.active += 1
+        self._gauges()
+        try:
+            future = self.executor.submit(run_job, fn, deadline, *args)
+        except Exception:
+            self.active -= 1
+            self._gauges()
+            raise
+        future.add_done_callback(self._release)
+        try:
+            out = await asyncio.wait_for(
+                asyncio.shield(asyncio.wrap_future(future)), self.timeout_s + GRACE_S
+            )
+        except TimeoutError:
+            out = {"ok": False, "kind": "timeout", "detail": "job passed its time limit"}
+            if on_abandon is not None:
+                future.add_done_callback(lambda _: on_abandon())
+        if "job_s" in out:
+            self.recent_s = 0.8 * self.recent_s + 0.2 * float(out["job_s"])
+        if self.metrics is not None:
+            self.metrics.jobs.labels(kind, "ok" if out["ok"] else out["kind"]).inc()
+            if "job_s" in out:
+                self.metrics.job_time.labels(kind).observe(out["job_s"])
+            for op, seconds in out.get("op_s", []):
+                self.metrics.operator_time.labels(op).observe(seconds)
+        if not out["ok"]:
+            detail = out["detail"]
+            if out["kind"] == "timeout":
+                detail = (
+                    f"the job did not finish within DEPICT_TIMEOUT_S={self.timeout_s:g} s "
+                    "(queue wait included); retry later, or send a smaller frame"
+                )
+            raise Problem(out["kind"], detail)
+        return out
+
+    async def check_ready(self) -> dict[str, Any]:
+        """Run :func:`probe_job` once on a worker and cache its answer (either way)."""
+        if self._probe_lock is None:
+            self._probe_lock = asyncio.Lock()
+        async with self._probe_lock:
+            if self.ready is None:
+                loop = asyncio.get_running_loop()
+                try:
+                    result = await asyncio.wait_for(
+                        loop.run_in_executor(self.executor, probe_job), 120.0
+                    )
+                except Exception as exc:  # a broken pool is "not ready", with the reason
+                    return {"osmesa": False, "detail": f"worker pool is not up: {exc!r}"}
+                self.ready = result
+            return self.ready
+
+    def shutdown(self) -> None:
+        self.executor.shutdown(wait=True, cancel_futures=True)
+
+
+def dump_json(value: Any, path: Path) -> str:
+    """Write ``value`` as JSON to ``path`` (a camera for :func:`gbuffer.read`); its path."""
+    path.write_text(json.dumps(value))
+    return str(path)

@@ -1,0 +1,327 @@
+"""The built-in operators: one registry entry each, mapping a frame onto an ``ops`` function.
+
+Each entry reads the buffers it needs from the frame, calls the maths in ``ops/`` and writes the
+enhanced beauty and/or output layers. Parameters are pydantic models; their ``description``
+strings are what ``depict ops``, the HTTP schema and the OpenAPI file show.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from gbuffer.frame import LOBES, Frame
+from ops import curvature as curv_ops
+from ops import radiance_scaling as rs
+from ops.scaling import scale_lobes, white_level
+from ops.shading import Light, parse_light
+from service.images import load_image
+from service.registry import Context, Params, register
+
+Fraction = Annotated[float, Field(gt=0.0, lt=1.0)]
+Magnitude = Annotated[float, Field(ge=0.0, le=100.0)]
+
+DEFAULT_LIGHTS = ["-0.4,0.6,0.7", "0.6,0.2,0.5*0.35"]
+
+
+class CurvatureParams(Params):
+    """View-centred curvature (RS §4), shared by every operator that needs it."""
+
+    scale: float = Field(
+        curv_ops.DEFAULT_SCALE,
+        gt=0.0,
+        le=0.1,
+        description="derivative scale, relative to the image height (Gaussian σ)",
+    )
+    gain: float = Field(
+        curv_ops.DEFAULT_GAIN,
+        gt=0.0,
+        le=100.0,
+        description="curvature gain s in κ = tanh(s·(κ1+κ2)), curvature per image height",
+    )
+    foreshortening: float = Field(
+        curv_ops.DEFAULT_FORESHORTENING,
+        ge=0.0,
+        le=1.0,
+        description="foreshortening f in g = −(n_x, n_y)/n_z^f (0: none, 1: full)",
+    )
+    depth_jump: float = Field(
+        curv_ops.DEFAULT_DEPTH_JUMP,
+        gt=0.0,
+        le=10.0,
+        description="relative depth jump treated as a discontinuity (no curvature across it)",
+    )
+
+
+def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
+    """The view-centred curvature of a frame at the parameters' scale."""
+    return curv_ops.principal_curvatures(
+        frame.need("normal", "for curvature"),
+        frame.need("depth", "for curvature"),
+        frame.mask,
+        scale=p.scale,
+        foreshortening=p.foreshortening,
+        image_height=frame.image_height,
+        depth_jump=p.depth_jump,
+    )
+
+
+@register(
+    "curvature",
+    summary="view-centred curvature (RS §4): mapped mean curvature, principal curvatures "
+    "and direction",
+    params=CurvatureParams,
+    needs=("normal", "depth"),
+    writes=("curvature.H", "curvature.k1", "curvature.k2", "curvature.dir.X", "curvature.dir.Y"),
+)
+def apply_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> None:
+    frame.set_layer("curvature", curv_ops.mean_curvature_layers(frame_curvature(frame, p), p.gain))
+
+
+Scenario = Literal[
+    "auto",
+    "lobes",
+    "beauty",
+    "ao",
+    "phong",
+    "sub_lambert",
+    "toon",
+    "ashikhmin_shirley",
+    "lit_sphere",
+    "mirror",
+    "refraction",
+]
+
+
+class RadianceScalingParams(CurvatureParams):
+    """Radiance Scaling (Vergne et al. 2011) in every rendering scenario of §5."""
+
+    scenario: Scenario = Field(
+        "auto",
+        description="lobes: scale the renderer's lobes (Eq. 4); beauty: the beauty as one lobe; "
+        "ao: ambient occlusion × prefiltered environment (§5.3.1); phong / sub_lambert / toon / "
+        "ashikhmin_shirley: deferred shading with `lights` (§5.1-5.2); lit_sphere: a matcap "
+        "(§5.3.1); mirror / refraction: an environment map (§5.3.2); auto: lobes when the "
+        "frame has them, else beauty",
+    )
+    alpha: Fraction = Field(0.5, description="scaling-invariant point α in (0, 1) (Eq. 2)")
+    gamma: Magnitude = Field(3.0, description="scaling magnitude γ ≥ 0 for every lobe (Eq. 2)")
+    gamma_ambient: Magnitude | None = Field(None, description="γ of the ambient lobe")
+    gamma_diffuse: Magnitude | None = Field(None, description="γ of the diffuse lobe")
+    gamma_specular: Magnitude | None = Field(None, description="γ of the specular lobe")
+    gamma_transmission: Magnitude | None = Field(None, description="γ of the transmission lobe")
+    anisotropy: float = Field(
+        0.0, ge=-1.0, le=1.0, description="λ ∈ [−1, 1] of the anisotropic mapping κ(ℓ) (§4)"
+    )
+    white: float | Literal["auto"] = Field(
+        "auto",
+        description="white level of δ̄ (lobes, beauty): a number pins it for sequences; auto = "
+        "the `white_percentile` of the covered pixels",
+    )
+    white_percentile: float = Field(99.0, gt=50.0, le=100.0, description="percentile of auto")
+    lobes: list[str] | None = Field(
+        None, description="renderer lobes to scale (default: every lobe the frame has)"
+    )
+    lights: list[str] = Field(
+        default_factory=lambda: list(DEFAULT_LIGHTS),
+        description="deferred scenarios: lights in camera space, 'X,Y,Z' (directional) or "
+        "'point:X,Y,Z', optional '@I' intensity",
+    )
+    ambient: float = Field(0.1, ge=0.0, le=10.0, description="k_a of Phong")
+    specular: float = Field(0.3, ge=0.0, le=10.0, description="k_s of Phong")
+    shininess: float = Field(32.0, gt=0.0, le=10000.0, description="Phong exponent η")
+    zeta: float = Field(0.5, ge=0.0, le=1.0, description="sub-Lambertian exponent ζ (§5.1)")
+    toon_levels: int = Field(4, ge=2, le=64, description="bands of toon shading")
+    as_exponent: float = Field(100.0, gt=0.0, le=100000.0, description="Ashikhmin-Shirley n")
+    ior: float = Field(1.5, gt=0.0, le=5.0, description="refraction index (refraction)")
+    matcap: str | None = Field(None, description="lit sphere image (default: a clay sphere)")
+    environment: str | None = Field(
+        None, description="equirectangular environment (EXR/HDR/PNG; default: a simple sky)"
+    )
+
+    @field_validator("lights")
+    @classmethod
+    def _lights(cls, value: list[str]) -> list[str]:
+        for text in value:
+            parse_light(text)  # raises ValueError naming what is wrong
+        return value
+
+    @field_validator("lobes")
+    @classmethod
+    def _lobes(cls, value: list[str] | None) -> list[str] | None:
+        for lobe in value or []:
+            if lobe not in LOBES:
+                raise ValueError(f"unknown lobe {lobe!r}; lobes: {', '.join(LOBES)}")
+        return value
+
+    def gamma_of(self, lobe: str) -> float:
+        specific = getattr(self, f"gamma_{lobe}", None)
+        return self.gamma if specific is None else float(specific)
+
+    def parsed_lights(self) -> list[Light]:
+        return [parse_light(text) for text in self.lights]
+
+
+def _white(
+    ctx: Context, p: RadianceScalingParams, key: str, light: np.ndarray, mask: np.ndarray
+) -> float:
+    if p.white != "auto":
+        return float(p.white)
+    return ctx.statistic(
+        f"radiance_scaling.white.{key}",
+        lambda: white_level(light, mask, percentile=p.white_percentile),
+    )
+
+
+def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
+    if p.scenario != "auto":
+        return p.scenario
+    return "lobes" if any(lobe in frame.buffers for lobe in LOBES) else "beauty"
+
+
+def _scale_renderer_lobes(
+    frame: Frame, p: RadianceScalingParams, kappa: np.ndarray, ctx: Context
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Eq. 4 on the renderer's lobes; the beauty is rebuilt as Σ σ̄_j lobe_j + remainder."""
+    names = p.lobes or [lobe for lobe in LOBES if lobe in frame.buffers]
+    if not names:
+        frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
+    lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
+    lights = {n: frame.buffers.get(f"{n}.light", lobes[n]) for n in names}
+    mask = frame.mask > 0
+    white = {n: _white(ctx, p, n, lights[n], mask) for n in names}
+    remainder = frame.buffers.get("remainder")
+    if remainder is None and "beauty" in frame.buffers:
+        remainder = frame.buffers["beauty"] - sum(lobes.values())
+    return scale_lobes(
+        lobes,
+        lights,
+        kappa,
+        p.alpha,
+        {n: p.gamma_of(n) for n in names},
+        white,
+        remainder,
+        mask=mask,
+    )
+
+
+def _scale_beauty(
+    frame: Frame, p: RadianceScalingParams, kappa: np.ndarray, ctx: Context
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The beauty as a single lobe; its light is beauty / albedo when the frame has an albedo."""
+    beauty = frame.need("beauty", "scenario 'beauty'")
+    light = beauty
+    if "albedo" in frame.buffers:
+        light = beauty / np.maximum(frame.buffers["albedo"], np.float32(1e-3))
+    white = _white(ctx, p, "beauty", light, frame.mask > 0)
+    return scale_lobes({"beauty": beauty}, {"beauty": light}, kappa, p.alpha, p.gamma, white)
+
+
+def _camera_to_world(frame: Frame) -> np.ndarray | None:
+    if frame.camera is None or frame.camera.world_to_camera is None:
+        return None
+    return np.linalg.inv(frame.camera.world_to_camera)[:3, :3]
+
+
+def _environment(p: RadianceScalingParams) -> np.ndarray:
+    return load_image(p.environment) if p.environment else rs.sky_environment()
+
+
+def _deferred(
+    frame: Frame, p: RadianceScalingParams, curv: curv_ops.Curvature, scenario: str
+) -> rs.Scaled:
+    normal = frame.need("normal", f"scenario '{scenario}'")
+    albedo = frame.buffers.get("albedo", np.array([0.8, 0.8, 0.8], np.float32))
+    common = {"alpha": p.alpha, "gain": p.gain}
+    if scenario in ("phong", "sub_lambert", "toon"):
+        return rs.phong(
+            normal,
+            frame.positions(),
+            frame.view_vectors(),
+            p.parsed_lights(),
+            curv,
+            albedo=albedo,
+            ambient=p.ambient,
+            specular=p.specular,
+            shininess=p.shininess,
+            gamma_ambient=p.gamma_of("ambient"),
+            gamma_diffuse=p.gamma_of("diffuse"),
+            gamma_specular=p.gamma_of("specular"),
+            lam=p.anisotropy,
+            zeta=p.zeta if scenario == "sub_lambert" else 1.0,
+            toon_levels=p.toon_levels if scenario == "toon" else 0,
+            **common,
+        )
+    if scenario == "ashikhmin_shirley":
+        return rs.ashikhmin_shirley(
+            normal,
+            frame.positions(),
+            frame.view_vectors(),
+            p.parsed_lights(),
+            curv,
+            albedo=albedo,
+            exponent=p.as_exponent,
+            gamma_diffuse=p.gamma_of("diffuse"),
+            gamma_specular=p.gamma_of("specular"),
+            lam=p.anisotropy,
+            **common,
+        )
+    if scenario == "ao":
+        irradiance = None
+        if p.environment:
+            to_world = _camera_to_world(frame)
+            n_world = normal if to_world is None else rs.rotate_directions(normal, to_world)
+            irradiance = rs.sh_irradiance(_environment(p), n_world)
+        return rs.precomputed_diffuse(
+            normal,
+            curv,
+            ao=frame.need("ao", "scenario 'ao'"),
+            irradiance=irradiance,
+            albedo=albedo,
+            gamma=p.gamma_of("diffuse"),
+            **common,
+        )
+    if scenario == "lit_sphere":
+        sphere = load_image(p.matcap) if p.matcap else rs.studio_matcap()
+        return rs.lit_sphere(normal, curv, sphere, gamma=p.gamma_of("specular"), **common)
+    return rs.environment(
+        normal,
+        frame.view_vectors(),
+        curv,
+        _environment(p),
+        mode=scenario,
+        ior=p.ior,
+        camera_to_world=_camera_to_world(frame),
+        gamma=p.gamma_of("specular"),
+        **common,
+    )
+
+
+@register(
+    "radiance_scaling",
+    summary="Radiance Scaling (Vergne et al. 2011): scale reflected light by curvature and "
+    "reflectance, per lobe, in every scenario of §5",
+    params=RadianceScalingParams,
+    needs=("normal", "depth"),
+    writes=("beauty", "curvature.H (debug)", "rs_sigma.<lobe>.X (debug)"),
+)
+def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context) -> None:
+    curv = frame_curvature(frame, p)
+    scenario = _scenario(frame, p)
+    if scenario in ("lobes", "beauty"):
+        kappa = curv_ops.isotropic(curv, p.gain)
+        if scenario == "lobes":
+            beauty, sigmas = _scale_renderer_lobes(frame, p, kappa, ctx)
+        else:
+            beauty, sigmas = _scale_beauty(frame, p, kappa, ctx)
+    else:
+        scaled = _deferred(frame, p, curv, scenario)
+        beauty, sigmas = scaled.beauty, scaled.sigmas
+        frame.buffers.update(scaled.lobes)
+    frame.buffers["beauty"] = beauty.astype(np.float32)
+    if ctx.debug_layers:
+        frame.set_layer("curvature", {"H": curv_ops.isotropic(curv, p.gain)})
+        for lobe, s in sigmas.items():
+            frame.set_layer(f"rs_sigma.{lobe}", {"X": s})

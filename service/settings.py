@@ -1,0 +1,64 @@
+"""Service settings, read from ``DEPICT_*`` environment variables (pydantic-settings).
+
+=========================  =============  ==========================================================
+variable                   default        meaning
+=========================  =============  ==========================================================
+``DEPICT_HOST``            ``127.0.0.1``  address ``depict serve`` binds (``0.0.0.0`` in Docker)
+``DEPICT_PORT``            ``8000``       port ``depict serve`` binds
+``DEPICT_API_KEY``         unset          when set, every route except ``/healthz`` and
+                                          ``/readyz`` needs ``Authorization: Bearer <key>``
+``DEPICT_METRICS_PUBLIC``  ``false``      ``true``: ``/metrics`` needs no key even when one is set
+``DEPICT_MAX_UPLOAD_MB``   ``512``        largest request body, MiB (413 above)
+``DEPICT_MAX_PIXELS``      ``67108864``   largest frame, width x height of the EXR data window or
+                                          of a render (413 above; checked on the header)
+``DEPICT_WORKERS``         ``2``          jobs processed in parallel (worker processes)
+``DEPICT_QUEUE``           ``8``          jobs waiting for a worker; one more answers 429
+``DEPICT_TIMEOUT_S``       ``120``        time limit of a job, queue wait included (504 after)
+``DEPICT_LOG_LEVEL``       ``info``       ``debug``, ``info``, ``warning`` or ``error``
+=========================  =============  ==========================================================
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+from pydantic import Field, SecretStr
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+
+class Settings(BaseSettings):
+    """Settings of the HTTP service; every field is the env variable ``DEPICT_<FIELD>``."""
+
+    model_config = SettingsConfigDict(env_prefix="DEPICT_", extra="ignore")
+
+    host: str = Field(default="127.0.0.1", description="address to bind")
+    port: int = Field(default=8000, ge=0, le=65535, description="port to bind (0: any free port)")
+    api_key: SecretStr | None = Field(
+        default=None, description="bearer token required on every route but health when set"
+    )
+    metrics_public: bool = Field(default=False, description="serve /metrics without the API key")
+    max_upload_mb: float = Field(default=512.0, gt=0, description="largest request body, MiB")
+    max_pixels: int = Field(
+        default=8192 * 8192,
+        ge=1,
+        description="largest frame (width x height), checked on the header",
+    )
+    workers: int = Field(default=2, ge=1, le=256, description="jobs processed in parallel")
+    queue: int = Field(default=8, ge=0, le=10_000, description="jobs waiting for a worker")
+    timeout_s: float = Field(
+        default=120.0, gt=0, description="time limit of a job, queue wait included"
+    )
+    log_level: Literal["debug", "info", "warning", "error"] = Field(
+        default="info", description="log level of the JSON logs"
+    )
+
+    @property
+    def max_upload_bytes(self) -> int:
+        return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def key(self) -> str | None:
+        """The API key, or ``None`` when unset or empty."""
+        if self.api_key is None:
+            return None
+        return self.api_key.get_secret_value() or None

@@ -1,0 +1,300 @@
+"""The HTTP app in process (Starlette's TestClient): contract, settings, auth, errors, metrics.
+
+The real-server behaviour (bit-for-bit outputs, saturation, time limit) is in
+tests/test_e2e_server.py; here every answer still goes through the real app, its middleware and
+its worker pool.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from typing import Any
+
+import pytest
+from pydantic import ValidationError
+
+from gbuffer.errors import FrameError, LimitError, MissingBufferError, MissingCameraError
+from service import problems
+from service.api import Gate, JsonFormatter, create_app
+from service.metrics import Metrics
+from service.openapi import DEFAULT_PATH, dumps
+from service.registry import PipelineError, operators
+from service.settings import Settings
+
+pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
+
+KEY = "test-key"
+AUTH = {"Authorization": f"Bearer {KEY}"}
+
+
+@pytest.fixture(scope="module")
+def client() -> Iterator[Any]:
+    from fastapi.testclient import TestClient
+
+    app = create_app(Settings(api_key=KEY, workers=1, queue=1, max_pixels=640 * 480))
+    with TestClient(app, raise_server_exceptions=False) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def gate() -> Iterator[Any]:
+    """The app's front middleware alone (no key, public metrics, tiny body limit) before an
+    inner app that answers 200 to everything it is given."""
+    from fastapi.testclient import TestClient
+
+    async def inner(scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            return
+        await send({"type": "http.response.start", "status": 200, "headers": []})
+        await send({"type": "http.response.body", "body": b"inner"})
+
+    settings = Settings(api_key=KEY, metrics_public=True, max_upload_mb=0.05)
+    yield TestClient(Gate(inner, settings=settings, metrics=Metrics()))  # no lifespan needed
+
+
+def problem(response: Any, status: int, words: str = "") -> dict:
+    assert response.status_code == status, response.text
+    assert response.headers["content-type"] == "application/problem+json"
+    body = response.json()
+    assert {"type", "title", "status", "detail", "instance", "request_id"} <= set(body)
+    assert body["status"] == status
+    assert words.lower() in body["detail"].lower(), body["detail"]
+    return body
+
+
+def exr_bytes() -> bytes:
+    """Any bytes with the EXR magic number but no valid header."""
+    return b"\x76\x2f\x31\x01" + b"\x02\x00\x00\x00" + b"\x00" * 64
+
+
+# -- settings ----------------------------------------------------------------------------------
+
+
+def test_settings_defaults_and_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    for name in ("HOST", "PORT", "API_KEY", "WORKERS", "QUEUE", "TIMEOUT_S", "MAX_UPLOAD_MB"):
+        monkeypatch.delenv(f"DEPICT_{name}", raising=False)
+    s = Settings()
+    assert (s.host, s.port, s.workers, s.queue, s.timeout_s) == ("127.0.0.1", 8000, 2, 8, 120.0)
+    assert s.key is None and s.max_upload_bytes == 512 * 2**20 and s.max_pixels == 8192**2
+    monkeypatch.setenv("DEPICT_WORKERS", "3")
+    monkeypatch.setenv("DEPICT_API_KEY", "abc")
+    monkeypatch.setenv("DEPICT_MAX_UPLOAD_MB", "1.5")
+    s = Settings()
+    assert s.workers == 3 and s.key == "abc" and s.max_upload_bytes == int(1.5 * 2**20)
+    assert "abc" not in repr(s)  # the key is a secret
+    monkeypatch.setenv("DEPICT_WORKERS", "0")
+    with pytest.raises(ValidationError, match="workers"):
+        Settings()
+
+
+# -- the contract ------------------------------------------------------------------------------
+
+
+def test_served_openapi_is_the_committed_file(client: Any) -> None:
+    served = client.get("/openapi.json").json()
+    committed = json.loads(DEFAULT_PATH.read_text())
+    assert served == committed, (
+        "openapi/openapi.json is stale: regenerate it with `python -m service.openapi`"
+    )
+    assert DEFAULT_PATH.read_text() == dumps(served)
+
+
+def test_openapi_has_every_operator_and_the_problem_schema(client: Any) -> None:
+    schema = client.get("/openapi.json").json()
+    branches = schema["components"]["schemas"]["Pipeline"]["properties"]["steps"]["items"]
+    names = {b["properties"]["op"]["const"] for b in branches["oneOf"]}
+    assert names == set(operators())
+    assert "Problem" in schema["components"]["schemas"]
+    enhance = schema["paths"]["/v1/enhance"]["post"]
+    assert {"400", "401", "413", "415", "422", "429", "504"} <= set(enhance["responses"])
+    assert "/healthz" in schema["paths"] and "security" not in schema["paths"]["/healthz"]["get"]
+
+
+def test_operators_route_lists_the_registry(client: Any) -> None:
+    ops = client.get("/v1/operators", headers=AUTH).json()
+    assert [op["name"] for op in ops] == list(operators())
+    assert all(op["params"]["type"] == "object" for op in ops)
+
+
+# -- problems ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("exc", "status", "kind"),
+    [
+        (FrameError("x"), 400, "bad-file"),
+        (LimitError("x"), 413, "limit"),
+        (MissingBufferError("x"), 422, "missing-buffer"),
+        (MissingCameraError("x"), 422, "missing-camera"),
+        (PipelineError("x"), 422, "invalid-request"),
+        (RuntimeError("x"), 500, "internal"),
+    ],
+)
+def test_exception_mapping(exc: Exception, status: int, kind: str) -> None:
+    p = problems.from_exception(exc)
+    assert (p.status, p.kind) == (status, kind)
+    body = p.body("/v1/enhance", "rid")
+    assert body["type"] == f"urn:depict:problem:{kind}" and body["request_id"] == "rid"
+    assert (body["detail"] == "x") == (status != 500)  # internals are never shown
+
+
+def test_unknown_problem_kind_is_refused() -> None:
+    with pytest.raises(ValueError, match="problem kind"):
+        problems.Problem("nope", "x")
+
+
+# -- auth --------------------------------------------------------------------------------------
+
+
+def test_api_key(client: Any) -> None:
+    c = client
+    assert c.get("/healthz").status_code == 200
+    assert c.get("/readyz").json()["osmesa"] is True
+    problem(c.get("/v1/operators"), 401, "Authorization: Bearer")
+    wrong = c.get("/v1/operators", headers={"Authorization": "Bearer x"})
+    problem(wrong, 401, "wrong")
+    basic = c.get("/v1/operators", headers={"Authorization": f"Basic {KEY}"})
+    problem(basic, 401)
+    assert c.get("/v1/operators", headers=AUTH).status_code == 200
+    problem(c.get("/metrics"), 401)
+    assert c.get("/metrics", headers=AUTH).status_code == 200
+
+
+def test_metrics_public_without_key(gate: Any) -> None:
+    assert gate.get("/metrics").text == "inner"  # let through without the key
+    problem(gate.get("/v1/operators"), 401)  # the key is still needed elsewhere
+
+
+# -- bad requests ------------------------------------------------------------------------------
+
+
+def test_content_type_415(client: Any) -> None:
+    r = client.post("/v1/enhance", headers=AUTH, content=b"x")
+    problem(r, 415, "multipart/form-data")
+    r = client.post("/v1/render", headers=AUTH, json={"mesh": 1})
+    problem(r, 415, "application/json")
+
+
+def test_body_limit_413(gate: Any) -> None:
+    r = gate.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", b"\0" * 60_000)})
+    problem(r, 413, "DEPICT_MAX_UPLOAD_MB")
+    r = gate.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", b"\0" * 1_000)})
+    assert r.text == "inner"
+
+
+def test_not_found_and_method_problems(client: Any) -> None:
+    problem(client.get("/nope", headers=AUTH), 404, "no route")
+    problem(client.get("/v1/enhance", headers=AUTH), 405, "does not accept GET")
+
+
+def test_not_an_exr_400(client: Any) -> None:
+    r = client.post("/v1/enhance", headers=AUTH, files={"file": ("x.exr", b"hello")})
+    body = problem(r, 400, "x.exr is not an OpenEXR file")
+    assert body["type"] == "urn:depict:problem:bad-file"
+    r = client.post("/v1/enhance", headers=AUTH, files={"file": ("e.exr", b"")})
+    problem(r, 400, "empty file")
+    r = client.post("/v1/enhance", headers=AUTH, files={"file": ("h.exr", exr_bytes())})
+    body = problem(r, 400, "h.exr")
+    assert "/tmp" not in body["detail"]
+
+
+@pytest.mark.parametrize(
+    ("data", "words"),
+    [
+        ({"pipeline": "{"}, "not valid JSON"),
+        ({"pipeline": '{"steps": []}'}, "steps"),
+        ({"pipeline": '[{"op": "nope"}]'}, "unknown operator 'nope'"),
+        ({"camera": "[1, 2]"}, "'camera' must be a JSON object"),
+        ({"camera": '{"fov_y_deg": 500}'}, "fov_y_deg"),
+        ({"camera": '{"focal_px": [1], "height": 2}'}, "camera"),
+        ({"map": '{"normal": 3}'}, "map"),
+        ({"preset": "maya"}, "preset 'maya' is unknown"),
+        ({"output_layer": "a b"}, "output_layer"),
+        ({"normal_space": "up"}, "normal_space"),
+    ],
+)
+def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> None:
+    r = client.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
+    problem(r, 422, words)
+
+
+def test_missing_file_field_422(client: Any) -> None:
+    r = client.post("/v1/enhance", headers=AUTH, files={"other": ("a", b"x")})
+    problem(r, 422, "file")
+
+
+def test_render_requests(client: Any) -> None:
+    mesh = ("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    r = client.post("/v1/render", headers=AUTH, files={"mesh": ("m.txt", b"x")})
+    problem(r, 415, ".obj")
+    big = {"scene": '{"width": 1000, "height": 1000}'}
+    r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data=big)
+    problem(r, 413, "DEPICT_MAX_PIXELS")
+    for scene, words in [
+        ("{", "scene"),
+        ('{"width": 0}', "width"),
+        ('{"colour": 1}', "colour"),
+        ('{"camera": {"fov_y_deg": -1}}', "scene.camera"),
+    ]:
+        r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data={"scene": scene})
+        problem(r, 422, words)
+    r = client.post(
+        "/v1/render",
+        headers=AUTH,
+        files={"mesh": mesh},
+        data={"scene": '{"width": 32, "height": 24, "lights": ["sideways"]}'},
+    )
+    problem(r, 422, "scene.lights")
+    small = {"scene": '{"width": 32, "height": 24}'}
+    r = client.post("/v1/render", headers=AUTH, files={"mesh": ("bad.ply", b"garbage")}, data=small)
+    problem(r, 400, "bad.ply")
+    r = client.post(
+        "/v1/render",
+        headers=AUTH,
+        files={"mesh": mesh},
+        data={"scene": '{"width": 32, "height": 24}'},
+    )
+    assert r.status_code == 200 and r.headers["content-type"] == "image/x-exr"
+    assert r.content[:4] == b"\x76\x2f\x31\x01"
+
+
+# -- request ids, metrics, logs ----------------------------------------------------------------
+
+
+def test_request_id(client: Any) -> None:
+    r = client.get("/healthz", headers={"X-Request-ID": "abc-123"})
+    assert r.headers["x-request-id"] == "abc-123"
+    r = client.get("/healthz", headers={"X-Request-ID": "bad id\twith spaces"})
+    generated = r.headers["x-request-id"]
+    assert generated != "bad id\twith spaces" and len(generated) == 32
+    r = client.get("/v1/operators", headers={"X-Request-ID": "xyz"})
+    assert r.json()["request_id"] == "xyz" == r.headers["x-request-id"]
+
+
+def test_metrics_count_requests_by_route(client: Any) -> None:
+    client.get("/healthz")
+    client.get("/no/such/path/123", headers=AUTH)
+    text = client.get("/metrics", headers=AUTH).text
+    assert 'depict_http_requests_total{method="GET",route="/healthz",status="200"}' in text
+    assert 'route="other",status="404"' in text and "/no/such/path" not in text
+    assert 'depict_http_requests_total{method="GET",route="/v1/operators",status="401"}' in text
+    for name in (
+        "depict_http_request_duration_seconds_bucket",
+        "depict_http_requests_in_flight",
+        "depict_jobs_queued",
+        "depict_jobs_running",
+        "depict_http_request_bytes_total",
+        "depict_http_response_bytes_total",
+    ):
+        assert name in text
+
+
+def test_json_log_lines() -> None:
+    record = logging.LogRecord("depict.http", logging.INFO, __file__, 1, "request", (), None)
+    record.status = 200
+    record.route = "/healthz"
+    line = json.loads(JsonFormatter().format(record))
+    assert line["msg"] == "request" and line["status"] == 200 and line["level"] == "info"
+    assert "request_id" in line and line["ts"].endswith("Z")

@@ -1,0 +1,396 @@
+"""End to end against a real ``depict serve`` (uvicorn) on 127.0.0.1, started by a fixture.
+
+The server's EXR is compared bit for bit with the CLI's local output (a canonical render and
+the Blender Cycles fixture); every error status comes from a real bad request; 16 concurrent
+requests against 2 workers and a queue of 2 give only 200s and 429s while /healthz answers, and
+the server's memory comes back to its baseline afterwards.
+"""
+
+from __future__ import annotations
+
+import json
+import struct
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import psutil
+import pytest
+import trimesh
+
+from gbuffer.io import read as read_exr
+from gbuffer.io import write as write_exr
+from gbuffer.render import render
+from service.cli import main as cli
+from service.client import Client, DepictError
+from service.compare import score_frame
+from tests import exr_factory
+from tests.live_server import Server, free_port, start_server, stop_server, wait_ready
+
+KEY = "e2e-secret"
+AUTH = {"Authorization": f"Bearer {KEY}"}
+BLENDER = Path(__file__).parent / "fixtures" / "blender"
+MAX_PIXELS = 600_000
+MAX_UPLOAD_MB = 16
+
+
+@pytest.fixture(scope="module")
+def servers() -> Iterator[dict[str, Server]]:
+    """The server under test, and one whose jobs always pass their time limit (504); both
+    start at once, so their start-up times overlap."""
+    main = start_server(
+        {
+            "DEPICT_API_KEY": KEY,
+            "DEPICT_WORKERS": "2",
+            "DEPICT_QUEUE": "2",
+            "DEPICT_MAX_PIXELS": str(MAX_PIXELS),
+            "DEPICT_MAX_UPLOAD_MB": str(MAX_UPLOAD_MB),
+            "DEPICT_TIMEOUT_S": "120",
+        }
+    )
+    slow = start_server({"DEPICT_WORKERS": "1", "DEPICT_QUEUE": "1", "DEPICT_TIMEOUT_S": "0.001"})
+    try:
+        wait_ready(main)
+        wait_ready(slow)
+        yield {"main": main, "slow": slow}
+    finally:
+        stop_server(main)
+        stop_server(slow)
+
+
+@pytest.fixture(scope="module")
+def server(servers: dict[str, Server]) -> Server:
+    return servers["main"]
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """A canonical EXR (OSMesa render of an icosphere), a larger one, and a mesh."""
+    root = tmp_path_factory.mktemp("e2e")
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    mesh.export(root / "ico.obj")
+    write_exr(render(mesh, 160, 120), root / "canonical.exr")
+    write_exr(render(mesh, 640, 480), root / "big.exr")
+    return {"canonical": root / "canonical.exr", "big": root / "big.exr", "mesh": root / "ico.obj"}
+
+
+@pytest.fixture
+def remote_env(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("DEPICT_API_KEY", KEY)
+    monkeypatch.delenv("DEPICT_SERVER", raising=False)
+
+
+def post_enhance(
+    server: Server,
+    content: bytes,
+    *,
+    headers: dict[str, str] | None = None,
+    data: dict[str, str] | None = None,
+    name: str = "frame.exr",
+) -> httpx.Response:
+    return httpx.post(
+        f"{server.url}/v1/enhance",
+        files={"file": (name, content)},
+        data=data or {},
+        headers=AUTH if headers is None else headers,
+        timeout=60,
+    )
+
+
+def assert_problem(response: httpx.Response, status: int, words: str) -> dict:
+    assert response.status_code == status, response.text
+    assert response.headers["content-type"].startswith("application/problem+json")
+    body = response.json()
+    assert body["status"] == status
+    assert words.lower() in body["detail"].lower(), body["detail"]
+    assert body["request_id"] == response.headers["x-request-id"]
+    return body
+
+
+# -- the same bytes as the CLI ------------------------------------------------------------------
+
+
+def test_enhance_canonical_matches_local_cli_bit_for_bit(
+    server: Server, files: dict[str, Path], tmp_path: Path, remote_env: None
+) -> None:
+    local, remote = tmp_path / "local.exr", tmp_path / "remote.exr"
+    assert cli(["enhance", str(files["canonical"]), "-o", str(local)]) == 0
+    assert cli(["enhance", str(files["canonical"]), "-o", str(remote), "--server", server.url]) == 0
+    assert local.read_bytes() == remote.read_bytes()
+    assert local.read_bytes() != files["canonical"].read_bytes()  # the operator did something
+
+
+def test_enhance_blender_matches_local_cli_bit_for_bit(
+    server: Server, tmp_path: Path, remote_env: None
+) -> None:
+    exr, camera = BLENDER / "cycles_multilayer.exr", BLENDER / "camera.json"
+    if not exr.is_file():
+        pytest.skip(f"Blender fixture {exr} is absent (tests/fixtures/blender/README.md)")
+    local, remote = tmp_path / "local.exr", tmp_path / "remote.exr"
+    args = ["enhance", str(exr), "--camera", str(camera), "--preset", "blender", "-o"]
+    assert cli([*args, str(local)]) == 0
+    assert cli([*args, str(remote), "--server", server.url]) == 0
+    assert local.read_bytes() == remote.read_bytes()
+
+
+@pytest.mark.parametrize("renderer", ["blender", "arnold", "karma"])
+def test_enhance_factory_renderers_match_local_cli(
+    server: Server,
+    tmp_path: Path,
+    remote_env: None,
+    renderer: str,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Files in each renderer's layout (tests/exr_factory.py): multi-layer, world-space normals,
+    multi-part with DWA; the server's answer is the CLI's, byte for byte, or the same error."""
+    scene = exr_factory.make_scene()
+    src = getattr(exr_factory, f"write_{renderer}")(tmp_path / f"{renderer}.exr", scene)
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(scene.camera.to_dict()))
+    args = ["enhance", str(src), "--camera", str(camera), "-o"]
+    local, remote = tmp_path / "local.exr", tmp_path / "remote.exr"
+    code = cli([*args, str(local)])
+    local_err = capsys.readouterr().err
+    assert cli([*args, str(remote), "--server", server.url]) == code
+    if code == 0:
+        assert local.read_bytes() == remote.read_bytes()
+    else:  # the same message, relayed by the server
+        detail = local_err.split("error: ", 1)[1].replace(str(src), src.name).strip()
+        assert detail in capsys.readouterr().err
+
+
+def test_render_matches_local_cli(
+    server: Server, files: dict[str, Path], tmp_path: Path, remote_env: None
+) -> None:
+    local, remote = tmp_path / "local.exr", tmp_path / "remote.exr"
+    args = ["render", str(files["mesh"]), "--width", "96", "--height", "64", "--light=-1,1,1"]
+    assert cli([*args, "-o", str(local)]) == 0
+    assert cli([*args, "-o", str(remote), "--server", server.url]) == 0
+    assert local.read_bytes() == remote.read_bytes()
+
+
+def test_preview_png(server: Server, files: dict[str, Path]) -> None:
+    response = httpx.post(
+        f"{server.url}/v1/enhance?preview=png",
+        files={"file": ("a.exr", files["canonical"].read_bytes())},
+        headers=AUTH,
+        timeout=60,
+    )
+    assert response.status_code == 200, response.text
+    assert response.headers["content-type"] == "image/png"
+    assert response.content[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_python_client_and_score_match_local(server: Server, files: dict[str, Path]) -> None:
+    with Client(server.url, api_key=KEY) as client:
+        assert client.health() == {"status": "ok"} and client.ready()["osmesa"] is True
+        assert "radiance_scaling" in {op["name"] for op in client.operators()}
+        remote = client.score(files["canonical"], gradient_scale=0.004)
+    local = score_frame(read_exr(files["canonical"]), gradient_scale=0.004)
+    # OpenCV's multi-threaded reductions change the last digits from run to run (1e-11)
+    assert remote["score"] == pytest.approx(local["score"], rel=1e-9, abs=1e-12)
+    assert 0.0 < remote["score"] <= 1.0
+    assert remote["params"] == local["params"]
+    assert remote["analysis_shape"] == local["analysis_shape"]
+    with Client(server.url, api_key="wrong") as client, pytest.raises(DepictError) as err:
+        client.operators()
+    assert err.value.status == 401 and err.value.problem["type"].endswith(":unauthorized")
+    with Client(f"http://127.0.0.1:{free_port()}") as client, pytest.raises(DepictError) as err:
+        client.health()
+    assert err.value.status == 0 and "cannot reach" in str(err.value)
+
+
+def test_remote_error_exits_like_local(
+    server: Server, tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bad = tmp_path / "bad.exr"
+    bad.write_bytes(b"not an exr at all")
+    code = cli(["enhance", str(bad), "-o", str(tmp_path / "o.exr"), "--server", server.url])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("depict: error: server answered 400") and "bad.exr" in err
+    assert not (tmp_path / "o.exr").exists()
+
+
+# -- every error status from a real bad request --------------------------------------------------
+
+
+def huge_header(exr: bytes, width: int = 100_000, height: int = 100_000) -> bytes:
+    """The same file with a dataWindow claiming ``width`` x ``height`` pixels."""
+    key = b"dataWindow\x00box2i\x00"
+    at = exr.index(key) + len(key)
+    size, x0, y0, _, _ = struct.unpack_from("<iiiii", exr, at)
+    assert size == 16
+    patched = bytearray(exr)
+    struct.pack_into("<ii", patched, at + 12, x0 + width - 1, y0 + height - 1)
+    return bytes(patched)
+
+
+def test_garbage_bytes_400(server: Server) -> None:
+    body = assert_problem(post_enhance(server, b"\x00garbage" * 100), 400, "not an OpenEXR")
+    assert body["type"] == "urn:depict:problem:bad-file"
+
+
+def test_truncated_exr_400(server: Server, files: dict[str, Path]) -> None:
+    data = files["canonical"].read_bytes()
+    body = assert_problem(post_enhance(server, data[: len(data) // 3], name="cut.exr"), 400, "")
+    assert "truncat" in body["detail"] and "cut.exr" in body["detail"]
+    assert "/tmp" not in body["detail"]  # the server's paths stay private
+
+
+def test_huge_header_413(server: Server, files: dict[str, Path]) -> None:
+    data = huge_header(files["canonical"].read_bytes())
+    assert_problem(post_enhance(server, data), 413, "DEPICT_MAX_PIXELS")
+
+
+def test_body_over_upload_limit_413(server: Server) -> None:
+    data = b"\x76\x2f\x31\x01" + b"\x00" * (MAX_UPLOAD_MB * 2**20 + 1000)
+    assert_problem(post_enhance(server, data), 413, "DEPICT_MAX_UPLOAD_MB")
+
+
+def test_wrong_content_type_415(server: Server) -> None:
+    response = httpx.post(f"{server.url}/v1/enhance", json={"file": "x"}, headers=AUTH, timeout=30)
+    assert_problem(response, 415, "multipart/form-data")
+
+
+def test_bad_pipeline_422(server: Server, files: dict[str, Path]) -> None:
+    data = files["canonical"].read_bytes()
+    unknown = {"pipeline": json.dumps({"steps": [{"op": "no_such_op"}]})}
+    assert_problem(post_enhance(server, data, data=unknown), 422, "unknown operator")
+    assert_problem(post_enhance(server, data, data={"pipeline": "{oops"}), 422, "JSON")
+    bad_param = {"pipeline": json.dumps([{"op": "radiance_scaling", "params": {"nope": 1}}])}
+    assert_problem(post_enhance(server, data, data=bad_param), 422, "nope")
+
+
+def test_missing_camera_422(server: Server) -> None:
+    exr = BLENDER / "cycles_multilayer.exr"
+    if not exr.is_file():
+        pytest.skip(f"Blender fixture {exr} is absent")
+    response = post_enhance(server, exr.read_bytes(), data={"preset": "blender"})
+    body = assert_problem(response, 422, "camera")
+    assert body["type"] == "urn:depict:problem:missing-camera"
+
+
+def test_wrong_or_missing_key_401(server: Server, files: dict[str, Path]) -> None:
+    data = files["canonical"].read_bytes()
+    wrong = post_enhance(server, data, headers={"Authorization": "Bearer nope"})
+    assert_problem(wrong, 401, "wrong")
+    assert wrong.headers["www-authenticate"].startswith("Bearer")
+    assert_problem(post_enhance(server, data, headers={}), 401, "Authorization: Bearer")
+    assert httpx.get(f"{server.url}/healthz").status_code == 200  # health needs no key
+    assert httpx.get(f"{server.url}/metrics").status_code == 401
+
+
+def test_request_id_echoed_and_logged(server: Server) -> None:
+    response = httpx.get(f"{server.url}/healthz", headers={"X-Request-ID": "e2e-trace-42"})
+    assert response.headers["x-request-id"] == "e2e-trace-42"
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        lines = [json.loads(x) for x in server.logs().splitlines() if x.startswith("{")]
+        hits = [x for x in lines if x.get("request_id") == "e2e-trace-42"]
+        if hits:
+            break
+        time.sleep(0.1)
+    assert hits and hits[0]["status"] == 200 and hits[0]["route"] == "/healthz"
+
+
+# -- saturation ---------------------------------------------------------------------------------
+
+
+def tree_rss(pid: int) -> int:
+    """RSS of the server process and its workers, bytes."""
+    proc = psutil.Process(pid)
+    return sum(p.memory_info().rss for p in [proc, *proc.children(recursive=True)])
+
+
+def test_saturation_only_200_and_429_health_answers_memory_returns(
+    server: Server, files: dict[str, Path]
+) -> None:
+    data = files["big"].read_bytes()
+
+    def enhance() -> httpx.Response:
+        with httpx.Client(timeout=120) as client:
+            return client.post(
+                f"{server.url}/v1/enhance", files={"file": ("big.exr", data)}, headers=AUTH
+            )
+
+    # warm both workers, then take the baseline
+    warm = [threading.Thread(target=enhance) for _ in range(2)]
+    for t in warm:
+        t.start()
+    for t in warm:
+        t.join()
+    baseline = tree_rss(server.process.pid)
+
+    statuses: list[int] = []
+    retry_after: list[str] = []
+    health: list[int] = []
+    barrier = threading.Barrier(16)
+    burst_done = threading.Event()
+
+    def one() -> None:
+        barrier.wait()
+        r = enhance()
+        statuses.append(r.status_code)
+        if r.status_code == 429:
+            retry_after.append(r.headers.get("retry-after", ""))
+
+    def watch_health() -> None:
+        with httpx.Client(timeout=10) as client:
+            while not burst_done.is_set():
+                health.append(client.get(f"{server.url}/healthz").status_code)
+                time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch_health)
+    watcher.start()
+    burst = [threading.Thread(target=one) for _ in range(16)]
+    for t in burst:
+        t.start()
+    for t in burst:
+        t.join()
+    burst_done.set()
+    watcher.join()
+
+    assert len(statuses) == 16
+    assert set(statuses) <= {200, 429}, statuses
+    assert statuses.count(200) >= 2 and statuses.count(429) >= 1, statuses
+    assert all(v.isdigit() and int(v) >= 1 for v in retry_after), retry_after
+    assert health and set(health) == {200}, health
+
+    metrics = httpx.get(f"{server.url}/metrics", headers=AUTH).text
+    assert 'depict_http_requests_total{method="POST",route="/v1/enhance",status="429"}' in metrics
+    assert "depict_operator_duration_seconds_count" in metrics
+    assert "depict_jobs_queued 0.0" in metrics
+
+    after = tree_rss(server.process.pid)
+    for _ in range(20):  # give the allocator a moment
+        if after <= baseline * 1.3 + 150 * 2**20:
+            break
+        time.sleep(0.25)
+        after = tree_rss(server.process.pid)
+    assert after <= baseline * 1.3 + 150 * 2**20, (baseline / 2**20, after / 2**20)
+
+
+# -- time limit ---------------------------------------------------------------------------------
+
+
+def test_job_over_time_limit_504(servers: dict[str, Server], files: dict[str, Path]) -> None:
+    slow = servers["slow"]
+    response = httpx.post(
+        f"{slow.url}/v1/enhance",
+        files={"file": ("a.exr", files["canonical"].read_bytes())},
+        timeout=60,
+    )
+    assert_problem(response, 504, "DEPICT_TIMEOUT_S")
+    assert httpx.get(f"{slow.url}/healthz").status_code == 200
+    metrics = httpx.get(f"{slow.url}/metrics").text
+    assert 'depict_jobs_total{kind="enhance",outcome="timeout"} 1.0' in metrics
+
+
+def test_health_metrics_and_operators(server: Server) -> None:
+    assert httpx.get(f"{server.url}/readyz").json()["osmesa"] is True
+    ops = httpx.get(f"{server.url}/v1/operators", headers=AUTH).json()
+    assert any(op["name"] == "radiance_scaling" for op in ops)
+    assert all({"name", "params", "needs", "writes"} <= set(op) for op in ops)
