@@ -326,9 +326,12 @@ def _check_unit(value: float, name: str, low_open: bool = False) -> None:
         raise ValueError(f"{name} must be in {'(0' if low_open else '[0'}, 1], got {value}")
 
 
-def _ggx(nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, roughness: float, f0: float) -> np.ndarray:
+def _ggx(
+    nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, roughness: float | np.ndarray, f0: float
+) -> np.ndarray:
     nh, vh = _half_cosines(nl, nv, lv)
-    a2 = np.float32(roughness**4)
+    r2 = np.asarray(roughness, np.float32) ** 2
+    a2 = r2 * r2
     nh = np.clip(nh, 0.0, 1.0)
     denom = nh * nh * (a2 - 1.0) + 1.0
     d = a2 / (np.float32(math.pi) * denom * denom)
@@ -619,3 +622,112 @@ def _accumulate(acc: np.ndarray, term: np.ndarray, irradiance: np.ndarray) -> No
         acc += _outer(term, irradiance)
     else:
         acc += term[..., None] * irradiance
+
+
+# -- shading with per-pixel light directions ----------------------------------------------------
+
+#: Diffuse and specular models of :func:`shade_directions`.
+DIFFUSE_MODELS: tuple[str, ...] = ("lambert", "half_lambert")
+SPECULAR_MODELS: tuple[str, ...] = ("none", "blinn_phong", "ggx")
+
+
+def shade_directions(
+    normal: np.ndarray,
+    view: np.ndarray,
+    position: np.ndarray,
+    lights: Sequence[Light],
+    directions: dict[str, Sequence[np.ndarray]] | None = None,
+    *,
+    diffuse: str = "lambert",
+    specular: str = "blinn_phong",
+    shininess: float = 32.0,
+    roughness: float | np.ndarray = 0.4,
+    f0: float = 0.04,
+    transmission: bool = False,
+    ior: float = 1.5,
+    transmission_exponent: float = 16.0,
+) -> dict[str, np.ndarray]:
+    """The light of each lobe, Σ_i E_i term(n, ℓ_{c,i}, v), with a light direction per component.
+
+    Deferred shading where component c of light i is lit from its own per-pixel direction
+    ℓ_{c,i} (the aligned lights of Local Light Alignment §4-6, one per guide), E_i the light's
+    irradiance (inverse-square for point lights):
+
+    * diffuse: Lambert max(n·ℓ, 0) or Valve's half-Lambert ((n·ℓ + 1)/2)² (:func:`half_lambert`);
+    * specular: Blinn-Phong (n·h)^s (:func:`blinn_phong`), or Cook-Torrance with GGX, Smith
+      masking and Schlick Fresnel (:func:`ggx`, Walter et al. 2007; ``roughness`` a number or a
+      per-pixel (H, W) pass, ``f0`` the reflectance at normal incidence, so the lobe's colour is
+      white), or none; h uses the specular component's light;
+    * transmission (``transmission=True``): max(t·ℓ, 0)^e along the refracted view ray t
+      (:func:`transmission`).
+
+    Parameters
+    ----------
+    normal : (H, W, 3) camera-space unit normals; (0, 0, 0) marks pixels without a surface.
+    view : (H, W, 3) or (3,) unit directions towards the eye.
+    position : (H, W, 3) camera-space positions (point lights' irradiance and directions).
+    lights : the lights, camera space.
+    directions : component ("diffuse", "specular", "transmission") -> one (H, W, 3) unit field
+        per light, in ``lights`` order; a component not given is lit from the light itself.
+    diffuse, specular : models (:data:`DIFFUSE_MODELS`, :data:`SPECULAR_MODELS`).
+    shininess, roughness, f0, ior, transmission_exponent : the models' parameters.
+
+    Returns
+    -------
+    dict lobe -> (H, W, 3) float32 light without colour: ``"diffuse"``, ``"specular"`` (unless
+    ``specular="none"``) and ``"transmission"`` (when asked); 0 where the normal is 0.
+    """
+    if diffuse not in DIFFUSE_MODELS:
+        raise ValueError(f"diffuse must be one of {', '.join(DIFFUSE_MODELS)}; got {diffuse!r}")
+    if specular not in SPECULAR_MODELS:
+        raise ValueError(f"specular must be one of {', '.join(SPECULAR_MODELS)}; got {specular!r}")
+    _check_exponent(shininess, "shininess")
+    _check_exponent(transmission_exponent, "transmission_exponent")
+    _check_unit(f0, "f0")
+    _check_ior(ior)
+    rough = np.asarray(roughness, np.float32)
+    if rough.ndim == 0:
+        _check_unit(float(rough), "roughness", low_open=True)
+    else:
+        rough = np.clip(rough, np.float32(1e-3), np.float32(1.0))
+    normal = np.ascontiguousarray(normal, np.float32)
+    if normal.ndim != 3 or normal.shape[2] != 3:
+        raise ValueError(f"normal must be (H, W, 3), got shape {normal.shape}")
+    shape = normal.shape[:2]
+    given = dict(directions or {})
+    for comp, fields in given.items():
+        if comp not in ("diffuse", "specular", "transmission"):
+            raise ValueError(f"unknown component {comp!r} in directions")
+        if len(fields) != len(lights):
+            raise ValueError(f"directions[{comp!r}] must hold one field per light")
+    mask = (dot(normal, normal) > 0.25).astype(np.float32)
+    pos = np.asarray(position, np.float32)
+    view_a = np.asarray(view, np.float32)
+    out = {"diffuse": np.zeros((*shape, 3), np.float32)}
+    if specular != "none":
+        out["specular"] = np.zeros((*shape, 3), np.float32)
+    if transmission:
+        out["transmission"] = np.zeros((*shape, 3), np.float32)
+    for i, light in enumerate(lights):
+        own = (
+            np.asarray(light.vector, np.float32)
+            if light.kind == "directional"
+            else light_vectors(light, pos)
+        )
+        e = light_irradiance(light, pos)
+        l_d = given["diffuse"][i] if "diffuse" in given else own
+        d_term = lambert(normal, l_d) if diffuse == "lambert" else half_lambert(normal, l_d)
+        _accumulate(out["diffuse"], d_term * mask, e)
+        if specular != "none":
+            l_s = given["specular"][i] if "specular" in given else own
+            nl, nv, lv = _dots(normal, l_s, view_a)
+            if specular == "blinn_phong":
+                s_term = _blinn_phong(nl, nv, lv, shininess)
+            else:
+                s_term = _ggx(nl, nv, lv, rough, f0)
+            _accumulate(out["specular"], s_term * mask, e)
+        if transmission:
+            l_t = given["transmission"][i] if "transmission" in given else own
+            t_term = _transmission(*_dots(normal, l_t, view_a), ior, transmission_exponent)
+            _accumulate(out["transmission"], t_term * mask, e)
+    return out

@@ -33,7 +33,7 @@ import shutil
 import tempfile
 import time
 import uuid
-from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
+from collections.abc import AsyncIterator, Callable, Iterator
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
@@ -394,6 +394,38 @@ async def _check_exr(path: Path, max_pixels: int) -> None:
     await anyio.to_thread.run_sync(check)
 
 
+def _read_fields(
+    preset: str,
+    camera: str | None,
+    map: str | None = None,
+    normal_space: str | None = None,
+) -> dict[str, Any]:
+    """The form fields saying how to read the frame, checked (422 naming the bad one)."""
+    _check_preset(preset)
+    camera_value = _json_field("camera", camera, dict)
+    _check_camera("camera", camera_value)
+    mapping = _json_field("map", map, dict) or {}
+    if not all(isinstance(v, str) for v in mapping.values()):
+        raise Problem("invalid-request", "form field 'map' must map buffer names to strings")
+    return {
+        "preset": preset,
+        "camera": camera_value,
+        "mapping": mapping,
+        "normal_space": normal_space,
+    }
+
+
+async def _receive_frame(
+    upload: UploadFile, src: Path, fields: dict[str, Any], max_pixels: int
+) -> dict[str, Any]:
+    """Save and check the uploaded EXR (header only); the job's read options."""
+    await _save_upload(upload, src)
+    await _check_exr(src, max_pixels)
+    camera = fields["camera"]
+    path = None if camera is None else jobs.dump_json(camera, src.parent / "camera.json")
+    return {**fields, "camera": path}
+
+
 @contextlib.contextmanager
 def _scrubbed(work: Path, names: dict[Path, str]) -> Iterator[None]:
     """Errors name the client's file names, never the server's temporary paths."""
@@ -559,26 +591,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
         spec = pipelines.parse(pipeline) if pipeline else pipelines.DEFAULT_PIPELINE
         pipelines.compile_steps(spec)  # 422 before any pixel work
-        _check_preset(preset)
-        camera_value = _json_field("camera", camera, dict)
-        _check_camera("camera", camera_value)
-        mapping = _json_field("map", map, dict) or {}
-        if not all(isinstance(v, str) for v in mapping.values()):
-            raise Problem("invalid-request", "form field 'map' must map buffer names to strings")
+        fields = _read_fields(preset, camera, map, normal_space)
         work = new_work()
         src = work / "in.exr"
         try:
             with _scrubbed(work, {src: file.filename or "upload.exr"}):
-                await _save_upload(file, src)
-                await _check_exr(src, settings.max_pixels)
-                read: dict[str, Any] = {
-                    "preset": preset,
-                    "mapping": mapping,
-                    "normal_space": normal_space,
-                    "camera": None
-                    if camera_value is None
-                    else jobs.dump_json(camera_value, work / "camera.json"),
-                }
+                read = await _receive_frame(file, src, fields, settings.max_pixels)
                 write = {
                     "debug_layers": debug_layers,
                     "output_layer": output_layer,
@@ -733,105 +751,11 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     async def get_metrics() -> Response:
         return Response(metrics.render(), media_type=metrics.content_type)
 
-    _install_score(app, new_work, run_job, common)
+    from service import api_analysis
+
+    api_analysis.install(app, new_work, run_job, common)
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
     return app
-
-
-class Score(BaseModel):
-    """The answer of ``POST /v1/score`` (the JSON of ``depict score --json``)."""
-
-    score: float = Field(description="congruence score (LLA Eq. 2) in [0, 1]")
-    analysis_shape: list[int] = Field(description="(h, w) at which the score was evaluated")
-    image_shape: list[int] = Field(description="(h, w) of the frame")
-    params: dict[str, float] = Field(description="the congruence parameters used")
-
-
-def _install_score(
-    app: FastAPI,
-    new_work: Callable[[], Path],
-    run_job: Callable[..., Awaitable[dict[str, Any]]],
-    common: tuple[int, ...],
-) -> None:
-    """``POST /v1/score`` when the congruence operator exists (absent otherwise)."""
-    try:
-        import ops.congruence  # noqa: F401
-    except ImportError:
-        return
-    settings: Settings = app.state.settings
-
-    @app.post(
-        "/v1/score",
-        tags=["frames"],
-        summary="Congruence score of a frame's beauty (Local Light Alignment, Eq. 2)",
-        response_model=Score,
-        responses=openapi_responses(*common),
-    )
-    async def score(
-        file: Annotated[UploadFile, File(description="the EXR frame (beauty + depth)")],
-        pipeline: Annotated[
-            str | None,
-            Form(description="pipeline JSON to apply before scoring (default: score as is)"),
-        ] = None,
-        preset: Annotated[str, Form(description="renderer preset (as for /v1/enhance)")] = "auto",
-        camera: Annotated[str | None, Form(description="camera JSON")] = None,
-        gradient_scale: Annotated[
-            float | None,
-            Form(gt=0, le=0.1, description="gradient sigma, relative to the image height"),
-        ] = None,
-        integration_scale: Annotated[
-            float | None,
-            Form(gt=0, le=0.25, description="integration sigma, relative to the image height"),
-        ] = None,
-        percentile: Annotated[
-            float | None, Form(gt=0, le=100, description="strength normalisation percentile")
-        ] = None,
-        depth_jump: Annotated[
-            float | None, Form(gt=0, le=100, description="largest log-depth step of a surface")
-        ] = None,
-    ) -> dict[str, Any]:
-        from service import pipeline as pipelines
-
-        spec_json = None
-        if pipeline:
-            spec = pipelines.parse(pipeline)
-            pipelines.compile_steps(spec)
-            spec_json = spec.model_dump_json()
-        _check_preset(preset)
-        camera_value = _json_field("camera", camera, dict)
-        _check_camera("camera", camera_value)
-        work = new_work()
-        src = work / "in.exr"
-        try:
-            with _scrubbed(work, {src: file.filename or "upload.exr"}):
-                await _save_upload(file, src)
-                await _check_exr(src, settings.max_pixels)
-                read = {
-                    "preset": preset,
-                    "camera": None
-                    if camera_value is None
-                    else jobs.dump_json(camera_value, work / "camera.json"),
-                }
-                given = {
-                    "gradient_scale": gradient_scale,
-                    "integration_scale": integration_scale,
-                    "percentile": percentile,
-                    "depth_jump": depth_jump,
-                }
-                options = {k: v for k, v in given.items() if v is not None}
-                out = await run_job(
-                    "score",
-                    work,
-                    jobs.score_job,
-                    str(src),
-                    spec_json,
-                    read,
-                    options,
-                    settings.max_pixels,
-                )
-        finally:
-            _cleanup(work)
-        return {k: out[k] for k in ("score", "analysis_shape", "image_shape", "params")}
 
 
 # -- OpenAPI -----------------------------------------------------------------------------------

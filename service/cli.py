@@ -8,87 +8,27 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 from collections.abc import Sequence
 from typing import Any
 
-from gbuffer.errors import FrameError
-from service.registry import PipelineError
+from service.cli_analysis import add_analysis_commands
+from service.cli_common import (
+    UsageError,
+    add_pipeline_options,
+    add_read_options,
+    add_server_option,
+    pipeline_spec,
+    read_options,
+)
 
 EXIT_USAGE = 2
 
 
-class UsageError(ValueError):
-    """A command line that cannot be honoured (bad flag value, missing file, ...)."""
-
-
-def parse_value(text: str) -> Any:
-    """A ``--set`` value: JSON when it parses (numbers, booleans, lists), a comma list of such
-    values (``1,0.5,0.25``), else the plain string."""
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        pass
-    if "," in text:
-        return [parse_value(part) for part in text.split(",")]
-    return text
-
-
-class _OpAction(argparse.Action):
-    """``--op NAME`` starts a new pipeline step."""
-
-    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
-        steps = getattr(ns, "steps", None) or []
-        steps.append({"op": value, "params": {}})
-        ns.steps = steps
-
-
-class _SetAction(argparse.Action):
-    """``--set key=value`` sets a parameter of the last ``--op``."""
-
-    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
-        steps = getattr(ns, "steps", None)
-        if not steps:
-            parser.error("--set must follow an --op NAME")
-        key, sep, raw = str(value).partition("=")
-        if not sep or not key:
-            parser.error(f"--set {value!r}: expected key=value")
-        steps[-1]["params"][key.strip()] = parse_value(raw.strip())
-
-
-def add_read_options(p: argparse.ArgumentParser) -> None:
-    """Flags for reading a frame: preset, camera and mapping overrides."""
-    p.add_argument(
-        "--preset",
-        default="auto",
-        help="renderer preset: auto, canonical, blender, arnold, vray, renderman, karma",
-    )
-    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (overrides the file's)")
-    p.add_argument(
-        "--map",
-        action="append",
-        default=[],
-        metavar="BUFFER=CHANNELS",
-        help="map a canonical buffer to file channels, e.g. normal=MyLayer.N or depth=Z",
-    )
-    p.add_argument(
-        "--normal-space", choices=["world", "camera"], help="override the normals' space"
-    )
-
-
 def read_frame(args: argparse.Namespace, path: str) -> Any:
-    import gbuffer
-    from gbuffer.io import ReadOptions
+    from service.jobs import read_frame as read
 
-    mapping = {}
-    for item in args.map:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise UsageError(f"--map {item!r}: expected BUFFER=CHANNELS")
-        mapping[key.strip()] = value.strip()
-    options = ReadOptions(mapping=mapping, normal_space=args.normal_space)
-    return gbuffer.read(path, preset=args.preset, camera=args.camera, options=options)
+    return read(path, read_options(args))
 
 
 # -- commands ----------------------------------------------------------------------------------
@@ -180,15 +120,7 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     import gbuffer
     from service import pipeline
 
-    if args.pipeline and getattr(args, "steps", None):
-        raise UsageError("give either --pipeline or --op steps, not both")
-    if args.pipeline:
-        spec = pipeline.load(args.pipeline)
-    elif getattr(args, "steps", None):
-        spec = pipeline.parse(args.steps)
-    else:
-        spec = pipeline.DEFAULT_PIPELINE
-    pipeline.compile_steps(spec)  # refuse bad parameters before reading pixels
+    spec = pipeline_spec(args, default=pipeline.DEFAULT_PIPELINE)
     frame = read_frame(args, args.input)
     out = pipeline.finish(
         pipeline.run(frame, spec, debug_layers=args.debug_layers), args.output_layer
@@ -199,16 +131,6 @@ def cmd_enhance(args: argparse.Namespace) -> int:
 
 
 # -- service: remote mode, serve, batch (service/client.py, service/api.py, service/batch.py) --
-
-
-def add_server_option(p: argparse.ArgumentParser) -> None:
-    """``--server URL``: run the command on a Depict server instead of locally."""
-    p.add_argument(
-        "--server",
-        metavar="URL",
-        default=os.environ.get("DEPICT_SERVER") or None,
-        help="run on this Depict server (env DEPICT_SERVER; key from DEPICT_API_KEY)",
-    )
 
 
 def run_remote(args: argparse.Namespace) -> int:
@@ -256,11 +178,7 @@ def add_service_commands(sub: Any) -> None:
     p.add_argument("input", help="input pattern: shot.####.exr, shot.%%04d.exr or shot.@.exr")
     p.add_argument("-o", "--output", required=True, help="output pattern, same tokens")
     p.add_argument("--frames", help="frames: 1-100, 1-100x2, 1,5,9 (default: existing inputs)")
-    p.add_argument("--op", action=_OpAction, metavar="NAME", help="add a pipeline step")
-    p.add_argument(
-        "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
-    )
-    p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
+    add_pipeline_options(p)
     p.add_argument(
         "--scheduler", metavar="tcp://HOST:8786", help="Dask scheduler (default: local cluster)"
     )
@@ -328,17 +246,14 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("enhance", help="apply operators to an EXR frame")
     p.add_argument("input")
     p.add_argument("-o", "--output", required=True, help="output EXR")
-    p.add_argument("--op", action=_OpAction, metavar="NAME", help="add a pipeline step")
-    p.add_argument(
-        "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
-    )
-    p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
+    add_pipeline_options(p)
     p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
     p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
     add_read_options(p)
     add_server_option(p)
     p.set_defaults(func=cmd_enhance)
 
+    add_analysis_commands(sub)
     add_service_commands(sub)
     return parser
 
@@ -348,7 +263,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except (FrameError, PipelineError, UsageError) as exc:
+    except ValueError as exc:  # FrameError, PipelineError, UsageError, and ops/' bad values
         print(f"depict: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except FileNotFoundError as exc:

@@ -20,6 +20,7 @@ temporary file renamed into place, so no reader sees half a file.
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import time
@@ -216,14 +217,9 @@ class Client:
         ``pipeline``: a PipelineSpec, dict, list of steps or JSON text (default: the server's
         default, Radiance Scaling). ``camera``: a dict, a Camera or a camera JSON path.
         """
-        data = {"preset": preset, "debug_layers": "true" if debug_layers else "false"}
-        optional = {
-            "pipeline": _pipeline_json(pipeline),
-            "camera": _camera_json(camera),
-            "map": json.dumps(dict(mapping)) if mapping else None,
-            "normal_space": normal_space,
-            "output_layer": output_layer,
-        }
+        data = self._read_fields(preset, camera, mapping, normal_space)
+        data["debug_layers"] = "true" if debug_layers else "false"
+        optional = {"pipeline": _pipeline_json(pipeline), "output_layer": output_layer}
         data.update({k: v for k, v in optional.items() if v is not None})
         params: dict[str, Any] = {"preview": "png", "exposure": exposure} if preview else {}
         with self._stream(
@@ -259,11 +255,89 @@ class Client:
         ) as response:
             return self._download(response, output)
 
-    def score(self, input: str | Path, **options: Any) -> dict[str, Any]:
-        """``POST /v1/score``: the congruence score of a frame (when the server has it)."""
-        data = {k: json.dumps(v) if not isinstance(v, str) else v for k, v in options.items()}
-        with self._stream("POST", "/v1/score", files={"file": Path(input)}, data=data) as r:
-            return dict(json.loads(r.read()))
+    def _read_fields(
+        self,
+        preset: str = "auto",
+        camera: Any = None,
+        mapping: Mapping[str, str] | None = None,
+        normal_space: str | None = None,
+    ) -> dict[str, str]:
+        """The form fields that say how the server reads the uploaded frame."""
+        fields = {
+            "preset": preset,
+            "camera": _camera_json(camera),
+            "map": json.dumps(dict(mapping)) if mapping else None,
+            "normal_space": normal_space,
+        }
+        return {k: v for k, v in fields.items() if v is not None}
+
+    def _post_json(self, path: str, file: Path, data: dict[str, str]) -> dict[str, Any]:
+        with self._stream("POST", path, files={"file": file}, data=data) as response:
+            return dict(json.loads(response.read()))
+
+    def score(
+        self,
+        input: str | Path,
+        *,
+        pipeline: Any = None,
+        preset: str = "auto",
+        camera: Any = None,
+        mapping: Mapping[str, str] | None = None,
+        normal_space: str | None = None,
+        **options: float,
+    ) -> dict[str, Any]:
+        """``POST /v1/score``: the congruence score of a frame's beauty (after ``pipeline``).
+
+        ``options``: ``gradient_scale``, ``integration_scale``, ``percentile``, ``depth_jump``.
+        """
+        data = self._read_fields(preset, camera, mapping, normal_space)
+        data.update({k: str(v) for k, v in options.items()})
+        spec = _pipeline_json(pipeline)
+        if spec is not None:
+            data["pipeline"] = spec
+        return self._post_json("/v1/score", Path(input), data)
+
+    def compare(
+        self,
+        input: str | Path,
+        options: Mapping[str, Any] | None = None,
+        *,
+        mesh: bool = False,
+        sheet: str | Path | None = None,
+        preset: str = "auto",
+        camera: Any = None,
+    ) -> dict[str, Any]:
+        """``POST /v1/compare``: the comparison bench (LLA §7) on an EXR frame or a mesh.
+
+        ``options``: ``methods``, ``directions``, ``params``, ``albedo``, ``label`` and, for a
+        mesh, ``width``, ``height``, ``azimuth``, ``elevation``. With ``sheet``, the contact
+        sheet PNG is written there. Returns the JSON of ``depict compare --json``.
+        """
+        data = self._read_fields(preset, camera)
+        data["options"] = json.dumps(dict(options or {}))
+        data["kind"] = "mesh" if mesh else "exr"
+        data["sheet"] = "true" if sheet else "false"
+        out = self._post_json("/v1/compare", Path(input), data)
+        png = out.pop("sheet_png", None)
+        if sheet and png:
+            with atomic_path(sheet) as tmp:
+                Path(tmp).write_bytes(base64.b64decode(png))
+        return out
+
+    def relief_pick(
+        self,
+        input: str | Path,
+        x: int,
+        y: int,
+        params: Mapping[str, Any] | None = None,
+        *,
+        preset: str = "auto",
+        camera: Any = None,
+    ) -> dict[str, Any]:
+        """``POST /v1/relief/pick``: the Apparent Relief descriptor under pixel (x, y)."""
+        data = self._read_fields(preset, camera)
+        data.update(x=str(x), y=str(y), params=json.dumps(dict(params or {})))
+        return self._post_json("/v1/relief/pick", Path(input), data)
 
 
 # -- the CLI's remote mode ----------------------------------------------------------------------
@@ -281,16 +355,9 @@ def _mapping(items: Sequence[str]) -> dict[str, str]:
 
 def remote_enhance(args: Any) -> int:
     """``depict enhance ... --server URL``: same flags and output as the local command."""
-    from service import pipeline
+    from service.cli_common import pipeline_spec
 
-    if args.pipeline and getattr(args, "steps", None):
-        raise DepictError("give either --pipeline or --op steps, not both")
-    if args.pipeline:
-        spec = pipeline.load(args.pipeline)
-    elif getattr(args, "steps", None):
-        spec = pipeline.parse(args.steps)
-    else:
-        spec = None  # the server's default
+    spec = pipeline_spec(args, default=None)  # None: the server's default
     with Client.from_env(args.server) as client:
         client.enhance(
             args.input,

@@ -460,6 +460,26 @@ class ComparisonResult:
             "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
         }
 
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> ComparisonResult:
+        """A result from :meth:`to_dict` (e.g. a server's answer): scores and directions, without
+        the per-pixel results and renderings (enough for tables and :func:`plot`)."""
+        methods = tuple(data["methods"])
+        dirs = data["directions"]
+        return cls(
+            methods=methods,
+            numbers=tuple(int(d["index"]) for d in dirs),
+            directions=np.asarray([d["vector"] for d in dirs], np.float32).reshape(-1, 3),
+            scores=np.asarray([data["scores"][m] for m in methods], np.float64),
+            results={},
+            images={},
+            params=dict(data.get("params", {})),
+            albedo=str(data.get("albedo", "white")),
+            image_shape=(int(data["image_shape"][0]), int(data["image_shape"][1])),
+            seconds=dict(data.get("seconds", {})),
+            label=str(data.get("label", "")),
+        )
+
     def to_json(self, indent: int | None = 2) -> str:
         """:meth:`to_dict` as a JSON string."""
         return json.dumps(self.to_dict(), indent=indent)

@@ -135,6 +135,18 @@ def read_frame(path: str, read: dict[str, Any], max_pixels: int | None = None) -
     )
 
 
+def run_steps(frame: Any, spec: Any, context: Any) -> tuple[Any, list[tuple[str, float]]]:
+    """Run a pipeline one step at a time, timing each operator: (frame, [(op, seconds)])."""
+    from service import pipeline
+
+    op_s: list[tuple[str, float]] = []
+    for step in spec.steps:
+        t0 = time.perf_counter()
+        frame = pipeline.run(frame, pipeline.PipelineSpec(steps=[step]), context=context)
+        op_s.append((step.op, time.perf_counter() - t0))
+    return frame, op_s
+
+
 def enhance_file(
     in_path: str,
     out_path: str,
@@ -143,12 +155,14 @@ def enhance_file(
     write: dict[str, Any],
     max_pixels: int | None = None,
     pinned: dict[str, float] | None = None,
+    files: bool = True,
 ) -> dict[str, Any]:
     """Read ``in_path``, run the pipeline, write the EXR (or a PNG preview) to ``out_path``.
 
     The same steps as ``depict enhance``, so the output is bit for bit the CLI's.
     ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``.
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`).
+    ``files``: whether parameters may name image files (False for the HTTP service).
     Returns ``op_s`` (seconds per operator), ``size`` and the statistics ``measured``.
     """
     from gbuffer.io import write as write_exr
@@ -158,13 +172,10 @@ def enhance_file(
     spec = pipeline.parse(spec_json)
     pipeline.compile_steps(spec)
     frame = read_frame(in_path, read, max_pixels)
-    context = Context(debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}))
-    op_s: list[tuple[str, float]] = []
-    out = frame
-    for step in spec.steps:  # one step at a time, to time each operator
-        t0 = time.perf_counter()
-        out = pipeline.run(out, pipeline.PipelineSpec(steps=[step]), context=context)
-        op_s.append((step.op, time.perf_counter() - t0))
+    context = Context(
+        debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}), files=files
+    )
+    out, op_s = run_steps(frame, spec, context)
     out = pipeline.finish(out, write.get("output_layer"))
     if write.get("preview"):
         from gbuffer.preview import picture, write_png
@@ -184,8 +195,9 @@ def enhance_job(
     write: dict[str, Any],
     max_pixels: int,
 ) -> dict[str, Any]:
-    """``POST /v1/enhance`` on a worker: :func:`enhance_file` under the pixel limit."""
-    return enhance_file(in_path, out_path, spec_json, read, write, max_pixels)
+    """``POST /v1/enhance`` on a worker: :func:`enhance_file` under the pixel limit, with no
+    file named by a parameter read."""
+    return enhance_file(in_path, out_path, spec_json, read, write, max_pixels, files=False)
 
 
 def render_job(mesh_path: str, out_path: str, scene: dict[str, Any]) -> dict[str, Any]:
@@ -221,9 +233,10 @@ def score_job(
     spec_json: str | None,
     read: dict[str, Any],
     options: dict[str, Any],
-    max_pixels: int,
+    max_pixels: int | None = None,
+    files: bool = False,
 ) -> dict[str, Any]:
-    """``depict score`` on a worker: the congruence score (LLA Eq. 2) of the frame's beauty
+    """``depict score``: the congruence score (LLA Eq. 2) of the frame's beauty
     (:func:`service.compare.score_frame`), after the pipeline ``spec_json`` when given."""
     from service import pipeline
     from service.compare import score_frame
@@ -234,11 +247,7 @@ def score_job(
     if spec_json:
         spec = pipeline.parse(spec_json)
         pipeline.compile_steps(spec)
-        context = Context()
-        for step in spec.steps:
-            t0 = time.perf_counter()
-            frame = pipeline.run(frame, pipeline.PipelineSpec(steps=[step]), context=context)
-            op_s.append((step.op, time.perf_counter() - t0))
+        frame, op_s = run_steps(frame, spec, Context(files=files))
     out = score_frame(frame, maps=False, **options)
     return {
         "score": float(out["score"]),
@@ -246,6 +255,87 @@ def score_job(
         "image_shape": [int(v) for v in out["image_shape"]],
         "params": {k: float(v) for k, v in out["params"].items()},
         "op_s": op_s,
+    }
+
+
+def compare_job(
+    in_path: str,
+    read: dict[str, Any] | None,
+    options: dict[str, Any],
+    sheet_path: str | None = None,
+    max_pixels: int | None = None,
+) -> dict[str, Any]:
+    """``depict compare``: the comparison bench (LLA §7) on an EXR frame (``read`` given) or a
+    mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``).
+
+    ``options``: ``methods``, ``directions``, ``params``, ``albedo`` (:func:`service.compare.
+    compare`), and for meshes ``width``, ``height``, ``azimuth``, ``elevation``. Writes the
+    contact sheet to ``sheet_path`` when given. Returns :meth:`ComparisonResult.to_dict`.
+    """
+    from service.compare import METHODS, SHEET_DIRECTIONS, compare, contact_sheet, frame_from_mesh
+
+    opts = dict(options)
+    if read is None:
+        width, height = int(opts.pop("width", 512)), int(opts.pop("height", 512))
+        if max_pixels is not None and width * height > max_pixels:
+            from gbuffer.errors import LimitError
+
+            raise LimitError(f"{width}x{height} is over the limit of {max_pixels} pixels")
+        frame = frame_from_mesh(
+            in_path,
+            width,
+            height,
+            azimuth_deg=float(opts.pop("azimuth", 30.0)),
+            elevation_deg=float(opts.pop("elevation", 20.0)),
+        )
+    else:
+        frame = read_frame(in_path, read, max_pixels)
+    result = compare(
+        frame,
+        methods=opts.get("methods") or METHODS,
+        directions=opts.get("directions", 21),
+        params=opts.get("params"),
+        albedo=opts.get("albedo", "white"),
+        keep_images=SHEET_DIRECTIONS if sheet_path else False,
+        label=opts.get("label", ""),
+    )
+    if sheet_path:
+        contact_sheet(result, sheet_path)
+    return result.to_dict()
+
+
+def pick_job(
+    in_path: str,
+    read: dict[str, Any],
+    x: int,
+    y: int,
+    params: dict[str, Any],
+    max_pixels: int | None = None,
+) -> dict[str, Any]:
+    """``depict relief-pick``: the Apparent Relief descriptor S under pixel (x, y) with the
+    ``apparent_relief`` parameters ``params``, its ARM texture coordinates and its region."""
+    import numpy as np
+
+    from ops import relief as rl
+    from service import pipeline
+    from service.registry import Context
+
+    frame = read_frame(in_path, read, max_pixels)
+    step = {"op": "apparent_relief", "params": {**params, "style": "cel"}}
+    context = Context(files=False)
+    out = pipeline.run(frame, [step], context=context)
+    s = np.dstack([out.outputs["relief.S.X"], out.outputs["relief.S.Y"]])
+    picked = rl.pick(s, x, y)
+    region = rl.REGIONS[int(rl.classify(s[y : y + 1, x : x + 1])[0, 0])]
+    norm = context.measured.get("apparent_relief.curvedness_norm", params.get("curvedness_norm"))
+    return {
+        "x": x,
+        "y": y,
+        "s": [picked.s1, picked.s2],
+        "uv": [picked.u, picked.v],
+        "region": region,
+        "r": float(out.outputs["relief.X"][y, x]),
+        "curvedness_norm": float(norm) if norm is not None else None,
     }
 
 

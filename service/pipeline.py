@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from service.registry import Context, Operator, Params, PipelineError, get
 
@@ -98,7 +99,12 @@ def run(
             out.need(buffer, f"needed by {op.name}")
         if op.needs_camera:
             out.need_camera(f"{op.name} needs the camera")
-        op.apply(out, params, ctx)
+        try:
+            op.apply(out, params, ctx)
+        except FrameError:
+            raise
+        except ValueError as exc:  # ops/ names a bad value in a ValueError
+            raise PipelineError(f"{op.name}: {exc}") from None
     return out
 
 

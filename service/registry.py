@@ -3,7 +3,7 @@
 An entry names the operator, its pydantic parameter model (ranges, defaults, units and
 descriptions live there), the frame buffers it needs, the layers it writes, and the function that
 applies it to a frame. Adding an operator means one function in ``ops/`` and one
-:func:`register` call in :mod:`service.operators`.
+:func:`register` call in a module of :mod:`service.operators`.
 """
 
 from __future__ import annotations
@@ -31,9 +31,12 @@ class Context:
     ``pinned``: statistics pinned for a whole sequence (white levels, normalisations), keyed by
     ``"<op>.<name>"``; an operator whose parameter is ``auto`` reads it from here when present
     and records what it measured in ``measured`` so a batch can pin it for later frames.
+    ``files``: whether parameters may name image files on this machine (matcaps, environment
+    maps, gain maps, ARMs); the HTTP service runs with ``files=False``.
     """
 
     debug_layers: bool = False
+    files: bool = True
     pinned: dict[str, float] = field(default_factory=dict)
     measured: dict[str, float] = field(default_factory=dict)
 

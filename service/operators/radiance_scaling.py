@@ -1,13 +1,9 @@
-"""The built-in operators: one registry entry each, mapping a frame onto an ``ops`` function.
-
-Each entry reads the buffers it needs from the frame, calls the maths in ``ops/`` and writes the
-enhanced beauty and/or output layers. Parameters are pydantic models; their ``description``
-strings are what ``depict ops``, the HTTP schema and the OpenAPI file show.
-"""
+"""``radiance_scaling``: Radiance Scaling (Vergne et al., TVCG 2011) in every rendering scenario
+of §5, on the renderer's lobes or by deferred shading of the G-buffer."""
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -16,69 +12,16 @@ from gbuffer.frame import LOBES, Frame
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.scaling import scale_lobes, white_level
-from ops.shading import Light, parse_light
-from service.images import load_image
-from service.registry import Context, Params, register
-
-Fraction = Annotated[float, Field(gt=0.0, lt=1.0)]
-Magnitude = Annotated[float, Field(ge=0.0, le=100.0)]
-
-DEFAULT_LIGHTS = ["-0.4,0.6,0.7", "0.6,0.2,0.5*0.35"]
-
-
-class CurvatureParams(Params):
-    """View-centred curvature (RS §4), shared by every operator that needs it."""
-
-    scale: float = Field(
-        curv_ops.DEFAULT_SCALE,
-        gt=0.0,
-        le=0.1,
-        description="derivative scale, relative to the image height (Gaussian σ)",
-    )
-    gain: float = Field(
-        curv_ops.DEFAULT_GAIN,
-        gt=0.0,
-        le=100.0,
-        description="curvature gain s in κ = tanh(s·(κ1+κ2)), curvature per image height",
-    )
-    foreshortening: float = Field(
-        curv_ops.DEFAULT_FORESHORTENING,
-        ge=0.0,
-        le=1.0,
-        description="foreshortening f in g = −(n_x, n_y)/n_z^f (0: none, 1: full)",
-    )
-    depth_jump: float = Field(
-        curv_ops.DEFAULT_DEPTH_JUMP,
-        gt=0.0,
-        le=10.0,
-        description="relative depth jump treated as a discontinuity (no curvature across it)",
-    )
-
-
-def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
-    """The view-centred curvature of a frame at the parameters' scale."""
-    return curv_ops.principal_curvatures(
-        frame.need("normal", "for curvature"),
-        frame.need("depth", "for curvature"),
-        frame.mask,
-        scale=p.scale,
-        foreshortening=p.foreshortening,
-        image_height=frame.image_height,
-        depth_jump=p.depth_jump,
-    )
-
-
-@register(
-    "curvature",
-    summary="view-centred curvature (RS §4): mapped mean curvature, principal curvatures "
-    "and direction",
-    params=CurvatureParams,
-    needs=("normal", "depth"),
-    writes=("curvature.H", "curvature.k1", "curvature.k2", "curvature.dir.X", "curvature.dir.Y"),
+from service.operators.common import (
+    Fraction,
+    LightsParams,
+    Magnitude,
+    frame_albedo,
+    statistic,
+    user_image,
 )
-def apply_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> None:
-    frame.set_layer("curvature", curv_ops.mean_curvature_layers(frame_curvature(frame, p), p.gain))
-
+from service.operators.curvature import CurvatureParams, frame_curvature
+from service.registry import Context, register
 
 Scenario = Literal[
     "auto",
@@ -95,7 +38,7 @@ Scenario = Literal[
 ]
 
 
-class RadianceScalingParams(CurvatureParams):
+class RadianceScalingParams(CurvatureParams, LightsParams):
     """Radiance Scaling (Vergne et al. 2011) in every rendering scenario of §5."""
 
     scenario: Scenario = Field(
@@ -124,11 +67,6 @@ class RadianceScalingParams(CurvatureParams):
     lobes: list[str] | None = Field(
         None, description="renderer lobes to scale (default: every lobe the frame has)"
     )
-    lights: list[str] = Field(
-        default_factory=lambda: list(DEFAULT_LIGHTS),
-        description="deferred scenarios: lights in camera space, 'X,Y,Z' (directional) or "
-        "'point:X,Y,Z', optional '@I' intensity",
-    )
     ambient: float = Field(0.1, ge=0.0, le=10.0, description="k_a of Phong")
     specular: float = Field(0.3, ge=0.0, le=10.0, description="k_s of Phong")
     shininess: float = Field(32.0, gt=0.0, le=10000.0, description="Phong exponent η")
@@ -140,13 +78,6 @@ class RadianceScalingParams(CurvatureParams):
     environment: str | None = Field(
         None, description="equirectangular environment (EXR/HDR/PNG; default: a simple sky)"
     )
-
-    @field_validator("lights")
-    @classmethod
-    def _lights(cls, value: list[str]) -> list[str]:
-        for text in value:
-            parse_light(text)  # raises ValueError naming what is wrong
-        return value
 
     @field_validator("lobes")
     @classmethod
@@ -160,17 +91,14 @@ class RadianceScalingParams(CurvatureParams):
         specific = getattr(self, f"gamma_{lobe}", None)
         return self.gamma if specific is None else float(specific)
 
-    def parsed_lights(self) -> list[Light]:
-        return [parse_light(text) for text in self.lights]
-
 
 def _white(
     ctx: Context, p: RadianceScalingParams, key: str, light: np.ndarray, mask: np.ndarray
 ) -> float:
-    if p.white != "auto":
-        return float(p.white)
-    return ctx.statistic(
+    return statistic(
+        ctx,
         f"radiance_scaling.white.{key}",
+        p.white,
         lambda: white_level(light, mask, percentile=p.white_percentile),
     )
 
@@ -225,15 +153,21 @@ def _camera_to_world(frame: Frame) -> np.ndarray | None:
     return np.linalg.inv(frame.camera.world_to_camera)[:3, :3]
 
 
-def _environment(p: RadianceScalingParams) -> np.ndarray:
-    return load_image(p.environment) if p.environment else rs.sky_environment()
+def _environment(p: RadianceScalingParams, ctx: Context) -> np.ndarray:
+    if p.environment:
+        return user_image(ctx, p.environment, "environment")
+    return rs.sky_environment()
 
 
 def _deferred(
-    frame: Frame, p: RadianceScalingParams, curv: curv_ops.Curvature, scenario: str
+    frame: Frame,
+    p: RadianceScalingParams,
+    curv: curv_ops.Curvature,
+    scenario: str,
+    ctx: Context,
 ) -> rs.Scaled:
     normal = frame.need("normal", f"scenario '{scenario}'")
-    albedo = frame.buffers.get("albedo", np.array([0.8, 0.8, 0.8], np.float32))
+    albedo = frame_albedo(frame, None)
     common = {"alpha": p.alpha, "gain": p.gain}
     if scenario in ("phong", "sub_lambert", "toon"):
         return rs.phong(
@@ -273,7 +207,7 @@ def _deferred(
         if p.environment:
             to_world = _camera_to_world(frame)
             n_world = normal if to_world is None else rs.rotate_directions(normal, to_world)
-            irradiance = rs.sh_irradiance(_environment(p), n_world)
+            irradiance = rs.sh_irradiance(_environment(p, ctx), n_world)
         return rs.precomputed_diffuse(
             normal,
             curv,
@@ -284,13 +218,13 @@ def _deferred(
             **common,
         )
     if scenario == "lit_sphere":
-        sphere = load_image(p.matcap) if p.matcap else rs.studio_matcap()
+        sphere = user_image(ctx, p.matcap, "matcap") if p.matcap else rs.studio_matcap()
         return rs.lit_sphere(normal, curv, sphere, gamma=p.gamma_of("specular"), **common)
     return rs.environment(
         normal,
         frame.view_vectors(),
         curv,
-        _environment(p),
+        _environment(p, ctx),
         mode=scenario,
         ior=p.ior,
         camera_to_world=_camera_to_world(frame),
@@ -317,7 +251,7 @@ def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context)
         else:
             beauty, sigmas = _scale_beauty(frame, p, kappa, ctx)
     else:
-        scaled = _deferred(frame, p, curv, scenario)
+        scaled = _deferred(frame, p, curv, scenario, ctx)
         beauty, sigmas = scaled.beauty, scaled.sigmas
         frame.buffers.update(scaled.lobes)
     frame.buffers["beauty"] = beauty.astype(np.float32)

@@ -1,0 +1,256 @@
+"""The analysis routes of the HTTP service: ``POST /v1/score``, ``POST /v1/compare`` and
+``POST /v1/relief/pick``. Each runs the job function the CLI runs locally
+(:mod:`service.jobs`) and answers its JSON, so ``depict score|compare|relief-pick --server``
+prints what the local command prints."""
+
+from __future__ import annotations
+
+import base64
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+from fastapi import FastAPI, File, Form, UploadFile
+from pydantic import BaseModel, Field
+
+from service import jobs
+from service.api import (
+    MESH_SUFFIXES,
+    _cleanup,
+    _json_field,
+    _read_fields,
+    _receive_frame,
+    _save_upload,
+    _scrubbed,
+)
+from service.problems import Problem, openapi_responses
+from service.settings import Settings
+
+RunJob = Callable[..., Awaitable[dict[str, Any]]]
+
+Preset = Annotated[str, Form(description="renderer preset (as for /v1/enhance)")]
+CameraField = Annotated[str | None, Form(description="camera JSON, overrides the file's")]
+MapField = Annotated[
+    str | None, Form(description='JSON object buffer -> channels, e.g. {"normal": "MyLayer.N"}')
+]
+NormalSpace = Annotated[
+    Literal["world", "camera"] | None, Form(description="override the normals' space")
+]
+
+
+class Score(BaseModel):
+    """The answer of ``POST /v1/score`` (the JSON of ``depict score --json``)."""
+
+    score: float = Field(description="congruence score (LLA Eq. 2) in [0, 1]")
+    analysis_shape: list[int] = Field(description="(h, w) at which the score was evaluated")
+    image_shape: list[int] = Field(description="(h, w) of the frame")
+    params: dict[str, float] = Field(description="the congruence parameters used")
+
+
+class Comparison(BaseModel):
+    """The answer of ``POST /v1/compare`` (the JSON of ``depict compare --json``)."""
+
+    label: str
+    image_shape: list[int]
+    albedo: str
+    methods: list[str]
+    directions: list[dict[str, Any]] = Field(description="index, vector, theta_deg, phi_deg")
+    scores: dict[str, list[float]] = Field(description="method -> score per direction")
+    means: dict[str, float]
+    claim: dict[str, Any] = Field(description="the paper's claim checked for Light Alignment")
+    params: dict[str, Any]
+    seconds: dict[str, float]
+    sheet_png: str | None = Field(None, description="the contact sheet, base64 PNG (sheet=true)")
+
+
+class Pick(BaseModel):
+    """The answer of ``POST /v1/relief/pick`` (the JSON of ``depict relief-pick --json``)."""
+
+    x: int
+    y: int
+    s: list[float] = Field(description="the descriptor S = (S1, S2) under the pixel")
+    uv: list[float] = Field(description="its ARM texture coordinates (u right, v up)")
+    region: str = Field(description="plane, cap, convex, saddle, concave or cup")
+    r: float = Field(description="the relief value of the default ARM there")
+    curvedness_norm: float | None
+
+
+def install(
+    app: FastAPI, new_work: Callable[[], Path], run_job: RunJob, common: tuple[int, ...]
+) -> None:
+    """Add the analysis routes to ``app``."""
+    settings: Settings = app.state.settings
+
+    async def frame_job(
+        kind: str,
+        file: UploadFile,
+        fields: dict[str, Any],
+        fn: Callable[..., dict[str, Any]],
+        args: Callable[[Path, dict[str, Any], Path], tuple[Any, ...]],
+    ) -> dict[str, Any]:
+        """Receive the EXR, run ``fn(src, read, *args(...))`` on a worker, clean up."""
+        work = new_work()
+        src = work / "in.exr"
+        try:
+            with _scrubbed(work, {src: file.filename or "upload.exr"}):
+                read = await _receive_frame(file, src, fields, settings.max_pixels)
+                return await run_job(kind, work, fn, *args(src, read, work))
+        finally:
+            _cleanup(work)
+
+    @app.post(
+        "/v1/score",
+        tags=["analysis"],
+        summary="Congruence score of a frame's beauty (Local Light Alignment, Eq. 2)",
+        response_model=Score,
+        responses=openapi_responses(*common),
+    )
+    async def score(
+        file: Annotated[UploadFile, File(description="the EXR frame (beauty + depth)")],
+        pipeline: Annotated[
+            str | None,
+            Form(description="pipeline JSON to apply before scoring (default: score as is)"),
+        ] = None,
+        preset: Preset = "auto",
+        camera: CameraField = None,
+        map: MapField = None,
+        normal_space: NormalSpace = None,
+        gradient_scale: Annotated[
+            float | None,
+            Form(gt=0, le=0.1, description="gradient sigma, relative to the image height"),
+        ] = None,
+        integration_scale: Annotated[
+            float | None,
+            Form(gt=0, le=0.25, description="integration sigma, relative to the image height"),
+        ] = None,
+        percentile: Annotated[
+            float | None, Form(gt=0, le=100, description="strength normalisation percentile")
+        ] = None,
+        depth_jump: Annotated[
+            float | None, Form(gt=0, le=100, description="largest log-depth step of a surface")
+        ] = None,
+    ) -> dict[str, Any]:
+        from service import pipeline as pipelines
+
+        spec_json = None
+        if pipeline:
+            spec = pipelines.parse(pipeline)
+            pipelines.compile_steps(spec)
+            spec_json = spec.model_dump_json()
+        given = {
+            "gradient_scale": gradient_scale,
+            "integration_scale": integration_scale,
+            "percentile": percentile,
+            "depth_jump": depth_jump,
+        }
+        options = {k: v for k, v in given.items() if v is not None}
+        out = await frame_job(
+            "score",
+            file,
+            _read_fields(preset, camera, map, normal_space),
+            jobs.score_job,
+            lambda src, read, work: (str(src), spec_json, read, options, settings.max_pixels),
+        )
+        return {k: out[k] for k in ("score", "analysis_shape", "image_shape", "params")}
+
+    @app.post(
+        "/v1/compare",
+        tags=["analysis"],
+        summary="Score every depiction method under the fixed light sweep (LLA §7)",
+        response_model=Comparison,
+        responses=openapi_responses(*common),
+    )
+    async def compare(
+        file: Annotated[UploadFile, File(description="an EXR frame (normals, depth) or a mesh")],
+        kind: Annotated[
+            Literal["exr", "mesh"], Form(description="what `file` is: exr or mesh")
+        ] = "exr",
+        options: Annotated[
+            str,
+            Form(
+                description="JSON: methods, directions, params, albedo, label; for a mesh "
+                "width, height, azimuth, elevation"
+            ),
+        ] = "{}",
+        sheet: Annotated[bool, Form(description="also answer the contact sheet")] = False,
+        preset: Preset = "auto",
+        camera: CameraField = None,
+    ) -> dict[str, Any]:
+        opts = _json_field("options", options, dict) or {}
+        fields = _read_fields(preset, camera)
+        if kind == "exr":
+            out = await frame_job(
+                "compare",
+                file,
+                fields,
+                jobs.compare_job,
+                lambda src, read, work: (
+                    str(src),
+                    read,
+                    opts,
+                    str(work / "sheet.png") if sheet else None,
+                    settings.max_pixels,
+                ),
+            )
+        else:
+            out = await _mesh_compare(file, opts, sheet)
+        return out
+
+    async def _mesh_compare(file: UploadFile, opts: dict[str, Any], sheet: bool) -> dict[str, Any]:
+        suffix = Path(file.filename or "").suffix.lower()
+        if suffix not in MESH_SUFFIXES:
+            raise Problem(
+                "unsupported-media-type",
+                f"mesh file name {file.filename!r} has no known mesh suffix; "
+                f"send one of {', '.join(MESH_SUFFIXES)}",
+            )
+        work = new_work()
+        src = work / f"mesh{suffix}"
+        sheet_path = work / "sheet.png"
+        try:
+            with _scrubbed(work, {src: file.filename or "mesh"}):
+                await _save_upload(file, src)
+                out = await run_job(
+                    "compare",
+                    work,
+                    jobs.compare_job,
+                    str(src),
+                    None,
+                    opts,
+                    str(sheet_path) if sheet else None,
+                    settings.max_pixels,
+                )
+                if sheet:
+                    out["sheet_png"] = base64.b64encode(sheet_path.read_bytes()).decode()
+                return out
+        finally:
+            _cleanup(work)
+
+    @app.post(
+        "/v1/relief/pick",
+        tags=["analysis"],
+        summary="The Apparent Relief descriptor under a pixel, to paint an ARM around it",
+        response_model=Pick,
+        responses=openapi_responses(*common),
+    )
+    async def relief_pick(
+        file: Annotated[UploadFile, File(description="the EXR frame (normals, depth)")],
+        x: Annotated[int, Form(ge=0, description="column, from the left")],
+        y: Annotated[int, Form(ge=0, description="row, from the top")],
+        params: Annotated[
+            str, Form(description="apparent_relief parameters JSON (scale, curvedness_norm)")
+        ] = "{}",
+        preset: Preset = "auto",
+        camera: CameraField = None,
+    ) -> dict[str, Any]:
+        values = _json_field("params", params, dict) or {}
+        from service.registry import get
+
+        get("apparent_relief").parse(values)  # 422 for a bad parameter
+        return await frame_job(
+            "pick",
+            file,
+            _read_fields(preset, camera),
+            jobs.pick_job,
+            lambda src, read, work: (str(src), read, x, y, values, settings.max_pixels),
+        )

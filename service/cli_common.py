@@ -1,0 +1,118 @@
+"""Flags and helpers shared by the commands of ``depict`` (:mod:`service.cli`)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+from typing import Any
+
+
+class UsageError(ValueError):
+    """A command line that cannot be honoured (bad flag value, missing file, ...)."""
+
+
+def parse_value(text: str) -> Any:
+    """A ``--set`` value: JSON when it parses (numbers, booleans, lists), a comma list of such
+    values (``1,0.5,0.25``), else the plain string."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        pass
+    if "," in text:
+        return [parse_value(part) for part in text.split(",")]
+    return text
+
+
+class _OpAction(argparse.Action):
+    """``--op NAME`` starts a new pipeline step."""
+
+    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+        steps = getattr(ns, "steps", None) or []
+        steps.append({"op": value, "params": {}})
+        ns.steps = steps
+
+
+class _SetAction(argparse.Action):
+    """``--set key=value`` sets a parameter of the last ``--op``."""
+
+    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+        steps = getattr(ns, "steps", None)
+        if not steps:
+            parser.error("--set must follow an --op NAME")
+        key, sep, raw = str(value).partition("=")
+        if not sep or not key:
+            parser.error(f"--set {value!r}: expected key=value")
+        steps[-1]["params"][key.strip()] = parse_value(raw.strip())
+
+
+def add_pipeline_options(p: argparse.ArgumentParser, what: str = "a pipeline step") -> None:
+    """``--op NAME [--set k=v ...] ...`` or ``--pipeline PIPE.json``."""
+    p.add_argument("--op", action=_OpAction, metavar="NAME", help=f"add {what}")
+    p.add_argument(
+        "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
+    )
+    p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
+
+
+def pipeline_spec(args: argparse.Namespace, default: Any) -> Any:
+    """The pipeline of ``--pipeline`` or the ``--op`` steps (validated), else ``default``."""
+    from service import pipeline
+
+    steps = getattr(args, "steps", None)
+    if args.pipeline and steps:
+        raise UsageError("give either --pipeline or --op steps, not both")
+    if args.pipeline:
+        spec = pipeline.load(args.pipeline)
+    elif steps:
+        spec = pipeline.parse(steps)
+    else:
+        return default
+    pipeline.compile_steps(spec)  # refuse bad parameters before reading pixels
+    return spec
+
+
+def add_read_options(p: argparse.ArgumentParser) -> None:
+    """Flags for reading a frame: preset, camera and mapping overrides."""
+    p.add_argument(
+        "--preset",
+        default="auto",
+        help="renderer preset: auto, canonical, blender, arnold, vray, renderman, karma",
+    )
+    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (overrides the file's)")
+    p.add_argument(
+        "--map",
+        action="append",
+        default=[],
+        metavar="BUFFER=CHANNELS",
+        help="map a canonical buffer to file channels, e.g. normal=MyLayer.N or depth=Z",
+    )
+    p.add_argument(
+        "--normal-space", choices=["world", "camera"], help="override the normals' space"
+    )
+
+
+def read_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The read flags as :func:`service.jobs.read_frame` takes them."""
+    mapping = {}
+    for item in args.map:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise UsageError(f"--map {item!r}: expected BUFFER=CHANNELS")
+        mapping[key.strip()] = value.strip()
+    return {
+        "preset": args.preset,
+        "camera": args.camera,
+        "mapping": mapping,
+        "normal_space": args.normal_space,
+    }
+
+
+def add_server_option(p: argparse.ArgumentParser) -> None:
+    """``--server URL``: run the command on a Depict server instead of locally."""
+    p.add_argument(
+        "--server",
+        metavar="URL",
+        default=os.environ.get("DEPICT_SERVER") or None,
+        help="run on this Depict server (env DEPICT_SERVER; key from DEPICT_API_KEY)",
+    )

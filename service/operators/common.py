@@ -1,0 +1,97 @@
+"""Parameter pieces and frame helpers shared by several operators."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Annotated, Literal
+
+import numpy as np
+from pydantic import Field, field_validator
+
+from gbuffer.frame import Frame
+from ops.shading import LIGHT_SYNTAX, Light, parse_light
+from service.images import load_image
+from service.registry import Context, Params, PipelineError
+
+Fraction = Annotated[float, Field(gt=0.0, lt=1.0)]
+Magnitude = Annotated[float, Field(ge=0.0, le=100.0)]
+#: ``"auto"`` (measured on the frame, pinnable for a sequence) or a number.
+Auto = Literal["auto"]
+
+#: A key light from the upper left and a dim fill from the right (camera space).
+DEFAULT_LIGHTS = ["-0.4,0.6,0.7", "0.6,0.2,0.5*0.35"]
+
+
+class LightsParams(Params):
+    """Explicit lights for operators that shade the G-buffer themselves."""
+
+    lights: list[str] = Field(
+        default_factory=lambda: list(DEFAULT_LIGHTS),
+        min_length=1,
+        max_length=16,
+        description=f"lights in camera space, {LIGHT_SYNTAX}: 'X,Y,Z' is a directional light "
+        "(towards it), 'point:X,Y,Z' a point light",
+    )
+
+    @field_validator("lights")
+    @classmethod
+    def _lights(cls, value: list[str]) -> list[str]:
+        for text in value:
+            parse_light(text)  # raises ValueError naming what is wrong
+        return value
+
+    def parsed_lights(self) -> list[Light]:
+        return [parse_light(text) for text in self.lights]
+
+
+def statistic(ctx: Context, key: str, value: float | str, compute: Callable[[], float]) -> float:
+    """``value`` when it is a number, else the pinned or measured statistic ``key``."""
+    if value != "auto":
+        return float(value)
+    return ctx.statistic(key, compute)
+
+
+def user_image(ctx: Context, path: str, what: str, **kwargs: bool) -> np.ndarray:
+    """An image file named by a parameter, where this run may read files (not over HTTP)."""
+    if not ctx.files:
+        raise PipelineError(
+            f"{what}: image files cannot be named here ({path!r}); use a layer of the uploaded "
+            "file or a built-in name"
+        )
+    return load_image(path, **kwargs)
+
+
+def frame_albedo(frame: Frame, albedo: float | None) -> np.ndarray:
+    """The frame's albedo buffer, or a constant grey (``albedo``, or 0.8 without one)."""
+    if albedo is None and "albedo" in frame.buffers:
+        return frame.buffers["albedo"]
+    return np.full(3, 0.8 if albedo is None else albedo, np.float32)
+
+
+def pixel_sizes(frame: Frame, why: str) -> np.ndarray:
+    """Scene units per pixel at each pixel (depth / focal length, or the orthographic size)."""
+    camera = frame.need_camera(why)
+    depth = frame.need("depth", why)
+    return camera.pixel_size_at(np.where(np.isfinite(depth), depth, np.inf), frame.image_height)
+
+
+def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
+    """One channel of the file by name: ``gain`` (its only channel, or X/Y/R) or ``gain.X``."""
+    channels = frame.layer(name)
+    if not channels:
+        layer, _, channel = name.rpartition(".")
+        channels = {k: v for k, v in frame.layer(layer).items() if k == channel} if layer else {}
+    if len(channels) == 1:
+        return next(iter(channels.values()))
+    for key in ("X", "Y", "R", "A"):
+        if key in channels:
+            return channels[key]
+    raise PipelineError(
+        f"{what}: no layer {name!r} with one channel in the file"
+        + (f" (it has {', '.join(sorted(channels))})" if channels else "")
+    )
+
+
+def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:
+    """An (H, W, C) field as output channels ``{"X": ..., "Y": ..., "Z": ...}``."""
+    return {n: np.ascontiguousarray(field[..., i]) for i, n in enumerate(names)}

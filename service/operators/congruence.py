@@ -1,0 +1,63 @@
+"""``congruence``: the congruence score of the current beauty against the shape (Mestres et al.,
+EG 2021, §7, Eq. 2) as a pipeline step.
+
+It leaves the beauty as it is and writes the per-pixel score ``congruence.X``, its weight
+``congruence.weight.X``, the two flows ``congruence.shading.X/Y`` and ``congruence.shape.X/Y``
+(camera x right, y up) and the mean score as the header attribute ``depict/congruence``. Put it
+last in a pipeline to measure what the steps before it did (``depict score`` prints it).
+"""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from gbuffer.frame import Frame
+from service.compare import DEFAULT_PARAMS, score_frame
+from service.registry import Context, Params, register
+
+_DEFAULTS = DEFAULT_PARAMS["congruence"]
+
+
+class CongruenceParams(Params):
+    """Scales of the structure tensors and the strength normalisation of LLA Eq. 2."""
+
+    gradient_scale: float = Field(
+        _DEFAULTS["gradient_scale"],
+        gt=0.0,
+        le=0.1,
+        description="σ of the gradients, relative to the image height",
+    )
+    integration_scale: float = Field(
+        _DEFAULTS["integration_scale"],
+        gt=0.0,
+        le=0.25,
+        description="σ integrating the structure tensors, relative to the image height",
+    )
+    percentile: float = Field(
+        _DEFAULTS["percentile"],
+        gt=0.0,
+        le=100.0,
+        description="percentile each strength is divided by (both e in [0, 1])",
+    )
+    depth_jump: float = Field(
+        0.05, gt=0.0, le=100.0, description="largest log-depth step still one surface"
+    )
+
+
+@register(
+    "congruence",
+    summary="congruence score (Mestres et al. 2021, Eq. 2): how well the shading flow follows "
+    "the shape flow; per-pixel map, flows, and the mean in the header",
+    params=CongruenceParams,
+    needs=("beauty", "depth"),
+    writes=(
+        "congruence.X",
+        "congruence.weight.X",
+        "congruence.shading.X/Y",
+        "congruence.shape.X/Y",
+    ),
+)
+def apply_congruence(frame: Frame, p: CongruenceParams, ctx: Context) -> None:
+    result = score_frame(frame, maps=True, **p.model_dump())
+    frame.outputs.update(result["layers"])
+    frame.attributes["depict/congruence"] = float(result["score"])

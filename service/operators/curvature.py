@@ -1,0 +1,64 @@
+"""``curvature``: view-centred curvature (Radiance Scaling §4), and its parameters, which every
+curvature-driven operator shares."""
+
+from __future__ import annotations
+
+from pydantic import Field
+
+from gbuffer.frame import Frame
+from ops import curvature as curv_ops
+from service.registry import Context, Params, register
+
+
+class CurvatureParams(Params):
+    """View-centred curvature (RS §4), shared by every operator that needs it."""
+
+    scale: float = Field(
+        curv_ops.DEFAULT_SCALE,
+        gt=0.0,
+        le=0.1,
+        description="derivative scale, relative to the image height (Gaussian σ)",
+    )
+    gain: float = Field(
+        curv_ops.DEFAULT_GAIN,
+        gt=0.0,
+        le=100.0,
+        description="curvature gain s in κ = tanh(s·(κ1+κ2)), curvature per image height",
+    )
+    foreshortening: float = Field(
+        curv_ops.DEFAULT_FORESHORTENING,
+        ge=0.0,
+        le=1.0,
+        description="foreshortening f in g = −(n_x, n_y)/n_z^f (0: none, 1: full)",
+    )
+    depth_jump: float = Field(
+        curv_ops.DEFAULT_DEPTH_JUMP,
+        gt=0.0,
+        le=10.0,
+        description="relative depth jump treated as a discontinuity (no curvature across it)",
+    )
+
+
+def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
+    """The view-centred curvature of a frame at the parameters' scale."""
+    return curv_ops.principal_curvatures(
+        frame.need("normal", "for curvature"),
+        frame.need("depth", "for curvature"),
+        frame.mask,
+        scale=p.scale,
+        foreshortening=p.foreshortening,
+        image_height=frame.image_height,
+        depth_jump=p.depth_jump,
+    )
+
+
+@register(
+    "curvature",
+    summary="view-centred curvature (RS §4): mapped mean curvature, principal curvatures "
+    "and direction",
+    params=CurvatureParams,
+    needs=("normal", "depth"),
+    writes=("curvature.H", "curvature.k1", "curvature.k2", "curvature.dir.X", "curvature.dir.Y"),
+)
+def apply_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> None:
+    frame.set_layer("curvature", curv_ops.mean_curvature_layers(frame_curvature(frame, p), p.gain))

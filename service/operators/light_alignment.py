@@ -1,0 +1,272 @@
+"""``light_alignment``: Local Light Alignment (Mestres et al., EG 2021, §4-6) on a frame.
+
+The lights are aligned per pixel with the depth-guided multi-scale normals
+(:func:`ops.filtering.normal_pyramid`, LLA §5) by :func:`ops.light_alignment.align_lights`
+(Eq. 1), one direction per shading component (diffuse: normal guide; specular: reflected view
+vector; transmission: refracted view vector, §6), then the frame is shaded with them:
+
+``relight``
+    Deferred shading of the G-buffer with the aligned lights
+    (:func:`ops.shading.shade_directions`): ambient + Lambert / half-Lambert + Blinn-Phong /
+    GGX (+ transmission), albedo from the frame (or a constant). The beauty and its lobes are
+    replaced. Right for Depict's own renders and for G-buffers without lobes.
+``ratio``
+    Each renderer lobe is multiplied by shade(aligned) / shade(original) of the same model and
+    lights, so the renderer's textures, shadows and indirect light are kept and only the
+    alignment is added; the beauty is rebuilt with the change of the lobes, emission and
+    everything unmapped untouched. Right for production renders with lobes — with lights given
+    as the ones of the shot.
+``auto``
+    ``ratio`` when the frame has a diffuse, specular or transmission lobe, else ``relight``.
+
+The aligned directions are written as ``lla_light.<component>.X/Y/Z`` (the first light;
+``lla_light<k>.<component>`` for the k-th, k ≥ 2), camera space, for any shader downstream;
+``--debug-layers`` adds the multi-scale normals ``lla_n<i>.X/Y/Z`` (i = 1 finest … S).
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from gbuffer.frame import Frame
+from ops import filtering
+from ops.light_alignment import DEFAULT_GAMMA, align_lights
+from ops.shading import Light, shade_directions
+from service.operators.common import LightsParams, channels, frame_albedo
+from service.registry import Context, register
+
+Component = Literal["diffuse", "specular", "transmission"]
+Sigmas = list[float]
+#: σ_1 … σ_5 of the paper's "fine-tuned" 6-scale result (LLA Fig. 7), finest first.
+PAPER_SIGMAS = [0.5, 0.3, 0.1, 0.2, 0.2]
+_SIGMA_ITEMS = {"min_length": 1, "max_length": 7}
+
+
+class LightAlignmentParams(LightsParams):
+    """Local Light Alignment (LLA §4-6) and the shading with the aligned lights."""
+
+    sigmas: Sigmas = Field(
+        default_factory=lambda: list(PAPER_SIGMAS),
+        **_SIGMA_ITEMS,
+        description="σ_1 … σ_{S−1} in [0, 1], finest first, of the diffuse component (S = "
+        "len + 1 scales, up to 8; default: LLA Fig. 7)",
+    )
+    specular_sigmas: Sigmas | None = Field(
+        None, **_SIGMA_ITEMS, description="σ_i of the specular component (default: `sigmas`)"
+    )
+    transmission_sigmas: Sigmas | None = Field(
+        None, **_SIGMA_ITEMS, description="σ_i of the transmission component (default: `sigmas`)"
+    )
+    components: list[Component] = Field(
+        default_factory=lambda: ["diffuse", "specular"],
+        min_length=1,
+        description="components whose light is aligned (others keep the original light)",
+    )
+    gamma: float = Field(DEFAULT_GAMMA, ge=0.0, le=20.0, description="γ of W_γ (Eq. 1)")
+    base: float = Field(
+        filtering.DEFAULT_BASE,
+        gt=0.0,
+        le=0.1,
+        description="spatial σ of the first filtering, relative to the image height (§5)",
+    )
+    factor: float = Field(
+        filtering.DEFAULT_FACTOR, ge=1.0, le=4.0, description="spatial σ growth per scale (§5)"
+    )
+    depth_sigma: float = Field(
+        filtering.DEFAULT_DEPTH_SIGMA,
+        gt=0.0,
+        le=10.0,
+        description="range σ of the bilateral filter on log depth (relative depth)",
+    )
+    ior: float = Field(1.5, gt=0.0, le=10.0, description="index of refraction (transmission)")
+    form: Literal["auto", "relight", "ratio"] = Field(
+        "auto",
+        description="relight: deferred shading with the aligned lights; ratio: scale the "
+        "renderer's lobes by shade(aligned)/shade(original); auto: ratio when the frame has lobes",
+    )
+    diffuse: Literal["lambert", "half_lambert"] = Field("lambert", description="diffuse model")
+    specular: Literal["none", "blinn_phong", "ggx"] = Field(
+        "blinn_phong", description="specular model"
+    )
+    shininess: float = Field(32.0, gt=0.0, le=10000.0, description="Blinn-Phong exponent")
+    specular_color: float = Field(
+        0.3, ge=0.0, le=10.0, description="k_s of Blinn-Phong (GGX: white, Fresnel gives f0)"
+    )
+    roughness: float | Literal["frame"] = Field(
+        0.4, description="GGX roughness in (0, 1], or 'frame' for the frame's roughness pass"
+    )
+    f0: float = Field(0.04, ge=0.0, le=1.0, description="GGX reflectance at normal incidence")
+    ambient: float = Field(0.1, ge=0.0, le=10.0, description="ambient light (× AO when present)")
+    albedo: float | None = Field(
+        None, ge=0.0, le=10.0, description="constant albedo (default: the frame's, else 0.8)"
+    )
+    transmission_weight: float = Field(
+        0.0, ge=0.0, le=10.0, description="relight: weight of a transmission lobe (0: none)"
+    )
+    ratio_floor: float = Field(
+        0.05,
+        gt=0.0,
+        le=10.0,
+        description="ratio form: ε in (shade_aligned + ε)/(shade_original + ε), relative to "
+        "the lights' irradiance",
+    )
+    ratio_max: float = Field(8.0, ge=1.0, le=1000.0, description="ratio form: largest factor")
+
+    @model_validator(mode="after")
+    def _check(self) -> LightAlignmentParams:
+        for name in ("sigmas", "specular_sigmas", "transmission_sigmas"):
+            values = getattr(self, name)
+            if values is None:
+                continue
+            if any(not 0.0 <= v <= 1.0 for v in values):
+                raise ValueError(f"{name} must be in [0, 1], got {values}")
+            if len(values) != len(self.sigmas):
+                raise ValueError(f"{name} must have {len(self.sigmas)} values, like sigmas")
+        if isinstance(self.roughness, float) and not 0.0 < self.roughness <= 1.0:
+            raise ValueError(f"roughness must be in (0, 1] or 'frame', got {self.roughness}")
+        return self
+
+    def sigmas_of(self, component: str) -> list[float]:
+        own = getattr(self, f"{component}_sigmas", None)
+        return list(self.sigmas if own is None else own)
+
+
+def _form(frame: Frame, p: LightAlignmentParams) -> str:
+    if p.form != "auto":
+        return p.form
+    has_lobes = any(lobe in frame.buffers for lobe in ("diffuse", "specular", "transmission"))
+    return "ratio" if has_lobes else "relight"
+
+
+def _light_layer(k: int, component: str) -> str:
+    return f"lla_light{'' if k == 0 else k + 1}.{component}"
+
+
+@register(
+    "light_alignment",
+    summary="Local Light Alignment (Mestres et al. 2021): lights rotated per pixel and per "
+    "scale towards the shape (Eq. 1), diffuse / specular / transmission guides, relit",
+    params=LightAlignmentParams,
+    needs=("normal", "depth"),
+    writes=(
+        "beauty",
+        "lla_light.<component>.X/Y/Z",
+        "lla_n<i>.X/Y/Z (debug)",
+    ),
+)
+def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -> None:
+    normal = frame.need("normal", "light_alignment")
+    depth = frame.need("depth", "light_alignment")
+    mask = frame.mask
+    form = _form(frame, p)
+    pyramid = filtering.normal_pyramid(
+        normal,
+        depth,
+        mask,
+        scales=len(p.sigmas) + 1,
+        base=p.base,
+        factor=p.factor,
+        depth_sigma=p.depth_sigma,
+    )
+    view = frame.view_vectors()
+    position = frame.positions()
+    lights = p.parsed_lights()
+    components = {c: p.sigmas_of(c) for c in p.components}
+    aligned = align_lights(
+        lights, pyramid, position, view, components, gamma=p.gamma, ior=p.ior, mask=mask
+    )
+    with_transmission = (
+        p.transmission_weight > 0.0 if form == "relight" else "transmission" in frame.buffers
+    )
+    roughness: float | np.ndarray = (
+        p.roughness if p.roughness != "frame" else frame.need("roughness", "roughness='frame'")
+    )
+
+    def shade(directions: dict[str, list[np.ndarray]] | None) -> dict[str, np.ndarray]:
+        return shade_directions(
+            normal,
+            view,
+            position,
+            lights,
+            directions,
+            diffuse=p.diffuse,
+            specular=p.specular,
+            shininess=p.shininess,
+            roughness=roughness,
+            f0=p.f0,
+            transmission=with_transmission,
+            ior=p.ior,
+        )
+
+    directions: dict[str, list[np.ndarray]] = {c: list(v) for c, v in aligned.items()}
+    if form == "relight":
+        _relight(frame, p, shade(directions))
+    else:
+        _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
+    for k in range(len(lights)):
+        for c, fields in aligned.items():
+            frame.set_layer(_light_layer(k, c), channels(fields[k]))
+    if ctx.debug_layers:
+        for i, n_i in enumerate(pyramid.full_list(), start=1):
+            frame.set_layer(f"lla_n{i}", channels(n_i))
+
+
+def lights_power(lights: list[Light]) -> float:
+    """Σ of the lights' intensity × mean colour: the unit of the ratio form's ε."""
+    return float(sum(light.intensity * float(np.mean(light.color)) for light in lights)) or 1.0
+
+
+def _relight(frame: Frame, p: LightAlignmentParams, light: dict[str, np.ndarray]) -> None:
+    """Deferred shading: ambient (× AO) + the lobes lit by the aligned lights."""
+    mask = frame.mask
+    albedo = np.broadcast_to(frame_albedo(frame, p.albedo), (*frame.shape, 3)).astype(np.float32)
+    amb = np.float32(p.ambient) * mask
+    if "ao" in frame.buffers:
+        amb = amb * frame.buffers["ao"]
+    colors = {
+        "ambient": albedo,
+        "diffuse": albedo,
+        "specular": np.full_like(albedo, 1.0 if p.specular == "ggx" else p.specular_color),
+        "transmission": albedo * np.float32(p.transmission_weight),
+    }
+    lights = {"ambient": np.repeat(amb[..., None], 3, axis=2), **light}
+    beauty = np.zeros((*frame.shape, 3), np.float32)
+    for lobe, lit in lights.items():
+        radiance = (lit * colors[lobe]).astype(np.float32)
+        frame.buffers[lobe] = radiance
+        frame.buffers[f"{lobe}.light"] = lit.astype(np.float32)
+        frame.buffers[f"{lobe}.color"] = colors[lobe]
+        beauty += radiance
+    frame.buffers.pop("remainder", None)
+    old = frame.buffers.get("beauty")
+    covered = (mask > 0)[..., None]
+    frame.buffers["beauty"] = beauty if old is None else np.where(covered, beauty, old)
+
+
+def _ratio(
+    frame: Frame,
+    p: LightAlignmentParams,
+    original: dict[str, np.ndarray],
+    aligned: dict[str, np.ndarray],
+    power: float,
+) -> None:
+    """Each renderer lobe × (shade(aligned) + ε)/(shade(original) + ε), clamped to ratio_max."""
+    eps = np.float32(p.ratio_floor * power)
+    lobes = [lobe for lobe in aligned if lobe in frame.buffers]
+    if not lobes:
+        frame.need("diffuse", "form 'ratio' needs a diffuse, specular or transmission lobe")
+    beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty").astype(np.float32)
+    for lobe in lobes:
+        ratio = np.clip((aligned[lobe] + eps) / (original[lobe] + eps), 0.0, p.ratio_max)
+        old = frame.buffers[lobe]
+        new = (old * ratio).astype(np.float32)
+        beauty = beauty + (new - old)
+        frame.buffers[lobe] = new
+        if f"{lobe}.light" in frame.buffers:
+            frame.buffers[f"{lobe}.light"] = (frame.buffers[f"{lobe}.light"] * ratio).astype(
+                np.float32
+            )
+    frame.buffers["beauty"] = beauty.astype(np.float32)

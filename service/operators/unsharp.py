@@ -1,0 +1,213 @@
+"""``unsharp_masking`` (3D Unsharp Masking, Ritschel et al., SIGGRAPH 2008, §4-5) and
+``depth_unsharp_masking`` (Luft, Colditz, Deussen, SIGGRAPH 2006) on a frame.
+
+``unsharp_masking`` enhances one signal — the beauty, one lobe, or the shadows — along the
+surfaces (:func:`ops.unsharp.unsharp_masking`): the smooth signal is taken over the visible
+surfaces with σ in scene units, converted per pixel with the depth and the focal length, so the
+enhancement keeps its width on the surface whatever its distance. With ``sigma: "auto"`` the
+width is ``sigma_fraction`` of the image height at the median depth of the surface; then the focal
+length cancels out and a frame without a camera works too (a 40° field of view is assumed for the
+conversion, which does not change the result).
+
+Signals:
+
+``beauty``
+    the beauty (default).
+``ambient`` / ``diffuse`` / ``specular`` / ``transmission``
+    one renderer lobe; the beauty gets the lobe's change, everything else is untouched.
+``shadows``
+    the shadow term T = Y(beauty) / Y(unlit) (``unlit``: a layer of the file holding the same
+    render without shadows, e.g. a shadow-free light AOV), T enhanced, the beauty multiplied by
+    U(T)/T: only shadow edges gain contrast, shading and textures do not.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import cv2
+import numpy as np
+from pydantic import Field, model_validator
+
+from gbuffer.frame import Frame
+from ops import color
+from ops.scaling import luminance
+from ops.unsharp import depth_unsharp_masking, unsharp_masking
+from service.operators.common import Auto, layer_plane, pixel_sizes, statistic, user_image
+from service.registry import Context, Params, PipelineError, register
+
+Signal = Literal["beauty", "ambient", "diffuse", "specular", "transmission", "shadows"]
+#: Field of view assumed to convert sizes when ``sigma`` is ``auto`` and the frame has no camera
+#: (it cancels out of the result).
+NOMINAL_FOV_Y_DEG = 40.0
+
+
+class UnsharpParams(Params):
+    """3D unsharp masking (Ritschel et al. 2008, §4-5)."""
+
+    amount: float = Field(1.0, ge=-10.0, le=10.0, description="λ (users preferred 1.7-2, §6)")
+    sigma: float | Auto = Field(
+        "auto",
+        description="σ of the smooth signal in scene units (> 0), or auto: `sigma_fraction` of "
+        "the image height at the surface's median depth",
+    )
+    sigma_fraction: float = Field(
+        0.04, gt=0.0, le=0.5, description="auto σ, relative to the image height"
+    )
+    adaptive: bool = Field(True, description="λ_adapt = λ √(1 + Var(S)) (Eq. 1)")
+    variance_sigma: float | None = Field(
+        None, gt=0.0, description="neighbourhood of Var(S), scene units (default σ/4)"
+    )
+    gain_map: str | None = Field(
+        None,
+        description="per-pixel gain (any sign): a layer of the file (e.g. `gain` or `gain.X`) or, "
+        "on the command line, an image file (PNG: 0..1, EXR: any value)",
+    )
+    signal: Signal = Field("beauty", description="what is enhanced (see the operator's docs)")
+    unlit: str | None = Field(
+        None, description="signal 'shadows': layer of the file with the render without shadows"
+    )
+    white: float | Auto = Field(
+        "auto", description="linear white level of CIELAB (auto: 99th percentile; pin it)"
+    )
+    depth_sigma: float = Field(
+        1.0, gt=0.0, le=100.0, description="depth gap (in σ) above which surfaces do not mix"
+    )
+    normal_sigma: float | None = Field(
+        1.0, gt=0.0, le=100.0, description="normal change counted as one σ (null: no crease term)"
+    )
+
+    @model_validator(mode="after")
+    def _check(self) -> UnsharpParams:
+        if isinstance(self.sigma, float) and not (math.isfinite(self.sigma) and self.sigma > 0):
+            raise ValueError(f"sigma must be > 0 scene units or 'auto', got {self.sigma}")
+        if isinstance(self.white, float) and not self.white > 0:
+            raise ValueError(f"white must be > 0 or 'auto', got {self.white}")
+        if self.signal == "shadows" and not self.unlit:
+            raise ValueError("signal 'shadows' needs `unlit`: the layer rendered without shadows")
+        return self
+
+
+def _pixel_sizes(frame: Frame, p: UnsharpParams) -> np.ndarray:
+    if frame.camera is not None or p.sigma != "auto":
+        return pixel_sizes(frame, "unsharp_masking with sigma in scene units")
+    depth = frame.need("depth", "unsharp_masking")
+    focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
+    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(np.float32)
+
+
+def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
+    if p.gain_map is None:
+        return None
+    name = p.gain_map
+    if frame.layer(name) or frame.layer(name.rpartition(".")[0]) or not ctx.files:
+        return layer_plane(frame, name, "gain_map")
+    img = user_image(ctx, name, "gain_map", srgb=False, grey=True)
+    h, w = frame.shape
+    return np.asarray(cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
+
+
+@register(
+    "unsharp_masking",
+    summary="3D Unsharp Masking (Ritschel et al. 2008): Cornsweet contrast in CIELAB lightness "
+    "along the surfaces, σ in scene units, adaptive gain, gain maps",
+    params=UnsharpParams,
+    needs=("beauty", "depth"),
+    writes=("beauty",),
+)
+def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
+    beauty = frame.buffers["beauty"]
+    depth = frame.buffers["depth"]
+    mask = frame.mask
+    pixel_size = _pixel_sizes(frame, p)
+    covered = (mask > 0) & np.isfinite(pixel_size)
+    sigma = statistic(
+        ctx,
+        "unsharp_masking.sigma",
+        p.sigma,
+        lambda: (
+            p.sigma_fraction * frame.image_height * float(np.median(pixel_size[covered]))
+            if covered.any()
+            else 1.0
+        ),
+    )
+    if p.signal == "shadows":
+        unlit = frame.layer(p.unlit or "")
+        if not all(c in unlit for c in "RGB"):
+            raise PipelineError(f"unsharp_masking: no RGB layer {p.unlit!r} (unlit) in the file")
+        unlit_y = luminance(np.dstack([unlit["R"], unlit["G"], unlit["B"]]))
+        term = np.clip(luminance(beauty) / np.maximum(unlit_y, np.float32(1e-6)), 0.0, 1.0)
+        signal = np.repeat(term[..., None], 3, axis=2).astype(np.float32)
+        white: float | Auto = 1.0
+    else:
+        lobe = None if p.signal == "beauty" else p.signal
+        signal = frame.need(lobe, "the signal of unsharp_masking") if lobe else beauty
+        white = statistic(
+            ctx,
+            f"unsharp_masking.white.{p.signal}",
+            p.white,
+            lambda: color.auto_white(signal, covered),
+        )
+    out = unsharp_masking(
+        signal,
+        depth,
+        frame.buffers.get("normal"),
+        mask,
+        amount=p.amount,
+        sigma_scene=sigma,
+        pixel_size=pixel_size,
+        adaptive=p.adaptive,
+        variance_sigma=p.variance_sigma,
+        gain_map=_gain_map(frame, p, ctx),
+        white=white,
+        depth_sigma=p.depth_sigma,
+        normal_sigma=p.normal_sigma,
+    )
+    if p.signal == "shadows":
+        factor = out[..., :1] / np.maximum(signal[..., :1], np.float32(1e-6))
+        frame.buffers["beauty"] = np.where(signal > 0, beauty * factor, beauty).astype(np.float32)
+    elif p.signal == "beauty":
+        frame.buffers["beauty"] = out
+    else:
+        frame.buffers["beauty"] = (beauty + (out - signal)).astype(np.float32)
+        frame.buffers[p.signal] = out
+
+
+class DepthUnsharpParams(Params):
+    """Unsharp masking of the depth buffer (Luft et al. 2006)."""
+
+    amount: float = Field(1.0, ge=-10.0, le=10.0, description="λ, on normalised depth")
+    sigma: float = Field(
+        0.02, gt=0.0, le=1.0, description="Gaussian σ relative to the image height"
+    )
+    mode: Literal["darken", "both"] = Field(
+        "darken", description="darken: L + λ·min(ΔD, 0) (MegaMol's default); both: L + λ·ΔD"
+    )
+    white: float | Auto = Field("auto", description="linear white level of CIELAB")
+
+
+@register(
+    "depth_unsharp_masking",
+    summary="unsharp masking of the depth buffer (Luft et al. 2006): darken behind "
+    "silhouettes and in creases by λ·ΔD, ΔD = G∗D − D",
+    params=DepthUnsharpParams,
+    needs=("beauty", "depth"),
+    writes=("beauty",),
+)
+def apply_depth_unsharp_masking(frame: Frame, p: DepthUnsharpParams, ctx: Context) -> None:
+    beauty = frame.buffers["beauty"]
+    mask = frame.mask
+    white = statistic(
+        ctx, "depth_unsharp_masking.white", p.white, lambda: color.auto_white(beauty, mask > 0)
+    )
+    frame.buffers["beauty"] = depth_unsharp_masking(
+        beauty,
+        frame.buffers["depth"],
+        mask,
+        amount=p.amount,
+        sigma=p.sigma,
+        image_height=frame.image_height,
+        mode=p.mode,
+        white=white,
+    )
