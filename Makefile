@@ -36,8 +36,19 @@ example: install
 	$(BIN)/depict preview example/gbuffer.exr -o example/gbuffer.png
 	@echo "example ready: example/gbuffer.exr (preview example/gbuffer.png)"
 
+HOST ?= 127.0.0.1
+PORT ?= 8000
+
 run: example
-	$(BIN)/depict inspect example/gbuffer.exr
+	@echo
+	@echo "Depict serves on http://$(HOST):$(PORT) (Ctrl-C stops it). Try, from another shell:"
+	@echo "  curl -sf -F file=@example/gbuffer.exr -o example/enhanced.exr http://$(HOST):$(PORT)/v1/enhance"
+	@echo "  curl -sf -F file=@example/gbuffer.exr -F 'pipeline={\"steps\": [{\"op\": \"light_alignment\"}]}' \\"
+	@echo "       -o example/aligned.png 'http://$(HOST):$(PORT)/v1/enhance?preview=png'"
+	@echo "  curl -sf -F file=@example/gbuffer.exr http://$(HOST):$(PORT)/v1/score"
+	@echo "  open http://$(HOST):$(PORT)/docs for the API, or run .venv/bin/depict --help"
+	@echo
+	DEPICT_HOST=$(HOST) DEPICT_PORT=$(PORT) exec $(BIN)/depict serve
 
 lint: install
 	$(BIN)/ruff check .

@@ -287,3 +287,21 @@ def test_write_in_memory_passthrough(tmp_path: Path) -> None:
     back = OpenEXR.File(str(out), separate_channels=True)
     assert back.header()["note"] == "fresh"
     assert np.array_equal(back.channels()["Z"].pixels, pixels)
+
+
+def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
+    """Atomic writes must not leave the private 0600 mode of a temporary file."""
+    import os
+
+    from gbuffer.atomic import atomic_path
+
+    target = tmp_path / "out.bin"
+    with atomic_path(target) as tmp:
+        tmp.write_bytes(b"x")
+    umask = os.umask(0o022)
+    os.umask(umask)
+    assert target.stat().st_mode & 0o777 == 0o666 & ~umask
+    target.chmod(0o640)
+    with atomic_path(target) as tmp:
+        tmp.write_bytes(b"y")
+    assert target.stat().st_mode & 0o777 == 0o640
