@@ -11,7 +11,7 @@ export UV_PROJECT_ENVIRONMENT := $(VENV)
 export UV_PYTHON_DOWNLOADS := never
 export PYOPENGL_PLATFORM := osmesa
 
-.PHONY: install osmesa run example test lint typecheck pytest bench gallery openapi clean
+.PHONY: install osmesa run example test lint typecheck pytest bench gallery openapi docs clean
 
 install: osmesa $(VENV)/.installed
 
@@ -67,6 +67,12 @@ bench: install
 
 gallery: install
 	$(BIN)/python -m bench.gallery
+
+openapi: install
+	$(BIN)/python -m service.openapi
+
+docs: install
+	$(BIN)/python -m service.docs
 
 clean:
 	rm -rf $(VENV) .uv example gallery .pytest_cache .mypy_cache .ruff_cache

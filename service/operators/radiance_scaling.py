@@ -38,7 +38,7 @@ Scenario = Literal[
 ]
 
 
-class RadianceScalingParams(CurvatureParams, LightsParams):
+class RadianceScalingParams(LightsParams, CurvatureParams):
     """Radiance Scaling (Vergne et al. 2011) in every rendering scenario of §5."""
 
     scenario: Scenario = Field(
