@@ -5,7 +5,6 @@ prints what the local command prints."""
 
 from __future__ import annotations
 
-import base64
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -179,24 +178,13 @@ def install(
         opts = _json_field("options", options, dict) or {}
         fields = _read_fields(preset, camera)
         if kind == "exr":
-            out = await frame_job(
+            return await frame_job(
                 "compare",
                 file,
                 fields,
                 jobs.compare_job,
-                lambda src, read, work: (
-                    str(src),
-                    read,
-                    opts,
-                    str(work / "sheet.png") if sheet else None,
-                    settings.max_pixels,
-                ),
+                lambda src, read, work: (str(src), read, opts, sheet, settings.max_pixels),
             )
-        else:
-            out = await _mesh_compare(file, opts, sheet)
-        return out
-
-    async def _mesh_compare(file: UploadFile, opts: dict[str, Any], sheet: bool) -> dict[str, Any]:
         suffix = Path(file.filename or "").suffix.lower()
         if suffix not in MESH_SUFFIXES:
             raise Problem(
@@ -206,23 +194,19 @@ def install(
             )
         work = new_work()
         src = work / f"mesh{suffix}"
-        sheet_path = work / "sheet.png"
         try:
             with _scrubbed(work, {src: file.filename or "mesh"}):
                 await _save_upload(file, src)
-                out = await run_job(
+                return await run_job(
                     "compare",
                     work,
                     jobs.compare_job,
                     str(src),
                     None,
                     opts,
-                    str(sheet_path) if sheet else None,
+                    sheet,
                     settings.max_pixels,
                 )
-                if sheet:
-                    out["sheet_png"] = base64.b64encode(sheet_path.read_bytes()).decode()
-                return out
         finally:
             _cleanup(work)
 

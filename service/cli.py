@@ -67,7 +67,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     from gbuffer.io import describe
 
     frame = read_frame(args, args.file)
-    info = describe(frame, args.file)
+    info = describe(frame)
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -199,8 +199,16 @@ def add_service_commands(sub: Any) -> None:
 # -- parser ------------------------------------------------------------------------------------
 
 
+class _Parser(argparse.ArgumentParser):
+    """Command-line errors as one line ``depict: error: ...`` and exit code 2, like the others
+    (subcommand parsers inherit the class)."""
+
+    def error(self, message: str) -> Any:
+        self.exit(EXIT_USAGE, f"depict: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="depict",
         description="Depict shape in rendered images: EXR G-buffers in, enhanced EXR out.",
     )

@@ -262,16 +262,20 @@ def compare_job(
     in_path: str,
     read: dict[str, Any] | None,
     options: dict[str, Any],
-    sheet_path: str | None = None,
+    sheet: bool = False,
     max_pixels: int | None = None,
 ) -> dict[str, Any]:
     """``depict compare``: the comparison bench (LLA §7) on an EXR frame (``read`` given) or a
     mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``).
 
     ``options``: ``methods``, ``directions``, ``params``, ``albedo`` (:func:`service.compare.
-    compare`), and for meshes ``width``, ``height``, ``azimuth``, ``elevation``. Writes the
-    contact sheet to ``sheet_path`` when given. Returns :meth:`ComparisonResult.to_dict`.
+    compare`), and for meshes ``width``, ``height``, ``azimuth``, ``elevation``. Returns
+    :meth:`ComparisonResult.to_dict`, with ``sheet``, plus ``sheet_png``: the contact sheet as a
+    base64 PNG.
     """
+    import base64
+    import tempfile
+
     from service.compare import METHODS, SHEET_DIRECTIONS, compare, contact_sheet, frame_from_mesh
 
     opts = dict(options)
@@ -296,12 +300,15 @@ def compare_job(
         directions=opts.get("directions", 21),
         params=opts.get("params"),
         albedo=opts.get("albedo", "white"),
-        keep_images=SHEET_DIRECTIONS if sheet_path else False,
+        keep_images=SHEET_DIRECTIONS if sheet else False,
         label=opts.get("label", ""),
     )
-    if sheet_path:
-        contact_sheet(result, sheet_path)
-    return result.to_dict()
+    out = result.to_dict()
+    if sheet:
+        with tempfile.TemporaryDirectory() as tmp:
+            png = contact_sheet(result, Path(tmp) / "sheet.png").read_bytes()
+        out["sheet_png"] = base64.b64encode(png).decode("ascii")
+    return out
 
 
 def pick_job(

@@ -214,6 +214,83 @@ def test_remote_error_exits_like_local(
     assert not (tmp_path / "o.exr").exists()
 
 
+def _cli_json(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
+    assert cli(args) == 0
+    data = json.loads(capsys.readouterr().out)
+    data.pop("seconds", None)  # timings differ from run to run
+    return data
+
+
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["score", "{canonical}", "--json", "--op", "light_alignment"],
+        [
+            "compare",
+            "{canonical}",
+            "--json",
+            "--directions",
+            "2",
+            "--methods",
+            "lambert,light_alignment",
+        ],
+        ["compare", "{mesh}", "--json", "--directions", "1", "--width", "96", "--height", "96"],
+        ["relief-pick", "{canonical}", "80", "60", "--json"],
+    ],
+    ids=["score", "compare-exr", "compare-mesh", "relief-pick"],
+)
+def test_analysis_commands_print_the_same_remotely(
+    server: Server,
+    files: dict[str, Path],
+    command: list[str],
+    remote_env: None,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = [a.format(**{k: str(v) for k, v in files.items()}) for a in command]
+    local = _cli_json(args, capsys)
+    remote = _cli_json([*args, "--server", server.url], capsys)
+    assert_close(remote, local)
+
+
+def assert_close(a: object, b: object, where: str = "") -> None:
+    """Equal JSON, numbers to 1e-6 (OpenCV threads sum in a different order in a worker)."""
+    if isinstance(b, dict):
+        assert isinstance(a, dict) and a.keys() == b.keys(), where
+        for key in b:
+            assert_close(a[key], b[key], f"{where}.{key}")
+    elif isinstance(b, list):
+        assert isinstance(a, list) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            assert_close(x, y, f"{where}[{i}]")
+    elif isinstance(b, float):
+        assert a == pytest.approx(b, rel=1e-6, abs=1e-9), where
+    else:
+        assert a == b, where
+
+
+def test_compare_sheet_comes_back_over_http(
+    server: Server, files: dict[str, Path], tmp_path: Path, remote_env: None
+) -> None:
+    sheet, plot = tmp_path / "sheet.png", tmp_path / "plot.png"
+    args = ["compare", str(files["canonical"]), "--directions", "1", "--sheet", str(sheet)]
+    assert cli([*args, "--plot", str(plot), "--server", server.url]) == 0
+    assert sheet.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and plot.stat().st_size > 1000
+
+
+def test_file_paths_in_parameters_are_refused_over_http(
+    server: Server, files: dict[str, Path]
+) -> None:
+    """A pipeline must not make the server read its own files (matcaps, gain maps, ARMs)."""
+    for op, params in (
+        ("radiance_scaling", {"scenario": "lit_sphere", "matcap": "/etc/hostname"}),
+        ("unsharp_masking", {"gain_map": "/etc/hostname"}),
+        ("apparent_relief", {"arm": "/etc/hostname"}),
+    ):
+        data = {"pipeline": json.dumps([{"op": op, "params": params}])}
+        response = post_enhance(server, files["canonical"].read_bytes(), data=data)
+        assert_problem(response, 422, "cannot be named here" if op != "unsharp_masking" else "")
+
+
 # -- every error status from a real bad request --------------------------------------------------
 
 

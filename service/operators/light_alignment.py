@@ -31,7 +31,7 @@ from typing import Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from gbuffer.frame import Frame
+from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, shade_directions
@@ -233,6 +233,10 @@ def _relight(frame: Frame, p: LightAlignmentParams, light: dict[str, np.ndarray]
         "transmission": albedo * np.float32(p.transmission_weight),
     }
     lights = {"ambient": np.repeat(amb[..., None], 3, axis=2), **light}
+    for lobe in LOBES:  # a lobe not relit (specular 'none', no transmission) is not in the beauty
+        if lobe not in lights:
+            for name in (lobe, f"{lobe}.light", f"{lobe}.color"):
+                frame.buffers.pop(name, None)
     beauty = np.zeros((*frame.shape, 3), np.float32)
     for lobe, lit in lights.items():
         radiance = (lit * colors[lobe]).astype(np.float32)
