@@ -134,7 +134,8 @@ def phong(
         e = np.broadcast_to(light_irradiance(light, position), normal.shape)
         kappa = _kappa(curv, ell, gain, lam)
         nl = np.clip(dot(normal, ell), 0.0, 1.0)
-        rho_d = nl if zeta == 1.0 else np.power(nl, np.float32(zeta))
+        # (n·ℓ)^ζ over the lit hemisphere only: 0^0 would light the far side when ζ = 0.
+        rho_d = nl if zeta == 1.0 else np.power(nl, np.float32(zeta)) * (nl > 0)
         s_d = sigma(kappa, rho_d, alpha, gamma_diffuse)
         d_term = rho_d * s_d
         if toon_levels:
@@ -204,14 +205,19 @@ def latlong_lookup(env: np.ndarray, directions: np.ndarray) -> np.ndarray:
     x, y, z = directions[..., 0], directions[..., 1], directions[..., 2]
     h, w = env.shape[:2]
     phi = cv2.phase(-z, x)  # 0 at -z, pi/2 at +x, in [0, 2pi)
-    u = phi * np.float32(w / (2.0 * np.pi)) - 0.5
+    u = phi * np.float32(w / (2.0 * np.pi)) + 0.5  # + 1: the wrapped column padded on the left
     v = np.arccos(np.clip(y, -1.0, 1.0)) * np.float32(h / np.pi) - 0.5
+    # Wrap in longitude only: a border mode of WRAP in v would blend the top (+y) row with the
+    # bottom (-y) row within half a texel of the poles. Pad one wrapped column on each side and
+    # replicate the border rows instead.
+    src = np.asarray(env, np.float32)
+    src = np.ascontiguousarray(np.concatenate([src[:, -1:], src, src[:, :1]], axis=1))
     out = cv2.remap(
-        np.ascontiguousarray(env, np.float32),
+        src,
         u.astype(np.float32),
         v.astype(np.float32),
         cv2.INTER_LINEAR,
-        borderMode=cv2.BORDER_WRAP,
+        borderMode=cv2.BORDER_REPLICATE,
     )
     return out if out.ndim == 3 else out[..., None]
 
@@ -293,6 +299,7 @@ def precomputed_diffuse(
     result is the ambient occlusion scaled by σ(κ, 1): mean-curvature shading of AO (Fig. 8b).
     """
     shape = normal.shape[:2]
+    covered = np.linalg.norm(normal, axis=2) > 0.5
     a = np.ones(shape, np.float32) if ao is None else ao.astype(np.float32)
     if irradiance is None:
         irr = np.ones((*shape, 3), np.float32)
@@ -305,7 +312,20 @@ def precomputed_diffuse(
     s = sigma(isotropic(curv, gain), delta, alpha, gamma)
     alb = np.broadcast_to(np.asarray(albedo, np.float32), (*shape, 3))
     diffuse = alb * irr * (a * s)[..., None]
+    diffuse[~covered] = 0.0
     return Scaled({"diffuse": diffuse}, {"diffuse": s})
+
+
+def _rgb(image: np.ndarray) -> np.ndarray:
+    """An (H, W) grey or (H, W, C ≥ 3) image as contiguous float32 (H, W, 3) RGB."""
+    img = np.asarray(image, np.float32)
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.ndim == 2:
+        return np.ascontiguousarray(np.repeat(img[..., None], 3, axis=2))
+    if img.ndim != 3 or img.shape[2] < 3:
+        raise ValueError(f"expected an (H, W) or (H, W, 3) image, got shape {img.shape}")
+    return np.ascontiguousarray(img[..., :3])
 
 
 def _scaled_lookup(
@@ -334,11 +354,10 @@ def lit_sphere(
     h, w = sphere.shape[:2]
     u = ((0.5 + 0.5 * normal[..., 0]) * w - 0.5).astype(np.float32)
     v = ((0.5 - 0.5 * normal[..., 1]) * h - 0.5).astype(np.float32)
-    src = np.ascontiguousarray(sphere, np.float32)
+    src = _rgb(sphere)
     looked = cv2.remap(src, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    looked = looked if looked.ndim == 3 else np.repeat(looked[..., None], 3, axis=2)
     looked[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
-    peak = float(luminance(np.atleast_3d(src)[..., :3]).max())
+    peak = float(luminance(src).max())
     return _scaled_lookup(looked, curv, alpha, gamma, gain, peak)
 
 
@@ -367,10 +386,10 @@ def environment(
         r = refract(view, normal, ior)
     else:
         raise ValueError(f"mode={mode!r} must be 'mirror' or 'refraction'")
+    env = _rgb(env)
     radiance = latlong_lookup(env, rotate_directions(normalize(r), camera_to_world))
-    radiance = np.array(np.broadcast_to(radiance, normal.shape), np.float32)
     radiance[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
-    peak = float(luminance(np.atleast_3d(env.astype(np.float32))[..., :3]).max())
+    peak = float(luminance(env).max())
     return _scaled_lookup(radiance, curv, alpha, gamma, gain, peak)
 
 

@@ -121,7 +121,11 @@ def _scale_renderer_lobes(
     mask = frame.mask > 0
     white = {n: _white(ctx, p, n, lights[n], mask) for n in names}
     remainder = frame.buffers.get("remainder")
-    if remainder is None and "beauty" in frame.buffers:
+    if remainder is not None:  # beauty minus every lobe: add back the lobes left unscaled
+        for lobe in LOBES:
+            if lobe in frame.buffers and lobe not in lobes:
+                remainder = remainder + frame.buffers[lobe]
+    elif "beauty" in frame.buffers:
         remainder = frame.buffers["beauty"] - sum(lobes.values())
     return scale_lobes(
         lobes,
@@ -254,6 +258,9 @@ def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context)
         scaled = _deferred(frame, p, curv, scenario, ctx)
         beauty, sigmas = scaled.beauty, scaled.sigmas
         frame.buffers.update(scaled.lobes)
+        if "beauty" in frame.buffers:  # the renderer's background passes through
+            covered = (frame.mask > 0)[..., None]
+            beauty = np.where(covered, beauty, frame.buffers["beauty"])
     frame.buffers["beauty"] = beauty.astype(np.float32)
     if ctx.debug_layers:
         frame.set_layer("curvature", {"H": curv_ops.isotropic(curv, p.gain)})

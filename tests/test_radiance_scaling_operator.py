@@ -1,0 +1,369 @@
+"""The ``radiance_scaling`` operator in every scenario, through ``service.pipeline.run``.
+
+On two real G-buffers: the committed Blender Cycles render (tests/fixtures/blender, read with
+gbuffer.read and its camera.json) and an OSMesa render of a shared mesh (../shared/models), and
+on small analytic frames for the parameter plumbing and the errors.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import gbuffer
+from gbuffer.errors import FrameError
+from gbuffer.frame import LOBES, Frame
+from ops import radiance_scaling as rs
+from ops.curvature import Curvature, isotropic, principal_curvatures
+from ops.scaling import reflectance_delta, sigma
+from ops.shading import parse_light
+from service import pipeline
+from service.registry import Context, PipelineError
+from tests import analytic
+
+BLENDER = Path(__file__).parent / "fixtures" / "blender"
+MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
+WIDTH, HEIGHT = 160, 120
+REC709 = np.array([0.2126, 0.7152, 0.0722], np.float32)
+
+#: scenario -> the lobes it writes a σ layer for (None: the renderer lobes the frame has)
+SIGMA_LOBES: dict[str, tuple[str, ...] | None] = {
+    "lobes": None,
+    "beauty": ("beauty",),
+    "ao": ("diffuse",),
+    "phong": ("ambient", "diffuse", "specular"),
+    "sub_lambert": ("ambient", "diffuse", "specular"),
+    "toon": ("ambient", "diffuse", "specular"),
+    "ashikhmin_shirley": ("diffuse", "specular"),
+    "lit_sphere": ("specular",),
+    "mirror": ("specular",),
+    "refraction": ("specular",),
+}
+#: scenarios that keep the renderer's shading
+POST_PROCESS = ("lobes", "beauty")
+
+
+@pytest.fixture(scope="module")
+def blender_frame() -> Frame:
+    exr = BLENDER / "cycles_multilayer.exr"
+    if not exr.is_file():
+        pytest.skip(f"{exr} is absent (tests/fixtures/blender/README.md)")
+    return gbuffer.read(exr, camera=BLENDER / "camera.json")
+
+
+@pytest.fixture(scope="module")
+def mesh_frame() -> Frame:
+    path = MODELS / "spot.obj"
+    if not path.is_file():
+        pytest.skip(f"{path} is absent (the shared test meshes are not checked out)")
+    from gbuffer.render import auto_camera, load_mesh, render
+
+    mesh = load_mesh(path)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # as service.compare.frame_from_mesh
+    cam = auto_camera(mesh, width=WIDTH, height=HEIGHT)
+    return render(mesh, WIDTH, HEIGHT, camera=cam)  # with SSAO, for the "ao" scenario
+
+
+FRAMES = ["blender", pytest.param("mesh", marks=pytest.mark.models)]
+
+
+def get_frame(request: pytest.FixtureRequest, name: str) -> Frame:
+    frame: Frame = request.getfixturevalue(f"{name}_frame")
+    return frame
+
+
+def rs_run(
+    frame: Frame, *, debug: bool = False, context: Context | None = None, **params: Any
+) -> Frame:
+    step = [{"op": "radiance_scaling", "params": params}]
+    return pipeline.run(frame, step, debug_layers=debug, context=context)
+
+
+def curvature_of(frame: Frame) -> Curvature:
+    return principal_curvatures(
+        frame.buffers["normal"], frame.buffers["depth"], frame.mask, image_height=frame.image_height
+    )
+
+
+def lum(rgb: np.ndarray) -> np.ndarray:
+    return np.asarray(rgb, np.float32) @ REC709
+
+
+def background(frame: Frame) -> np.ndarray:
+    return ~np.isfinite(frame.buffers["depth"])
+
+
+# -- every scenario on real renders -------------------------------------------------------------
+
+
+@pytest.mark.parametrize("scenario", list(SIGMA_LOBES))
+@pytest.mark.parametrize("which", FRAMES)
+def test_every_scenario_on_a_real_render(
+    request: pytest.FixtureRequest, which: str, scenario: str
+) -> None:
+    frame = get_frame(request, which)
+    beauty_in = frame.buffers["beauty"].copy()
+    out = rs_run(frame, debug=True, scenario=scenario, gamma=3.0)
+    ref = rs_run(frame, scenario=scenario, gamma=0.0)  # the same shading, unscaled
+    # the input frame is left as it was
+    np.testing.assert_array_equal(frame.buffers["beauty"], beauty_in)
+    assert not any(k.startswith(("rs_sigma.", "curvature.")) for k in frame.outputs)
+
+    b, b0 = out.buffers["beauty"], ref.buffers["beauty"]
+    assert b.dtype == np.float32 and b.shape == (HEIGHT, WIDTH, 3)
+    assert np.isfinite(b).all()
+    kappa = out.outputs["curvature.H"]
+    assert kappa.shape == (HEIGHT, WIDTH) and np.abs(kappa).max() <= 1.0
+    # where the surface is curved (and lit) the scaling changes the picture...
+    curved = (np.abs(kappa) > 0.2) & (lum(b0) > 1e-3)
+    assert curved.sum() > 300
+    change = np.abs(b - b0)[curved].max(axis=1) / lum(b0)[curved]
+    assert np.mean(change > 1e-3) > 0.9
+    # ...and where κ = 0 (background, depth jumps, the Blender ground plane) it does not
+    flat = kappa == 0
+    assert flat.sum() > 1000
+    np.testing.assert_allclose(b[flat], b0[flat], rtol=1e-6, atol=1e-6)
+    bg = background(frame)
+    assert bg.sum() > 1000
+    # the renderer's background passes through, whatever the scenario
+    np.testing.assert_allclose(b[bg], beauty_in[bg], rtol=1e-6, atol=1e-6)
+
+    # debug layers: κ and the σ of each lobe, σ = 1 where κ = 0; none without debug_layers
+    lobes = SIGMA_LOBES[scenario] or tuple(lobe for lobe in LOBES if lobe in frame.buffers)
+    written = {k for k in out.outputs if k.startswith("rs_sigma.")}
+    assert written == {f"rs_sigma.{lobe}.X" for lobe in lobes}
+    for name in written:
+        s = out.outputs[name]
+        assert s.dtype == np.float32 and s.shape == (HEIGHT, WIDTH), name
+        assert np.isfinite(s).all() and (s > 0).all(), name
+        assert (s[flat] == 1.0).all(), name
+        assert np.abs(s - 1.0).max() > 0.1, name
+    assert not any(k.startswith("rs_sigma.") or k == "curvature.H" for k in ref.outputs)
+
+
+def test_lobes_with_gamma_zero_reproduce_the_blender_beauty(blender_frame: Frame) -> None:
+    """beauty' = Σ σ̄_j lobe_j + remainder with σ̄ ≡ 1 is the input beauty."""
+    out = rs_run(blender_frame, scenario="lobes", gamma=0.0)
+    np.testing.assert_allclose(
+        out.buffers["beauty"], blender_frame.buffers["beauty"], rtol=1e-6, atol=1e-6
+    )
+
+
+def test_lobes_rebuild_the_beauty_from_each_lobe_and_its_light(blender_frame: Frame) -> None:
+    """Eq. 4 on Cycles' passes: σ̄_j from δ̄_j = lum(light_j) / white_j (the lobe's light without
+    its colour, DiffDir + DiffInd), each lobe with its own γ; the remainder passes unchanged."""
+    f = blender_frame
+    ctx = Context(debug_layers=True)
+    out = rs_run(f, context=ctx, scenario="lobes", alpha=0.4, gamma=3.0, gamma_specular=1.5)
+    kappa = out.outputs["curvature.H"]
+    expect = f.buffers["remainder"].copy()
+    for lobe, g in (("diffuse", 3.0), ("specular", 1.5), ("transmission", 3.0)):
+        white = ctx.measured[f"radiance_scaling.white.{lobe}"]
+        s = sigma(kappa, reflectance_delta(f.buffers[f"{lobe}.light"], white), 0.4, g)
+        np.testing.assert_allclose(out.outputs[f"rs_sigma.{lobe}.X"], s, rtol=1e-5, err_msg=lobe)
+        expect += s[..., None] * f.buffers[lobe]
+    np.testing.assert_allclose(out.buffers["beauty"], expect, rtol=1e-5, atol=1e-5)
+    # a pinned white level (a sequence) is used instead of measuring it
+    pinned = Context(debug_layers=True, pinned={"radiance_scaling.white.diffuse": 0.5})
+    out2 = rs_run(f, context=pinned, scenario="lobes", alpha=0.4, gamma=3.0)
+    s = sigma(kappa, reflectance_delta(f.buffers["diffuse.light"], 0.5), 0.4, 3.0)
+    np.testing.assert_allclose(out2.outputs["rs_sigma.diffuse.X"], s, rtol=1e-5)
+    assert "radiance_scaling.white.diffuse" not in pinned.measured
+
+
+@pytest.mark.parametrize("scenario", ["lobes", "phong"])
+@pytest.mark.parametrize("which", FRAMES)
+def test_gamma_per_lobe(request: pytest.FixtureRequest, which: str, scenario: str) -> None:
+    f = get_frame(request, which)
+    out = rs_run(f, debug=True, scenario=scenario, gamma=3.0, gamma_specular=0.0)
+    assert (out.outputs["rs_sigma.specular.X"] == 1.0).all()
+    assert np.abs(out.outputs["rs_sigma.diffuse.X"] - 1.0).max() > 0.1
+
+
+@pytest.mark.parametrize(
+    "which",
+    ["blender", pytest.param("mesh", marks=pytest.mark.models)],
+)
+def test_lobes_left_out_stay_in_the_beauty(request: pytest.FixtureRequest, which: str) -> None:
+    f = get_frame(request, which)
+    only = rs_run(f, debug=True, scenario="lobes", gamma=3.0, lobes=["diffuse"])
+    s = only.outputs["rs_sigma.diffuse.X"]
+    rest = f.buffers["beauty"] - f.buffers["diffuse"]
+    np.testing.assert_allclose(
+        only.buffers["beauty"], rest + s[..., None] * f.buffers["diffuse"], rtol=1e-5, atol=1e-5
+    )
+
+
+def test_lobe_selection_scales_only_the_named_lobes(blender_frame: Frame) -> None:
+    only = rs_run(blender_frame, debug=True, scenario="lobes", gamma=3.0, lobes=["diffuse"])
+    assert {k for k in only.outputs if k.startswith("rs_sigma.")} == {"rs_sigma.diffuse.X"}
+    both = rs_run(blender_frame, debug=True, scenario="lobes", gamma=3.0)
+    np.testing.assert_array_equal(
+        only.outputs["rs_sigma.diffuse.X"], both.outputs["rs_sigma.diffuse.X"]
+    )
+
+
+def test_auto_scenario(blender_frame: Frame) -> None:
+    f = blender_frame
+    auto = rs_run(f, gamma=2.0)
+    lobes = rs_run(f, scenario="lobes", gamma=2.0)
+    np.testing.assert_array_equal(auto.buffers["beauty"], lobes.buffers["beauty"])
+    bare = Frame(
+        buffers={k: v for k, v in f.buffers.items() if k.split(".")[0] not in LOBES},
+        camera=f.camera,
+    )
+    auto = rs_run(bare, gamma=2.0)
+    beauty = rs_run(bare, scenario="beauty", gamma=2.0)
+    np.testing.assert_array_equal(auto.buffers["beauty"], beauty.buffers["beauty"])
+    assert not np.array_equal(auto.buffers["beauty"], lobes.buffers["beauty"])
+
+
+@pytest.mark.parametrize("mode", ["mirror", "refraction"])
+def test_environment_scenarios_look_up_in_world_space(blender_frame: Frame, mode: str) -> None:
+    """The map is looked up along camera_to_world of the reflected / refracted view."""
+    f = blender_frame
+    out = rs_run(f, scenario=mode, gamma=0.0, ior=1.3)
+    w2c = f.camera.world_to_camera if f.camera is not None else None
+    assert w2c is not None
+    args = (f.buffers["normal"], f.view_vectors(), curvature_of(f), rs.sky_environment())
+    c2w = np.linalg.inv(w2c)[:3, :3]
+    world = rs.environment(*args, mode=mode, ior=1.3, camera_to_world=c2w, gamma=0.0)
+    covered = f.mask > 0  # the background keeps the renderer's
+    np.testing.assert_allclose(
+        out.buffers["beauty"][covered], world.beauty[covered], rtol=1e-5, atol=1e-6
+    )
+    camera = rs.environment(*args, mode=mode, ior=1.3, gamma=0.0)
+    assert np.abs(camera.beauty - world.beauty).max() > 0.1
+
+
+# -- parameters reach ops/ -----------------------------------------------------------------------
+
+
+def analytic_frame(with_lobes: bool = False) -> Frame:
+    s = analytic.cylinder(48, length=1.4)  # anisotropic: κ(ℓ) depends on the light (λ ≠ 0)
+    shade = np.clip(s.normal @ np.array([-0.4, 0.5, 0.77], np.float32), 0, 1)
+    buffers = {
+        "normal": s.normal,
+        "depth": s.depth,
+        "beauty": np.repeat(shade[..., None], 3, axis=2).astype(np.float32),
+        "ao": (0.5 + 0.5 * s.normal[..., 2]).astype(np.float32),
+    }
+    if with_lobes:
+        buffers["diffuse"] = buffers["beauty"].copy()
+    return Frame(buffers=buffers)
+
+
+PARAMS = {
+    "alpha": 0.35,
+    "gamma": 2.0,
+    "gamma_ambient": 0.5,
+    "gamma_specular": 4.0,
+    "gain": 0.2,
+    "anisotropy": 0.5,
+    "lights": ["-0.3,0.5,0.8", "point:1,1,-8*30"],
+    "ambient": 0.2,
+    "specular": 0.6,
+    "shininess": 12.0,
+    "zeta": 0.3,
+    "toon_levels": 3,
+    "as_exponent": 40.0,
+    "ior": 1.3,
+}
+
+
+def direct(frame: Frame, scenario: str) -> rs.Scaled:
+    """What the scenario must compute, called on ops/ directly with PARAMS."""
+    p = PARAMS
+    curv = principal_curvatures(frame.buffers["normal"], frame.buffers["depth"], frame.mask)
+    n, view, pos = frame.buffers["normal"], frame.view_vectors(), frame.positions()
+    lights = [parse_light(t) for t in p["lights"]]
+    albedo = np.array([0.8, 0.8, 0.8], np.float32)  # the frame has none
+    common = {"alpha": p["alpha"], "gain": p["gain"]}
+    if scenario in ("phong", "sub_lambert", "toon"):
+        return rs.phong(
+            n, pos, view, lights, curv, albedo=albedo, ambient=p["ambient"],
+            specular=p["specular"], shininess=p["shininess"], gamma_ambient=p["gamma_ambient"],
+            gamma_diffuse=p["gamma"], gamma_specular=p["gamma_specular"], lam=p["anisotropy"],
+            zeta=p["zeta"] if scenario == "sub_lambert" else 1.0,
+            toon_levels=p["toon_levels"] if scenario == "toon" else 0, **common,
+        )  # fmt: skip
+    if scenario == "ashikhmin_shirley":
+        return rs.ashikhmin_shirley(
+            n, pos, view, lights, curv, albedo=albedo, exponent=p["as_exponent"],
+            gamma_diffuse=p["gamma"], gamma_specular=p["gamma_specular"], lam=p["anisotropy"],
+            **common,
+        )  # fmt: skip
+    if scenario == "ao":
+        ao = frame.buffers["ao"]
+        return rs.precomputed_diffuse(n, curv, ao=ao, albedo=albedo, gamma=p["gamma"], **common)
+    if scenario == "lit_sphere":
+        return rs.lit_sphere(n, curv, rs.studio_matcap(), gamma=p["gamma_specular"], **common)
+    return rs.environment(
+        n, view, curv, rs.sky_environment(), mode=scenario, ior=p["ior"],
+        gamma=p["gamma_specular"], **common,
+    )  # fmt: skip
+
+
+@pytest.mark.parametrize("scenario", [s for s in SIGMA_LOBES if s not in POST_PROCESS])
+def test_deferred_scenarios_pass_their_parameters_to_ops(scenario: str) -> None:
+    frame = analytic_frame()
+    out = rs_run(frame, debug=True, scenario=scenario, **PARAMS)
+    expect = direct(frame, scenario)
+    np.testing.assert_allclose(out.buffers["beauty"], expect.beauty, rtol=1e-5, atol=1e-6)
+    for lobe, s in expect.sigmas.items():
+        np.testing.assert_allclose(out.outputs[f"rs_sigma.{lobe}.X"], s, rtol=1e-5, atol=1e-6)
+    # the curvature layer is κ at the operator's gain
+    curv = principal_curvatures(frame.buffers["normal"], frame.buffers["depth"], frame.mask)
+    np.testing.assert_allclose(out.outputs["curvature.H"], isotropic(curv, 0.2), atol=1e-6)
+
+
+def test_beauty_scenario_uses_beauty_over_albedo_as_its_light() -> None:
+    frame = analytic_frame()
+    frame.buffers["albedo"] = np.broadcast_to(
+        np.array([0.5, 0.25, 0.5], np.float32), frame.buffers["beauty"].shape
+    ).copy()
+    light = frame.buffers["beauty"] / frame.buffers["albedo"]
+    out = rs_run(frame, debug=True, scenario="beauty", alpha=0.4, gamma=2.0, white=1.5, gain=0.2)
+    kappa = out.outputs["curvature.H"]
+    s = sigma(kappa, reflectance_delta(light, 1.5), 0.4, 2.0)
+    np.testing.assert_allclose(out.outputs["rs_sigma.beauty.X"], s, rtol=1e-5)
+    np.testing.assert_allclose(
+        out.buffers["beauty"], frame.buffers["beauty"] * s[..., None], rtol=1e-5, atol=1e-6
+    )
+
+
+# -- errors --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("params", "word"),
+    [
+        ({"alpha": 0.0}, "alpha"),
+        ({"alpha": 1.5}, "alpha"),
+        ({"gamma": -1.0}, "gamma"),
+        ({"gamma_specular": -1.0}, "gamma_specular"),
+        ({"lobes": ["nope"]}, "lobes"),
+        ({"scenario": "nope"}, "scenario"),
+        ({"toon_levels": 1}, "toon_levels"),
+        ({"zeta": 1.5}, "zeta"),
+        ({"lights": ["up"]}, "lights"),
+        ({"gamma_diffuse": 1.0, "gama": 2.0}, "gama"),
+    ],
+)
+def test_bad_parameters_are_refused_by_name(params: dict[str, Any], word: str) -> None:
+    with pytest.raises(PipelineError, match=word):
+        rs_run(analytic_frame(with_lobes=True), **params)
+
+
+def test_missing_buffers_are_named() -> None:
+    with pytest.raises(FrameError, match="lobes"):  # no renderer lobe at all
+        rs_run(analytic_frame(), scenario="lobes")
+    with pytest.raises(FrameError, match=r"'specular'.*parameter 'lobes'"):
+        rs_run(analytic_frame(with_lobes=True), scenario="lobes", lobes=["specular"])
+    bare = analytic_frame()
+    del bare.buffers["ao"]
+    with pytest.raises(FrameError, match=r"'ao'.*scenario 'ao'"):
+        rs_run(bare, scenario="ao")
