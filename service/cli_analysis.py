@@ -119,7 +119,16 @@ def cmd_compare(args: argparse.Namespace) -> int:
     else:
         from service.jobs import compare_job
 
-        data = compare_job(args.input, None if is_mesh else read_options(args), options, args.sheet)
+        read = None if is_mesh else read_options(args)
+        data = compare_job(args.input, read, options, bool(args.sheet))
+        png = data.pop("sheet_png", None)  # as the client does: the sheet goes to its file
+        if args.sheet and png:
+            import base64
+
+            from gbuffer.atomic import atomic_path
+
+            with atomic_path(args.sheet) as tmp:
+                Path(tmp).write_bytes(base64.b64decode(png))
     result = ComparisonResult.from_dict(data)
     if args.plot:
         plot(result, args.plot)

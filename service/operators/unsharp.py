@@ -5,9 +5,9 @@
 surfaces (:func:`ops.unsharp.unsharp_masking`): the smooth signal is taken over the visible
 surfaces with σ in scene units, converted per pixel with the depth and the focal length, so the
 enhancement keeps its width on the surface whatever its distance. With ``sigma: "auto"`` the
-width is ``sigma_fraction`` of the image height at the median depth of the surface; then the focal
-length cancels out and a frame without a camera works too (a 40° field of view is assumed for the
-conversion, which does not change the result).
+width is ``sigma_fraction`` of the image height at the median depth of the surface, and a frame
+without a camera works too: a 40° vertical field of view is then assumed to turn depth steps into
+surface lengths (the smoothing's depth term depends on it; pass the camera for exact results).
 
 Signals:
 
@@ -24,6 +24,7 @@ Signals:
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from typing import Literal
 
 import cv2
@@ -38,8 +39,7 @@ from service.operators.common import Auto, layer_plane, pixel_sizes, statistic, 
 from service.registry import Context, Params, PipelineError, register
 
 Signal = Literal["beauty", "ambient", "diffuse", "specular", "transmission", "shadows"]
-#: Field of view assumed to convert sizes when ``sigma`` is ``auto`` and the frame has no camera
-#: (it cancels out of the result).
+#: Vertical field of view assumed when ``sigma`` is ``auto`` and the frame has no camera.
 NOMINAL_FOV_Y_DEG = 40.0
 
 
@@ -101,7 +101,7 @@ def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None
     if p.gain_map is None:
         return None
     name = p.gain_map
-    if frame.layer(name) or frame.layer(name.rpartition(".")[0]) or not ctx.files:
+    if not (ctx.files and Path(name).is_file()):  # a layer of the file, unless a file exists
         return layer_plane(frame, name, "gain_map")
     img = user_image(ctx, name, "gain_map", srgb=False, grey=True)
     h, w = frame.shape
