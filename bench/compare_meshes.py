@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from service import cli_common
 from service.compare import LABELS, METHODS, ComparisonResult, compare, contact_sheet, plot
 
 #: Views (azimuth, elevation in degrees) that show each mesh's front (checked by eye).
@@ -47,25 +48,12 @@ DEFAULT_MESHES = ("spot", "stanford-bunny", "nefertiti", "ogre")
 DEFAULT_MODELS = Path(__file__).resolve().parents[1].parent / "shared" / "models"
 
 
-def _value(text: str) -> Any:
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError:
-        if "," in text:
-            return [_value(t) for t in text.split(",")]
-        return text
-
-
 def parse_sets(items: list[str]) -> dict[str, dict[str, Any]]:
     """``section.key=value`` items -> ``{section: {key: value}}`` (values parsed as JSON)."""
-    out: dict[str, dict[str, Any]] = {}
-    for item in items:
-        lhs, sep, rhs = item.partition("=")
-        section, dot, key = lhs.partition(".")
-        if not sep or not dot or not key:
-            raise SystemExit(f"--set {item!r}: expected section.key=value")
-        out.setdefault(section, {})[key] = _value(rhs)
-    return out
+    try:
+        return cli_common.parse_sets(items)
+    except cli_common.UsageError as exc:
+        raise SystemExit(str(exc)) from None
 
 
 def find_mesh(models: Path, name: str) -> Path:

@@ -415,6 +415,18 @@ def _read_fields(
     }
 
 
+def mesh_suffix(upload: UploadFile) -> str:
+    """The mesh format of an upload from its file name, or a 415 listing the known ones."""
+    suffix = Path(upload.filename or "").suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise Problem(
+            "unsupported-media-type",
+            f"mesh file name {upload.filename!r} has no known mesh suffix; "
+            f"send one of {', '.join(MESH_SUFFIXES)}",
+        )
+    return suffix
+
+
 async def _receive_frame(
     upload: UploadFile, src: Path, fields: dict[str, Any], max_pixels: int
 ) -> dict[str, Any]:
@@ -652,13 +664,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             ),
         ] = "{}",
     ) -> Response:
-        suffix = Path(mesh.filename or "").suffix.lower()
-        if suffix not in MESH_SUFFIXES:
-            raise Problem(
-                "unsupported-media-type",
-                f"mesh file name {mesh.filename!r} has no known mesh suffix; "
-                f"send one of {', '.join(MESH_SUFFIXES)}",
-            )
+        suffix = mesh_suffix(mesh)
         try:
             spec = Scene.model_validate_json(scene or "{}")
         except ValidationError as exc:

@@ -14,15 +14,15 @@ from pydantic import BaseModel, Field
 
 from service import jobs
 from service.api import (
-    MESH_SUFFIXES,
     _cleanup,
     _json_field,
     _read_fields,
     _receive_frame,
     _save_upload,
     _scrubbed,
+    mesh_suffix,
 )
-from service.problems import Problem, openapi_responses
+from service.problems import openapi_responses
 from service.settings import Settings
 
 RunJob = Callable[..., Awaitable[dict[str, Any]]]
@@ -80,20 +80,26 @@ def install(
     """Add the analysis routes to ``app``."""
     settings: Settings = app.state.settings
 
-    async def frame_job(
+    async def upload_job(
         kind: str,
         file: UploadFile,
-        fields: dict[str, Any],
+        fields: dict[str, Any] | None,
         fn: Callable[..., dict[str, Any]],
-        args: Callable[[Path, dict[str, Any], Path], tuple[Any, ...]],
+        args: Callable[[Path, dict[str, Any] | None], tuple[Any, ...]],
     ) -> dict[str, Any]:
-        """Receive the EXR, run ``fn(src, read, *args(...))`` on a worker, clean up."""
+        """Receive the upload — an EXR read with ``fields``, or a mesh when ``fields`` is None —,
+        run ``fn(*args(src, read))`` on a worker, clean up."""
+        src_name = "in.exr" if fields is not None else f"mesh{mesh_suffix(file)}"
         work = new_work()
-        src = work / "in.exr"
+        src = work / src_name
         try:
-            with _scrubbed(work, {src: file.filename or "upload.exr"}):
-                read = await _receive_frame(file, src, fields, settings.max_pixels)
-                return await run_job(kind, work, fn, *args(src, read, work))
+            with _scrubbed(work, {src: file.filename or src_name}):
+                if fields is None:
+                    await _save_upload(file, src)
+                    read = None
+                else:
+                    read = await _receive_frame(file, src, fields, settings.max_pixels)
+                return await run_job(kind, work, fn, *args(src, read))
         finally:
             _cleanup(work)
 
@@ -143,12 +149,12 @@ def install(
             "depth_jump": depth_jump,
         }
         options = {k: v for k, v in given.items() if v is not None}
-        out = await frame_job(
+        out = await upload_job(
             "score",
             file,
             _read_fields(preset, camera, map, normal_space),
             jobs.score_job,
-            lambda src, read, work: (str(src), spec_json, read, options, settings.max_pixels),
+            lambda src, read: (str(src), spec_json, read, options, settings.max_pixels),
         )
         return {k: out[k] for k in ("score", "analysis_shape", "image_shape", "params")}
 
@@ -176,39 +182,13 @@ def install(
         camera: CameraField = None,
     ) -> dict[str, Any]:
         opts = _json_field("options", options, dict) or {}
-        fields = _read_fields(preset, camera)
-        if kind == "exr":
-            return await frame_job(
-                "compare",
-                file,
-                fields,
-                jobs.compare_job,
-                lambda src, read, work: (str(src), read, opts, sheet, settings.max_pixels),
-            )
-        suffix = Path(file.filename or "").suffix.lower()
-        if suffix not in MESH_SUFFIXES:
-            raise Problem(
-                "unsupported-media-type",
-                f"mesh file name {file.filename!r} has no known mesh suffix; "
-                f"send one of {', '.join(MESH_SUFFIXES)}",
-            )
-        work = new_work()
-        src = work / f"mesh{suffix}"
-        try:
-            with _scrubbed(work, {src: file.filename or "mesh"}):
-                await _save_upload(file, src)
-                return await run_job(
-                    "compare",
-                    work,
-                    jobs.compare_job,
-                    str(src),
-                    None,
-                    opts,
-                    sheet,
-                    settings.max_pixels,
-                )
-        finally:
-            _cleanup(work)
+        return await upload_job(
+            "compare",
+            file,
+            _read_fields(preset, camera) if kind == "exr" else None,
+            jobs.compare_job,
+            lambda src, read: (str(src), read, opts, sheet, settings.max_pixels),
+        )
 
     @app.post(
         "/v1/relief/pick",
@@ -231,10 +211,10 @@ def install(
         from service.registry import get
 
         get("apparent_relief").parse(values)  # 422 for a bad parameter
-        return await frame_job(
+        return await upload_job(
             "pick",
             file,
             _read_fields(preset, camera),
             jobs.pick_job,
-            lambda src, read, work: (str(src), read, x, y, values, settings.max_pixels),
+            lambda src, read: (str(src), read, x, y, values, settings.max_pixels),
         )

@@ -342,29 +342,14 @@ def print_summary(summary: Summary, total: int) -> None:
 def cmd_batch(args: Any) -> int:
     """``depict batch``: wired from :mod:`service.cli`; exit 1 when a frame failed."""
     from service import pipeline
+    from service.cli_common import pipeline_spec, read_options
 
-    if args.pipeline and getattr(args, "steps", None):
-        raise BatchError("give either --pipeline or --op steps, not both")
-    if args.pipeline:
-        spec = pipeline.load(args.pipeline)
-    elif getattr(args, "steps", None):
-        spec = pipeline.parse(args.steps)
-    else:
-        spec = pipeline.DEFAULT_PIPELINE
-    mapping = {}
-    for item in args.map:
-        key, sep, value = item.partition("=")
-        if not sep:
-            raise BatchError(f"--map {item!r}: expected BUFFER=CHANNELS")
-        mapping[key.strip()] = value.strip()
+    spec = pipeline_spec(args, default=pipeline.DEFAULT_PIPELINE)
     if args.camera and not os.path.isfile(args.camera):
         raise BatchError(f"--camera {args.camera}: no such file")
-    read = {
-        "preset": args.preset,
-        "camera": os.path.abspath(args.camera) if args.camera else None,
-        "mapping": mapping,
-        "normal_space": args.normal_space,
-    }
+    read = read_options(args)
+    if args.camera:
+        read["camera"] = os.path.abspath(args.camera)  # workers may run in another folder
     write = {"debug_layers": args.debug_layers, "output_layer": args.output_layer}
     frames = parse_frames(args.frames) if args.frames else None
     if args.workers is not None and args.workers < 1:

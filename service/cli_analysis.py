@@ -17,7 +17,7 @@ from service.cli_common import (
     add_pipeline_options,
     add_read_options,
     add_server_option,
-    parse_value,
+    parse_sets,
     pipeline_spec,
     read_options,
 )
@@ -76,18 +76,6 @@ def cmd_score(args: argparse.Namespace) -> int:
 # -- compare -----------------------------------------------------------------------------------
 
 
-def _sets(items: list[str]) -> dict[str, dict[str, Any]]:
-    """``section.key=value`` items -> ``{section: {key: value}}`` (values parsed as JSON)."""
-    out: dict[str, dict[str, Any]] = {}
-    for item in items:
-        lhs, sep, rhs = item.partition("=")
-        section, dot, key = lhs.partition(".")
-        if not sep or not dot or not key:
-            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        out.setdefault(section.strip(), {})[key.strip()] = parse_value(rhs.strip())
-    return out
-
-
 def cmd_compare(args: argparse.Namespace) -> int:
     from service.compare import ComparisonResult, plot
 
@@ -96,7 +84,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
     options: dict[str, Any] = {
         "methods": methods,
         "directions": args.directions,
-        "params": _sets(args.set),
+        "params": parse_sets(args.set),
         "albedo": args.albedo,
         "label": Path(args.input).stem,
     }

@@ -24,6 +24,18 @@ def parse_value(text: str) -> Any:
     return text
 
 
+def parse_sets(items: list[str]) -> dict[str, dict[str, Any]]:
+    """``section.key=value`` items -> ``{section: {key: value}}`` (values parsed as JSON)."""
+    out: dict[str, dict[str, Any]] = {}
+    for item in items:
+        lhs, sep, rhs = item.partition("=")
+        section, dot, key = lhs.partition(".")
+        if not sep or not dot or not key:
+            raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
+        out.setdefault(section.strip(), {})[key.strip()] = parse_value(rhs.strip())
+    return out
+
+
 class _OpAction(argparse.Action):
     """``--op NAME`` starts a new pipeline step."""
 

@@ -173,37 +173,28 @@ def _deferred(
     normal = frame.need("normal", f"scenario '{scenario}'")
     albedo = frame_albedo(frame, None)
     common = {"alpha": p.alpha, "gain": p.gain}
+    if scenario in ("phong", "sub_lambert", "toon", "ashikhmin_shirley"):
+        lit = (normal, frame.positions(), frame.view_vectors(), p.parsed_lights(), curv)
+        common.update(albedo=albedo, lam=p.anisotropy)
     if scenario in ("phong", "sub_lambert", "toon"):
         return rs.phong(
-            normal,
-            frame.positions(),
-            frame.view_vectors(),
-            p.parsed_lights(),
-            curv,
-            albedo=albedo,
+            *lit,
             ambient=p.ambient,
             specular=p.specular,
             shininess=p.shininess,
             gamma_ambient=p.gamma_of("ambient"),
             gamma_diffuse=p.gamma_of("diffuse"),
             gamma_specular=p.gamma_of("specular"),
-            lam=p.anisotropy,
             zeta=p.zeta if scenario == "sub_lambert" else 1.0,
             toon_levels=p.toon_levels if scenario == "toon" else 0,
             **common,
         )
     if scenario == "ashikhmin_shirley":
         return rs.ashikhmin_shirley(
-            normal,
-            frame.positions(),
-            frame.view_vectors(),
-            p.parsed_lights(),
-            curv,
-            albedo=albedo,
+            *lit,
             exponent=p.as_exponent,
             gamma_diffuse=p.gamma_of("diffuse"),
             gamma_specular=p.gamma_of("specular"),
-            lam=p.anisotropy,
             **common,
         )
     if scenario == "ao":
