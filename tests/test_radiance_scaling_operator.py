@@ -338,6 +338,17 @@ def test_beauty_scenario_uses_beauty_over_albedo_as_its_light() -> None:
 # -- errors --------------------------------------------------------------------------------------
 
 
+def test_beauty_white_level_ignores_pixels_without_albedo(blender_frame: Frame) -> None:
+    """Glass and emitters (albedo ~0) must not set the white level: beauty / albedo explodes
+    there (thousands on the fixture) and would leave δ ‹ α everywhere else."""
+    beauty_ctx, lobes_ctx = Context(), Context()
+    rs_run(blender_frame, scenario="beauty", context=beauty_ctx)
+    rs_run(blender_frame, scenario="lobes", context=lobes_ctx)
+    white = beauty_ctx.measured["radiance_scaling.white.beauty"]
+    diffuse = lobes_ctx.measured["radiance_scaling.white.diffuse"]
+    assert diffuse / 2 < white < diffuse * 4
+
+
 @pytest.mark.parametrize(
     ("params", "word"),
     [

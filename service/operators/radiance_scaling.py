@@ -11,7 +11,7 @@ from pydantic import Field, field_validator
 from gbuffer.frame import LOBES, Frame
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
-from ops.scaling import scale_lobes, white_level
+from ops.scaling import luminance, scale_lobes, white_level
 from service.operators.common import (
     Fraction,
     LightsParams,
@@ -22,6 +22,9 @@ from service.operators.common import (
 )
 from service.operators.curvature import CurvatureParams, frame_curvature
 from service.registry import Context, register
+
+#: Albedo (luminance) below which a pixel's light is not beauty / albedo (scenario 'beauty').
+MIN_ALBEDO = np.float32(0.02)
 
 Scenario = Literal[
     "auto",
@@ -142,12 +145,18 @@ def _scale_renderer_lobes(
 def _scale_beauty(
     frame: Frame, p: RadianceScalingParams, kappa: np.ndarray, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The beauty as a single lobe; its light is beauty / albedo when the frame has an albedo."""
+    """The beauty as a single lobe; its light is beauty / albedo where the frame has an albedo
+    (glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
+    count in the white level)."""
     beauty = frame.need("beauty", "scenario 'beauty'")
     light = beauty
+    counted = frame.mask > 0
     if "albedo" in frame.buffers:
-        light = beauty / np.maximum(frame.buffers["albedo"], np.float32(1e-3))
-    white = _white(ctx, p, "beauty", light, frame.mask > 0)
+        albedo = frame.buffers["albedo"]
+        has_albedo = luminance(albedo) > MIN_ALBEDO
+        light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
+        counted &= has_albedo
+    white = _white(ctx, p, "beauty", light, counted)
     return scale_lobes({"beauty": beauty}, {"beauty": light}, kappa, p.alpha, p.gamma, white)
 
 
