@@ -21,12 +21,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.curvature import DEFAULT_GAIN, DEFAULT_SCALE, isotropic, principal_curvatures
+from ops.filtering import run_strips
 from ops.shading import dot, lambert, normalize
 
 F32 = NDArray[np.float32]
 
 #: Default smoothing scales of Exaggerated Shading (Gaussian σ relative to the image height).
 ES_SCALES: tuple[float, ...] = (0.0025, 0.005, 0.01, 0.02, 0.04)
+
+# Rows per strip of the per-pixel combination of the scales.
+_ES_ROWS = 64
 
 
 def _light(light_dir: Sequence[float] | NDArray[np.floating]) -> F32:
@@ -103,33 +107,155 @@ def lambert_image(
     return np.where(cov, img, 0).astype(np.float32)
 
 
-def _unit_field(v: F32) -> F32:
-    """Unit vectors of an (H, W, 3) field (0 where the vector is ~0), with cv2 reductions."""
-    len2 = dot(v, v)
-    inv = np.divide(1.0, cv2.sqrt(len2), out=np.zeros_like(len2), where=len2 > 1e-12)
-    return np.asarray(v * inv[..., None], np.float32)
+def _f32(x: object) -> F32:
+    """An OpenCV result as a float32 array (no copy)."""
+    return np.asarray(x, np.float32)
 
 
-def _masked_blur_stack(stack: F32, sigma_px: float) -> F32:
-    """Gaussian blur of an (H, W, 4) stack (field × coverage, coverage), normalised:
-    G*(f m) / G*m (0 where no coverage is near). Large σ are blurred on an area-downsampled
-    copy (σ ≈ 4 px there) and the normalised result is upsampled, so every σ costs about the
-    same."""
-    h, w = stack.shape[:2]
+def _level_factor(sigma_px: float, h: int, w: int) -> int:
+    """Area-downsampling factor of the level a Gaussian of ``sigma_px`` is applied at (σ ≈ 4 px
+    there), so that every σ costs about the same."""
     f = max(1, int(sigma_px / 4.0))
-    f = min(f, max(1, h // 4), max(1, w // 4))
-    small = stack
-    if f > 1:
-        small = np.asarray(
-            cv2.resize(stack, (max(w // f, 1), max(h // f, 1)), interpolation=cv2.INTER_AREA),
-            np.float32,
-        )
-    small = np.asarray(cv2.GaussianBlur(small, (0, 0), sigma_px / f), np.float32)
-    wsum = small[..., 3:]
-    out = np.divide(small[..., :3], wsum, out=np.zeros_like(small[..., :3]), where=wsum > 1e-6)
-    if f > 1:
-        out = cv2.resize(out, (w, h), interpolation=cv2.INTER_LINEAR)
-    return np.asarray(out, np.float32)
+    return min(f, max(1, h // 4), max(1, w // 4))
+
+
+def _reach(sigma: float) -> int:
+    """An upper bound of the radius of OpenCV's float Gaussian kernel for ``sigma`` (its size
+    is round(8σ + 1) | 1)."""
+    return int(4.0 * sigma) + 1
+
+
+def _box(cov: NDArray[np.bool_]) -> tuple[int, int, int, int] | None:
+    """Rows and columns (y0, y1, x0, x1) of the bounding box of the covered pixels, or None."""
+    x, y, bw, bh = cv2.boundingRect(cov.view(np.uint8))
+    return None if bw == 0 or bh == 0 else (y, y + bh, x, x + bw)
+
+
+def _grown(
+    box: tuple[int, int, int, int], f: int, margin: int, shape: tuple[int, int]
+) -> tuple[int, int, int, int]:
+    """``box`` (full resolution) at the level downsampled by ``f`` (of ``shape``), grown by
+    ``margin`` level pixels. The first column is a multiple of 16 and the box extends 16 more
+    columns on the right, so that OpenCV's vectorised filters treat every column that is not 0
+    with the same lanes as on the whole level (a bit-identical result)."""
+    y0, y1, x0, x1 = box
+    h, w = shape
+    return (
+        max(0, y0 // f - margin),
+        min(h, -(-y1 // f) + margin),
+        max(0, x0 // f - margin) // 16 * 16,
+        min(w, -(-x1 // f) + margin + 16),
+    )
+
+
+#: One smoothed field: its three components, the G*m they are still to be divided by (or
+#: None), and the full-resolution (row, column) of their first pixel.
+_Part = tuple[list[F32], F32 | None, tuple[int, int]]
+
+
+def _smoothed_components(
+    n: F32, covf: F32, sigmas_px: Sequence[float], box: tuple[int, int, int, int]
+) -> list[_Part]:
+    """Mask-normalised Gaussian smoothing G*(n m) / G*m of the normals at each σ (pixels), as
+    the three components at full resolution and, for the scales blurred at full resolution,
+    the G*m they are still to be divided by (:func:`_unit_rows` does it, on strips).
+
+    Large σ are blurred on an area-downsampled copy (σ ≈ 4 px there, :func:`_level_factor`),
+    normalised there and upsampled bilinearly. The work is done one channel at a time
+    (OpenCV's blur and resize are much faster on single channels, and its filters are
+    single-threaded: the blurs of all scales and channels run on parallel threads), and
+    only on the covered pixels' bounding ``box`` grown by more than the blur's reach (G*(n m)
+    and G*m are exactly 0 further away): the full-resolution components only cover that.
+    """
+    h, w = covf.shape
+    chans = [np.asarray(cv2.multiply(c, covf), np.float32) for c in cv2.split(n)] + [covf]
+    plans: list[tuple[int, float, tuple[int, int], tuple[int, int, int, int], list[F32]]] = []
+    for s in sigmas_px:
+        f = _level_factor(s, h, w)
+        shape = (max(h // f, 1), max(w // f, 1))
+        y0, y1, x0, x1 = _grown(box, f, _reach(s / f) + 2, shape)
+        if f == 1:
+            crops = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in chans]
+        elif (h % f, w % f) == (0, 0):
+            # an integer area resize of the window's pixels gives the window of the level
+            win = (slice(y0 * f, y1 * f), slice(x0 * f, x1 * f))
+            size = (x1 - x0, y1 - y0)
+            crops = [
+                _f32(cv2.resize(np.ascontiguousarray(c[win]), size, interpolation=cv2.INTER_AREA))
+                for c in chans
+            ]
+        else:
+            small = [_f32(cv2.resize(c, shape[::-1], interpolation=cv2.INTER_AREA)) for c in chans]
+            crops = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in small]
+        plans.append((f, s / f, shape, (y0, y1, x0, x1), crops))
+    # blur tasks (scale, channel), the largest first so that the threads balance
+    tasks = sorted(
+        ((i, j) for i in range(len(plans)) for j in range(4)),
+        key=lambda t: -plans[t[0]][4][0].size * plans[t[0]][1],
+    )
+    blurred: list[list[F32]] = [[covf] * 4 for _ in plans]
+
+    def blur(a: int, b: int) -> None:
+        for i, j in tasks[a:b]:
+            _, sig, _, _, crops = plans[i]
+            blurred[i][j] = np.asarray(cv2.GaussianBlur(crops[j], (0, 0), sig), np.float32)
+
+    run_strips(len(tasks), blur, rows=1)
+
+    out: list[_Part] = []
+    for (f, _, shape, (y0, y1, x0, x1), _), bl in zip(plans, blurred, strict=True):
+        if f == 1:
+            out.append((bl[:3], bl[3], (y0, x0)))
+            continue
+        wsum = bl[3]
+        low = [np.divide(c, wsum, out=np.zeros_like(c), where=wsum > 1e-6) for c in bl[:3]]
+        if (h % f, w % f) != (0, 0):
+            # not an integer upsampling: the whole level, 0 outside the window
+            comps = []
+            for c in low:
+                full = np.zeros(shape, np.float32)
+                full[y0:y1, x0:x1] = c
+                comps.append(_f32(cv2.resize(full, (w, h), interpolation=cv2.INTER_LINEAR)))
+            out.append((comps, None, (0, 0)))
+            continue
+        # upsample only the box (with one level pixel around it, so that the bilinear
+        # weights and neighbours are those of the whole level: the same result)
+        v0, v1 = max(0, box[0] // f - 1), min(shape[0], -(-box[1] // f) + 1)
+        u0, u1 = max(0, box[2] // f - 1), min(shape[1], -(-box[3] // f) + 1)
+        size = ((u1 - u0) * f, (v1 - v0) * f)
+        sub = (slice(v0 - y0, v1 - y0), slice(u0 - x0, u1 - x0))
+        comps = [
+            _f32(cv2.resize(np.ascontiguousarray(c[sub]), size, interpolation=cv2.INTER_LINEAR))
+            for c in low
+        ]
+        out.append((comps, None, (v0 * f, u0 * f)))
+    return out
+
+
+def _part_rows(part: _Part, rows: slice, cols: slice) -> tuple[list[F32], F32 | None]:
+    """The components (and G*m) of one smoothed field at full-resolution ``rows``, ``cols``."""
+    comps, wsum, (oy, ox) = part
+    r = slice(rows.start - oy, rows.stop - oy)
+    c = slice(cols.start - ox, cols.stop - ox)
+    return [x[r, c] for x in comps], None if wsum is None else wsum[r, c]
+
+
+def _unit_rows(comps: Sequence[F32], wsum: F32 | None, covf: F32) -> F32:
+    """Pixels of one smoothed field: (G*(n m) / G*m when ``wsum`` = G*m is given),
+    renormalised (0 where the vector is ~0) and multiplied by the coverage: (h, w, 3)."""
+    if wsum is not None:
+        # at full resolution every covered pixel has G*m > 1e-6 (the blur's centre weight
+        # alone is larger): dividing by max(G*m, 1e-6) instead of leaving 0 where G*m <= 1e-6
+        # only changes background pixels, which the coverage sets to 0 below
+        ws = np.maximum(wsum, np.float32(1e-6))
+        comps = [_f32(cv2.divide(c, ws)) for c in comps]
+    len2 = cv2.add(
+        cv2.add(cv2.multiply(comps[0], comps[0]), cv2.multiply(comps[1], comps[1])),
+        cv2.multiply(comps[2], comps[2]),
+    )
+    inv = np.divide(1.0, cv2.sqrt(len2), out=np.zeros_like(len2), where=len2 > 1e-12)
+    g = cv2.multiply(inv, covf)
+    return np.asarray(cv2.merge([cv2.multiply(c, g) for c in comps]), np.float32)
 
 
 def smoothed_normals(
@@ -148,11 +274,16 @@ def smoothed_normals(
     n = _normal_field(normal)
     cov = _coverage(n, None, mask).astype(np.float32)
     href = n.shape[0] if image_height is None else int(image_height)
-    stack = np.asarray(cv2.merge([cv2.multiply(n, cv2.merge([cov, cov, cov])), cov]), np.float32)
+    box = _box(cov > 0.5)
+    if box is None:
+        return [np.zeros_like(n) for _ in scales]
+    y0, y1, x0, x1 = box
+    rows, cols = slice(y0, y1), slice(x0, x1)
     out = []
-    for s in scales:
-        sm = _unit_field(_masked_blur_stack(stack, float(s) * href))
-        out.append(np.asarray(sm * cov[..., None], np.float32))
+    for part in _smoothed_components(n, cov, [float(s) * href for s in scales], box):
+        field = np.zeros_like(n)
+        field[rows, cols] = _unit_rows(*_part_rows(part, rows, cols), cov[rows, cols])
+        out.append(field)
     return out
 
 
@@ -218,22 +349,39 @@ def exaggerated_shading(
         raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
     light = _light(light_dir)
 
-    levels = [n * cov[..., None], *smoothed_normals(n, cov, sc, image_height=image_height)]
+    href = n.shape[0] if image_height is None else int(image_height)
+    covf = cov.astype(np.float32)
     sigmas = np.array([sc[0] / 2.0, *sc], np.float64)
     k = sigmas**weight_exponent
     k = (k / k.sum()).astype(np.float32)
+    out = np.zeros(cov.shape, np.float32)
+    box = _box(cov)
+    if box is None:
+        return out
+    parts = _smoothed_components(n, covf, [s * href for s in sc], box)
+    y0, y1, x0, x1 = box
+    cols = slice(x0, x1)
 
-    # n_i·ℓ_{i+1} = (n_i·ℓ − (ℓ·n_{i+1})(n_i·n_{i+1})) / √(1 − (ℓ·n_{i+1})²) for unit n_{i+1}
-    nl = [dot(lv, light) for lv in levels]
-    acc = k[-1] * nl[-1]  # base term: coarsest normals, unmodified light
-    for i in range(len(levels) - 1):
-        lc = nl[i + 1]
-        norm = cv2.sqrt(np.maximum(1.0 - lc * lc, 0.0))
-        num = nl[i] - lc * dot(levels[i], levels[i + 1])
-        proj = np.divide(num, norm, out=np.zeros_like(num), where=norm > 1e-6)
-        acc += k[i] * np.clip(np.float32(contrast) * proj, -1.0, 1.0)
-    img = np.clip(np.float32(ambient) + 0.5 * acc, 0.0, 1.0)
-    return np.where(cov, img, 0).astype(np.float32)
+    def strip(r0: int, r1: int) -> None:
+        # per-pixel work on strips of the covered box (in cache, on parallel threads)
+        rows = slice(y0 + r0, y0 + r1)
+        lv = [n[rows, cols] * cov[rows, cols, None]]
+        for part in parts:
+            lv.append(_unit_rows(*_part_rows(part, rows, cols), covf[rows, cols]))
+        # n_i·ℓ_{i+1} = (n_i·ℓ − (ℓ·n_{i+1})(n_i·n_{i+1})) / √(1 − (ℓ·n_{i+1})²) for unit n_{i+1}
+        nl = [dot(x, light) for x in lv]
+        acc = k[-1] * nl[-1]  # base term: coarsest normals, unmodified light
+        for i in range(len(lv) - 1):
+            lc = nl[i + 1]
+            norm = cv2.sqrt(np.maximum(1.0 - lc * lc, 0.0))
+            num = nl[i] - lc * dot(lv[i], lv[i + 1])
+            proj = np.divide(num, norm, out=np.zeros_like(num), where=norm > 1e-6)
+            acc += k[i] * np.clip(np.float32(contrast) * proj, -1.0, 1.0)
+        img = np.clip(np.float32(ambient) + 0.5 * acc, 0.0, 1.0)
+        out[rows, cols] = np.where(cov[rows, cols], img, 0)
+
+    run_strips(y1 - y0, strip, rows=_ES_ROWS)
+    return out
 
 
 def _warp_cos_sin(cos_t: F32, sin_t: F32, kappa: F32, strength: float) -> tuple[F32, F32]:

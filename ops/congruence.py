@@ -33,11 +33,22 @@ Implementation choices (the paper does not fix them):
   brightness (the tensor scales by k², and so does the percentile) and to the depth units.
   A strength below ~1e-5 of the signal's own scale (float rounding noise on a constant image or
   a fronto-parallel plane) counts as no flow: its direction is undefined and gives a dot of 0.
+
+Speed (none of it changes the result beyond float rounding): the full-resolution pass and the
+gradient level run on strips of rows (with a halo covering the filters) on parallel threads,
+so the intermediates stay in the CPU cache (OpenCV's filters are single-threaded); after the
+first pass only the bounding box of the covered pixels, grown by more than the filters' reach,
+is processed, since everything is exactly 0 further away; OpenCV works on one channel at a time
+(its area resize and blur are several times faster on single channels).
 """
 
 from __future__ import annotations
 
 import functools
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
@@ -130,12 +141,241 @@ class CongruenceResult:
         return self._maps["weight"]
 
 
+def _f32(x: object) -> F32:
+    """An OpenCV result as a float32 array (no copy)."""
+    return np.asarray(x, np.float32)
+
+
 def _half_angle(c: F32, s: F32, insidef: F32) -> F32:
     """Unit (cos θ, sin θ) from a doubled-angle vector ∝ (cos 2θ, sin 2θ); 0 where undefined."""
     mag, ang = cv2.cartToPolar(c, s)
     okf = cv2.multiply((mag > 1e-6).astype(np.float32), insidef)
     vx, vy = cv2.polarToCart(okf, ang * np.float32(0.5))
     return np.asarray(cv2.merge([vx, vy]), np.float32)
+
+
+# Strip heights, in rows of the level a pass writes: the full-resolution pass (gradient-level
+# rows) and the gradient pass (gradient-level rows, rounded to a multiple of the integration
+# factor). Strips keep each pass's working set in the CPU cache and run on parallel threads.
+_ROWS_COVER = 48
+_ROWS_GRAD = 136
+
+_ONES3 = np.ones((3, 3), np.uint8)
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+_POOL_PREFIX = "depict-congruence"
+
+
+def _parallel(n: int, step: int, fn: Callable[[int, int], None]) -> None:
+    """Call ``fn(a, b)`` on consecutive ranges of ``step`` covering ``[0, n)``, on parallel
+    threads (OpenCV's filters are single-threaded, and the strips stay in cache). Runs inline
+    when there is one range, one core, or when called from one of the pool's own threads."""
+    global _POOL
+    bounds = [(a, min(n, a + step)) for a in range(0, n, max(1, step))]
+    workers = min(len(bounds), cv2.getNumThreads(), os.cpu_count() or 1)
+    if workers <= 1 or threading.current_thread().name.startswith(_POOL_PREFIX):
+        for a, b in bounds:
+            fn(a, b)
+        return
+    with _POOL_LOCK:
+        if _POOL is None:
+            size = max(2, min(cv2.getNumThreads(), os.cpu_count() or 1))
+            _POOL = ThreadPoolExecutor(size, thread_name_prefix=_POOL_PREFIX)
+        pool = _POOL
+    for fut in [pool.submit(fn, a, b) for a, b in bounds]:
+        fut.result()
+
+
+def _covered_level(
+    img: F32, dep: F32, mask: NDArray[np.generic] | None, f: int, size: tuple[int, int]
+) -> tuple[F32, F32, F32]:
+    """Covered luminance, covered depth and coverage, area-downsampled by ``f`` to ``size``.
+
+    Coverage is finite positive depth (and mask > 0.5); the depth and luminance are 0 where it
+    is 0 (a NaN depth stays NaN). When ``f`` divides the image this runs on strips of rows (an
+    integer area resize only mixes rows of one strip, so the result is the same as one pass).
+    """
+    h, w = dep.shape
+    ws, hs = size
+    strips = f == 1 or (w == ws * f and h == hs * f)
+    out = [np.empty((hs, ws), np.float32) for _ in range(3)]
+    msk = None if mask is None else np.asarray(mask)
+
+    def strip(a: int, b: int) -> None:
+        r0, r1 = (a * f, b * f) if strips else (0, h)
+        if f == 1:
+            lum, depc, covf = (o[a:b] for o in out)
+        else:
+            lum, depc, covf = (np.empty((r1 - r0, w), np.float32) for _ in range(3))
+        cv2.threshold(dep[r0:r1], 1e30, 0, cv2.THRESH_TOZERO_INV, dst=depc)  # +inf -> 0
+        cv2.threshold(depc, 0, 1, cv2.THRESH_BINARY, dst=covf)  # > 0 -> 1
+        if msk is not None:
+            cv2.multiply(covf, (msk[r0:r1] > 0.5).astype(np.float32), dst=covf)
+        cv2.multiply(depc, covf, dst=depc)
+        if img.ndim == 3:
+            cv2.transform(img[r0:r1], REC709, dst=lum)
+            cv2.multiply(lum, covf, dst=lum)
+        else:
+            cv2.multiply(img[r0:r1], covf, dst=lum)
+        if f > 1:
+            rows = slice(a, b) if strips else slice(0, hs)
+            for src, o in zip((lum, depc, covf), out, strict=True):
+                cv2.resize(src, (ws, o[rows].shape[0]), dst=o[rows], interpolation=cv2.INTER_AREA)
+
+    _parallel(hs, _ROWS_COVER if strips else hs, strip)
+    return out[0], out[1], out[2]
+
+
+def _tensor_products(
+    lum: F32, dep: F32, cov: F32, sigma: float, jump: float, f: int, size: tuple[int, int]
+) -> list[F32]:
+    """Gradient-level pass: blur the covered luminance, depth and coverage by ``sigma``,
+    normalise, take Sobel gradients of the luminance and log depth where the whole stencil is
+    covered and the log depth steps by at most ``jump``, and return the structure-tensor
+    products [lxx, lxy, lyy, dxx, dxy, dyy, valid] area-downsampled by ``f`` to ``size``.
+
+    Runs on strips of rows with a halo covering the blur and the 3×3 stencils when ``f``
+    divides the level, which gives the same result as one pass over the whole level.
+    """
+    h, w = cov.shape
+    ws, hs = size
+    strips = f == 1 or (w == ws * f and h == hs * f)
+    halo = int(4.0 * sigma) + 4  # > Gaussian radius (≈ 4σ) + the Sobel / erosion row
+    out = [np.empty((hs, ws), np.float32) for _ in range(7)]
+
+    def strip(a: int, b: int) -> None:
+        lo, hi = max(0, a - halo), min(h, b + halo)
+        chans = [x[lo:hi] for x in (lum, dep, cov)]
+        if sigma >= 0.3:
+            chans = [_f32(cv2.GaussianBlur(x, (0, 0), sigma)) for x in chans]
+        lum1, dep1, c1 = chans
+        # 1 / coverage; where the coverage is <= 1e-6 this is 1e6 instead of 0, which only
+        # changes values no kept gradient reads (those need coverage > 0.999) and keeps them
+        # finite
+        inv = cv2.divide(1.0, np.maximum(c1, np.float32(1e-6)))
+        lum1 = _f32(cv2.multiply(lum1, inv))
+        logd1 = cv2.log(np.maximum(cv2.multiply(dep1, inv), np.float32(1e-30)))
+        # Sobel derivatives per level pixel (x right, rows down), kept where the whole stencil
+        # is covered and the log depth does not jump; computed on the strip, used on [a, b)
+        rows = slice(a - lo, b - lo)
+        lx, ly, dx, dy = (
+            cv2.Sobel(x, cv2.CV_32F, ox, 1 - ox, ksize=3, scale=0.125)[rows]
+            for x in (lum1, logd1)
+            for ox in (1, 0)
+        )
+        full = cv2.erode(cv2.threshold(c1, 0.999, 1, cv2.THRESH_BINARY)[1], _ONES3)[rows]
+        steep = cv2.max(np.abs(dx), np.abs(dy))
+        vf = cv2.multiply(cv2.threshold(steep, jump, 1, cv2.THRESH_BINARY_INV)[1], full)
+        lx, ly, dx, dy = (cv2.multiply(g, vf) for g in (lx, ly, dx, dy))
+        # xy products in image (row-down) convention; the sign is flipped to y-up later
+        prods = (lx * lx, lx * ly, ly * ly, dx * dx, dx * dy, dy * dy, vf)
+        orows = slice(a // f, b // f) if strips else slice(0, hs)
+        for p, o in zip(prods, out, strict=True):
+            if f > 1:
+                cv2.resize(p, (ws, o[orows].shape[0]), dst=o[orows], interpolation=cv2.INTER_AREA)
+            else:
+                o[orows] = p
+
+    _parallel(h, max(1, _ROWS_GRAD // f) * f if strips else h, strip)
+    return out
+
+
+#: The analysis-level maps a :class:`CongruenceResult` upsamples on demand.
+_LOW_MAPS = (
+    "score",
+    "e_shading",
+    "e_shape",
+    "weight",
+    "cos2_shading",
+    "sin2_shading",
+    "cos2_shape",
+    "sin2_shape",
+)
+
+
+def _reach(sigma: float) -> int:
+    """An upper bound of the radius of OpenCV's float Gaussian kernel for ``sigma`` (its size
+    is round(8σ + 1) | 1)."""
+    return int(4.0 * sigma) + 1
+
+
+def _window(
+    cov: F32, f: int, size: tuple[int, int], margin: int
+) -> tuple[tuple[int, int, int, int], tuple[int, int, int, int]] | None:
+    """Rows and columns (y0, y1, x0, x1) of the level ``cov`` that hold its covered pixels plus
+    ``margin``, aligned to the factor ``f`` of the next level, and the same window at the next
+    level (of ``size``); the whole level when ``f`` does not divide it; None when nothing is
+    covered.
+
+    The first column is a multiple of 16 at both levels and the window extends 16 columns
+    further on the right, so that OpenCV's vectorised filters process every column that is
+    not 0 with the same lanes as on the whole level (a bit-identical result).
+    """
+    h, w = cov.shape
+    ws, hs = size
+    bx, by, bw, bh = cv2.boundingRect((cov > 0).view(np.uint8))
+    if bw == 0 or bh == 0:
+        return None
+    if f > 1 and (w != ws * f or h != hs * f):
+        return (0, h, 0, w), (0, hs, 0, ws)
+    y0 = max(0, by - margin) // f
+    x0 = max(0, bx - margin) // (16 * f) * 16
+    y1 = min(hs, -(-(by + bh + margin) // f))
+    x1 = min(ws, -(-(bx + bw + margin) // f) + 16)
+    return (y0 * f, y1 * f, x0 * f, x1 * f), (y0, y1, x0, x1)
+
+
+def _percentile(vals: F32, q: float) -> float:
+    """``np.percentile(vals, q)`` (linear method), bit for bit, with one partial sort of ``vals``
+    in place (numpy's partitions at four ranks and copies the array first)."""
+    if type(q) not in (int, float):  # numpy scalars interpolate in their own precision
+        return float(np.percentile(vals, q))
+    n = vals.size
+    virtual = (n - 1) * (q / 100.0)
+    k = min(int(np.floor(virtual)), n - 1)
+    gamma = virtual - k
+    vals.partition(k)
+    a = vals[k]
+    b = vals[k + 1 :].min() if k + 1 < n else a
+    d = b - a
+    return float(b - d * (1.0 - gamma) if gamma >= 0.5 else a + d * gamma)
+
+
+def _flow(
+    txx: F32,
+    txy: F32,
+    tyy: F32,
+    invw: F32,
+    inside: NDArray[np.bool_],
+    outside: NDArray[np.bool_],
+    ref: float,
+    q: float,
+) -> tuple[F32, F32, F32, NDArray[np.bool_]]:
+    """Normalised strength, doubled-angle direction (cos 2θ, sin 2θ) and definedness of one
+    integrated structure tensor (row-down xy products; y flipped to up here)."""
+    jxx = np.multiply(txx, invw)
+    jyy = np.multiply(tyy, invw)
+    e = np.add(jxx, jyy)
+    e *= 0.5  # mean eigenvalue (≥ 0: the tensor is a positive blur of squares)
+    a = np.subtract(jxx, jyy, out=jxx)
+    b = np.asarray(cv2.multiply(txy, invw, scale=-2.0))  # 2 jxy, y up
+    floor = _REL_FLOOR * ref * ref
+    mag = np.asarray(cv2.magnitude(a, b))
+    defined = mag > e * np.float32(1e-6)
+    defined &= e > floor
+    defined &= inside
+    vals = e[inside]
+    p = _percentile(vals, q) if vals.size else 0.0
+    p = max(p, floor)
+    if p > 0:
+        en = np.multiply(e, np.float32(1.0 / p), out=e)
+        np.minimum(en, np.float32(1.0), out=en)
+    else:
+        en = np.multiply(e, 0, out=e)
+    en[outside] = 0.0
+    inv_mag = np.divide(1.0, mag, out=np.zeros_like(mag), where=defined)
+    return en, np.multiply(a, inv_mag, out=a), np.multiply(b, inv_mag, out=b), defined
 
 
 def _check_scale(name: str, value: float, hi: float) -> float:
@@ -217,122 +457,85 @@ def congruence(
 
     img = img.astype(np.float32, copy=False)
     dep = dep.astype(np.float32, copy=False)
-    lum = cv2.transform(img, REC709) if img.ndim == 3 else img
-
-    # coverage: finite positive depth (and mask); depc = depth there, 0 elsewhere (a NaN depth
-    # stays NaN and is reported below)
-    depc = cv2.threshold(dep, 1e30, 0, cv2.THRESH_TOZERO_INV)[1]  # +inf -> 0
-    covf = cv2.threshold(depc, 0, 1, cv2.THRESH_BINARY)[1]  # > 0 -> 1
-    if mask is not None:
-        covf = cv2.multiply(covf, (np.asarray(mask) > 0.5).astype(np.float32))
-    depc = cv2.multiply(depc, covf)
-    lumc = cv2.multiply(lum, covf)
 
     # --- gradient level: area-downsample by f1 so that sigma_g is 1-2 px there; area-average
     # the covered depth, luminance and coverage, blur them, and normalise by the coverage.
     f1 = max(1, min(int(sg), h // 8 or 1, w // 8 or 1))
-    chans = [lumc, depc, covf]
-    if f1 > 1:
-        size1 = (max(w // f1, 3), max(h // f1, 3))
-        chans = [cv2.resize(c, size1, interpolation=cv2.INTER_AREA) for c in chans]
-    # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small copy
-    if not (cv2.checkRange(chans[0])[0] and cv2.checkRange(chans[1])[0]):
+    size1 = (max(w // f1, 3), max(h // f1, 3)) if f1 > 1 else (w, h)
+    lum0, dep0, cov0 = _covered_level(img, dep, mask, f1, size1)
+    # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small
+    # copies (a sum accumulated in float64 cannot overflow: it is finite iff every value is)
+    if not np.isfinite(cv2.sumElems(lum0)[0] + cv2.sumElems(dep0)[0]):
         if np.isnan(dep).any():
             raise ValueError("depth contains NaN (use +inf for background)")
         raise ValueError("image contains NaN or infinite values")
-    lmin, lmax = cv2.minMaxLoc(chans[0])[:2]
-    lref = max(abs(lmin), abs(lmax)) / max(float(np.max(chans[2])), 1e-6)
-    s1 = sg / f1
-    if s1 >= 0.3:
-        chans = [cv2.GaussianBlur(c, (0, 0), s1) for c in chans]
-    c1 = chans[2]
-    inv = np.divide(1.0, c1, out=np.zeros_like(c1), where=c1 > 1e-6)
-    lum1 = cv2.multiply(chans[0], inv)
-    logd1 = cv2.log(np.maximum(cv2.multiply(chans[1], inv), np.float32(1e-30)))
+    lmin, lmax = cv2.minMaxLoc(lum0)[:2]
+    lref = max(abs(lmin), abs(lmax)) / max(float(cv2.minMaxLoc(cov0)[1]), 1e-6)
 
-    # Sobel derivatives per level pixel (x right, rows down); gradients are kept where the whole
-    # stencil is covered and the log depth does not jump.
-    lx = cv2.Sobel(lum1, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-    ly = cv2.Sobel(lum1, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-    dx = cv2.Sobel(logd1, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
-    dy = cv2.Sobel(logd1, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
-    full = np.asarray(cv2.erode((c1 > 0.999).view(np.uint8), np.ones((3, 3), np.uint8))) > 0
-    jump = 0.5 * float(depth_jump)
-    vf = (full & (np.asarray(cv2.max(np.abs(dx), np.abs(dy))) <= jump)).astype(np.float32)
-    lx, ly, dx, dy = (cv2.multiply(g, vf) for g in (lx, ly, dx, dy))
-    # xy products in image (row-down) convention; the sign is flipped to y-up below.
-    tens = cv2.merge(
-        [
-            cv2.multiply(lx, lx),
-            cv2.multiply(lx, ly),
-            cv2.multiply(ly, ly),
-            cv2.multiply(dx, dx),
-            cv2.multiply(dx, dy),
-            cv2.multiply(dy, dy),
-            vf,
-        ]
-    )
-
-    # --- integration level: area-downsample by f2 so that sigma_i is 2-4 px there.
-    h1, w1 = tens.shape[:2]
-    si1 = si / f1
+    # --- integration level: area-downsample the tensor products by f2 so that sigma_i is
+    # 2-4 px there.
+    w1, h1 = size1
+    s1, si1 = sg / f1, si / f1
     f2 = max(1, min(int(si1 / 2.0), h1 // 8 or 1, w1 // 8 or 1))
-    if f2 > 1:
-        tens = cv2.resize(tens, (max(w1 // f2, 3), max(h1 // f2, 3)), interpolation=cv2.INTER_AREA)
-    area = tens[..., 6].copy()  # fraction of each analysis pixel with valid gradients
-    tens = cv2.GaussianBlur(tens, (0, 0), si1 / f2)
-    wsum = tens[..., 6]
+    size2 = (max(w1 // f2, 3), max(h1 // f2, 3)) if f2 > 1 else (w1, h1)
+    s2 = si1 / f2
+    low = {k: np.zeros(size2[::-1], np.float32) for k in _LOW_MAPS}
+    # Everything below is 0 away from the covered pixels: work on their bounding box, grown by
+    # more than the blurs' and stencils' reach (the result is the same as on the whole level)
+    win = _window(cov0, f2, size2, max(_reach(s1) + 2, (_reach(s2) + 2) * f2))
+    if win is None:  # nothing covered
+        return CongruenceResult(0.0, (size2[1], size2[0]), (h, w), low)
+    (y0, y1, x0, x1), (v0, v1, u0, u1) = win
+    crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in (lum0, dep0, cov0)]
+    jump = 0.5 * float(depth_jump)
+    prods = _tensor_products(crop[0], crop[1], crop[2], s1, jump, f2, (u1 - u0, v1 - v0))
+    area = prods[6]  # fraction of each analysis pixel with valid gradients
+    tens = list(prods)
+
+    def integrate(a: int, b: int) -> None:
+        for i in range(a, b):
+            tens[i] = _f32(cv2.GaussianBlur(prods[i], (0, 0), s2))
+
+    _parallel(len(tens), 1, integrate)
+    wsum = tens[6]
     invw = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 1e-4)
 
     inside = area > 0.5
+    outside = ~inside
     # signal scales for the noise floors: lref (brightness) above, log depth is dimensionless
     dref = 1.0
 
     flows = {}
     for name, k, ref in (("shading", 0, lref), ("shape", 3, dref)):
-        jxx = tens[..., k] * invw
-        jxy = tens[..., k + 1] * -invw  # y up
-        jyy = tens[..., k + 2] * invw
-        e = 0.5 * (jxx + jyy)
-        a = jxx - jyy
-        b = 2.0 * jxy
-        floor = _REL_FLOOR * ref * ref
-        defined = inside & (e > floor)
-        mag = cv2.magnitude(a, b)
-        defined &= mag > 1e-6 * e
-        vals = e[inside]
-        p = float(np.percentile(vals, percentile)) if vals.size else 0.0
-        p = max(p, floor)
-        en = np.clip(e * np.float32(1.0 / p), 0.0, 1.0).astype(np.float32) if p > 0 else e * 0
-        en[~inside] = 0.0
-        inv_mag = np.divide(1.0, mag, out=np.zeros_like(mag), where=defined)
-        flows[name] = (en, a * inv_mag, b * inv_mag, defined)
+        flows[name] = _flow(
+            tens[k], tens[k + 1], tens[k + 2], invw, inside, outside, ref, percentile
+        )
 
     es, ca, sa, ds = flows["shading"]
     ec, cb, sb, dc = flows["shape"]
-    cosd = ca * cb + sa * sb  # cos of the doubled-angle difference
-    dot = np.sqrt(np.clip(0.5 * (1.0 + cosd), 0.0, 1.0))
-    dot[~(ds & dc)] = 0.0
-    smap = (1.0 - np.clip(ec - es, 0.0, 1.0)) * dot
-    smap[~inside] = 0.0
+    cosd = ca * cb
+    cosd += sa * sb  # cos of the doubled-angle difference
+    cosd += 1.0
+    cosd *= 0.5
+    dot = np.sqrt(np.clip(cosd, 0.0, 1.0, out=cosd), out=cosd)
+    ds &= dc
+    dot[~ds] = 0.0
+    smap = np.subtract(ec, es)
+    np.clip(smap, 0.0, 1.0, out=smap)
+    np.subtract(1.0, smap, out=smap)
+    smap *= dot
+    smap[outside] = 0.0
     wgt = ec * area
     den = float(wgt.sum(dtype=np.float64))
-    score = float((wgt * smap).sum(dtype=np.float64) / den) if den > 0 else 0.0
+    wgt *= smap
+    score = float(wgt.sum(dtype=np.float64) / den) if den > 0 else 0.0
 
-    weight = np.where(inside, area, 0).astype(np.float32)
-    low: dict[str, F32] = {
-        "score": smap.astype(np.float32),
-        "e_shading": es,
-        "e_shape": ec,
-        "weight": weight,
-        "cos2_shading": ca.astype(np.float32),
-        "sin2_shading": sa.astype(np.float32),
-        "cos2_shape": cb.astype(np.float32),
-        "sin2_shape": sb.astype(np.float32),
-    }
+    maps = (smap, es, ec, np.where(inside, area, np.float32(0)), ca, sa, cb, sb)
+    for name, m in zip(_LOW_MAPS, maps, strict=True):
+        low[name][v0:v1, u0:u1] = m
     return CongruenceResult(
         score=float(np.clip(score, 0.0, 1.0)),
-        analysis_shape=(int(smap.shape[0]), int(smap.shape[1])),
+        analysis_shape=(size2[1], size2[0]),
         _out_shape=(h, w),
         _low=low,
     )
