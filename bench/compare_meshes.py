@@ -169,6 +169,12 @@ def main(argv: list[str] | None = None) -> int:
         metavar="SECTION.KEY=VALUE",
         help="parameter override, e.g. light_alignment.gamma=2 or congruence.percentile=99",
     )
+    ap.add_argument(
+        "--shading-norm",
+        default="reference",
+        choices=["reference", "per_image"],
+        help="scale of the shading strengths (service.compare)",
+    )
     ap.add_argument("--no-sheet", action="store_true", help="skip the contact sheets")
     ap.add_argument(
         "--terms",
@@ -201,6 +207,7 @@ def main(argv: list[str] | None = None) -> int:
             albedo=args.albedo,
             keep_images=not args.no_sheet,
             label=name,
+            shading_norm=args.shading_norm,
         )
         t2 = time.perf_counter()
         results[name] = res
@@ -234,7 +241,8 @@ def main(argv: list[str] | None = None) -> int:
 
     summary = summary_markdown(results)
     (args.out / "summary.md").write_text(
-        f"# Comparison bench ({args.size}×{args.size}, albedo {args.albedo})\n\n"
+        f"# Comparison bench ({args.size}×{args.size}, albedo {args.albedo}, "
+        f"shading strengths {args.shading_norm})\n\n"
         + (f"Overrides: `{json.dumps(params)}`\n\n" if params else "")
         + summary
         + "\n"

@@ -31,6 +31,11 @@ Implementation choices (the paper does not fix them):
 - Strengths are made comparable by dividing each by its ``percentile``-th percentile over the
   covered pixels and clipping to [0, 1]. This makes the score invariant to scaling the image
   brightness (the tensor scales by k², and so does the percentile) and to the depth units.
+  To compare several renderings of one frame (LLA §7), the shading strength can instead be
+  divided by a reference's (``shading_norm``): then only the shape's scale is per image, and a
+  rendering with more shading contrast than the reference keeps it, as the clamp of Eq. 2
+  intends ("prevents the score from dropping in case of exaggeration"); with per-image
+  normalisation that clamp could never act on a rendering that is only more contrasted.
   A strength below ~1e-5 of the signal's own scale (float rounding noise on a constant image or
   a fronto-parallel plane) counts as no flow: its direction is undefined and gives a dot of 0.
 
@@ -87,10 +92,14 @@ class CongruenceResult:
         Fraction of each pixel that is scored (1 inside, 0 on background).
     analysis_shape : (h, w)
         Resolution at which the score was evaluated.
+    shading_norm : float
+        The shading strength that was mapped to 1 (the ``shading_norm`` argument, or this
+        image's percentile): pass it to score other renderings of the same frame on this scale.
     """
 
     score: float
     analysis_shape: tuple[int, int]
+    shading_norm: float
     _out_shape: tuple[int, int] = field(repr=False)
     _low: dict[str, F32] = field(repr=False)
 
@@ -351,9 +360,11 @@ def _flow(
     outside: NDArray[np.bool_],
     ref: float,
     q: float,
-) -> tuple[F32, F32, F32, NDArray[np.bool_]]:
-    """Normalised strength, doubled-angle direction (cos 2θ, sin 2θ) and definedness of one
-    integrated structure tensor (row-down xy products; y flipped to up here)."""
+    norm: float | None = None,
+) -> tuple[F32, F32, F32, NDArray[np.bool_], float]:
+    """Normalised strength, doubled-angle direction (cos 2θ, sin 2θ), definedness and the
+    strength mapped to 1 (``norm``, else the ``q``-th percentile) of one integrated structure
+    tensor (row-down xy products; y flipped to up here)."""
     jxx = np.multiply(txx, invw)
     jyy = np.multiply(tyy, invw)
     e = np.add(jxx, jyy)
@@ -365,8 +376,11 @@ def _flow(
     defined = mag > e * np.float32(1e-6)
     defined &= e > floor
     defined &= inside
-    vals = e[inside]
-    p = _percentile(vals, q) if vals.size else 0.0
+    if norm is None:
+        vals = e[inside]
+        p = _percentile(vals, q) if vals.size else 0.0
+    else:
+        p = float(norm)
     p = max(p, floor)
     if p > 0:
         en = np.multiply(e, np.float32(1.0 / p), out=e)
@@ -375,7 +389,7 @@ def _flow(
         en = np.multiply(e, 0, out=e)
     en[outside] = 0.0
     inv_mag = np.divide(1.0, mag, out=np.zeros_like(mag), where=defined)
-    return en, np.multiply(a, inv_mag, out=a), np.multiply(b, inv_mag, out=b), defined
+    return en, np.multiply(a, inv_mag, out=a), np.multiply(b, inv_mag, out=b), defined, p
 
 
 def _check_scale(name: str, value: float, hi: float) -> float:
@@ -395,6 +409,7 @@ def congruence(
     image_height: int | None = None,
     percentile: float = 95.0,
     depth_jump: float = 0.05,
+    shading_norm: float | None = None,
 ) -> CongruenceResult:
     """Congruence score between shading and shape flows (Mestres et al. 2021, §7, Eq. 2).
 
@@ -424,6 +439,12 @@ def congruence(
     depth_jump : float
         Largest change of log depth between neighbouring pixels (of the gradient level) still
         treated as a continuous surface, > 0; above it the pixels are not scored.
+    shading_norm : float, optional
+        The shading strength mapped to 1, instead of this image's own ``percentile``: pass the
+        :attr:`CongruenceResult.shading_norm` of a reference rendering of the same frame (same
+        parameters) to put several renderings on one scale, so that a shading with more contrast
+        than the reference is not normalised back down (the clamp of Eq. 2 then does what the
+        paper says: exaggeration, e_shading > e_shape, does not lower the score).
 
     Returns
     -------
@@ -454,6 +475,8 @@ def congruence(
         raise ValueError(f"percentile must be in (0, 100], got {percentile!r}")
     if not (np.isfinite(depth_jump) and depth_jump > 0):
         raise ValueError(f"depth_jump must be > 0, got {depth_jump!r}")
+    if shading_norm is not None and not (np.isfinite(shading_norm) and shading_norm > 0):
+        raise ValueError(f"shading_norm must be > 0 (or None), got {shading_norm!r}")
 
     img = img.astype(np.float32, copy=False)
     dep = dep.astype(np.float32, copy=False)
@@ -484,7 +507,7 @@ def congruence(
     # more than the blurs' and stencils' reach (the result is the same as on the whole level)
     win = _window(cov0, f2, size2, max(_reach(s1) + 2, (_reach(s2) + 2) * f2))
     if win is None:  # nothing covered
-        return CongruenceResult(0.0, (size2[1], size2[0]), (h, w), low)
+        return CongruenceResult(0.0, (size2[1], size2[0]), shading_norm or 0.0, (h, w), low)
     (y0, y1, x0, x1), (v0, v1, u0, u1) = win
     crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in (lum0, dep0, cov0)]
     jump = 0.5 * float(depth_jump)
@@ -505,14 +528,10 @@ def congruence(
     # signal scales for the noise floors: lref (brightness) above, log depth is dimensionless
     dref = 1.0
 
-    flows = {}
-    for name, k, ref in (("shading", 0, lref), ("shape", 3, dref)):
-        flows[name] = _flow(
-            tens[k], tens[k + 1], tens[k + 2], invw, inside, outside, ref, percentile
-        )
-
-    es, ca, sa, ds = flows["shading"]
-    ec, cb, sb, dc = flows["shape"]
+    es, ca, sa, ds, norm_s = _flow(
+        tens[0], tens[1], tens[2], invw, inside, outside, lref, percentile, shading_norm
+    )
+    ec, cb, sb, dc, _ = _flow(tens[3], tens[4], tens[5], invw, inside, outside, dref, percentile)
     cosd = ca * cb
     cosd += sa * sb  # cos of the doubled-angle difference
     cosd += 1.0
@@ -536,6 +555,7 @@ def congruence(
     return CongruenceResult(
         score=float(np.clip(score, 0.0, 1.0)),
         analysis_shape=(size2[1], size2[0]),
+        shading_norm=norm_s,
         _out_shape=(h, w),
         _low=low,
     )

@@ -76,6 +76,17 @@ def cmd_score(args: argparse.Namespace) -> int:
 # -- compare -----------------------------------------------------------------------------------
 
 
+def _shading_norm(text: str) -> str | float:
+    if text in ("reference", "per_image"):
+        return text
+    try:
+        return float(text)
+    except ValueError:
+        raise UsageError(
+            f"--shading-norm {text!r}: expected reference, per_image or a number"
+        ) from None
+
+
 def cmd_compare(args: argparse.Namespace) -> int:
     from service.compare import ComparisonResult, plot
 
@@ -87,6 +98,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
         "params": parse_sets(args.set),
         "albedo": args.albedo,
         "label": Path(args.input).stem,
+        "shading_norm": _shading_norm(args.shading_norm),
     }
     if is_mesh:
         options.update(
@@ -247,6 +259,13 @@ def add_analysis_commands(sub: Any) -> None:
         default=[],
         metavar="SECTION.KEY=VALUE",
         help="parameter override, e.g. light_alignment.gamma=2 or congruence.percentile=99",
+    )
+    p.add_argument(
+        "--shading-norm",
+        default="reference",
+        metavar="MODE",
+        help="scale of the shading strengths: reference (the frame's Lambert under #1, for "
+        "every rendering), per_image, or a number",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.add_argument("--plot", metavar="OUT.png", help="scores vs direction (like LLA Fig. 13)")

@@ -51,6 +51,18 @@ only the blown-out highlights.
 Score. Every image is scored with :func:`ops.congruence.congruence` on the frame's depth and
 coverage, with the same congruence parameters for all methods (``params["congruence"]``) and
 sizes relative to the frame's display height.
+
+Normalisation (``shading_norm``). Eq. 2 compares a shading strength with a shape strength, which
+need a common scale; the paper does not say which. By default (``"reference"``) every rendering
+of the frame is put on **one** scale: its shading strength is divided by that of the frame's
+plain Lambert rendering under direction #1 (its 95th percentile), the same number for every
+method and direction. A method that raises shading contrast then keeps it, and the clamp of
+Eq. 2 ("prevents the score from dropping in case of exaggeration, i.e. if e_s > e_c", §7) acts
+as the paper describes. ``"per_image"`` divides each rendering by its own percentile instead
+(as :func:`score_frame` does for a single image, which makes a score invariant to brightness):
+then extra contrast is normalised away, and a method that concentrates contrast at features
+(Light Alignment) loses to Lambert under near-frontal lights, where their directions agree.
+A number pins the scale.
 """
 
 from __future__ import annotations
@@ -315,6 +327,8 @@ class ComparisonResult:
     image_shape : (H, W) of the renderings.
     seconds : method -> seconds spent shading (scoring excluded); ``"score"`` -> scoring.
     label : free text naming the input (a mesh or file name).
+    shading_norm : ``{"mode": "reference" | "per_image" | "pinned", "value": float | None}``,
+        the scale of the shading strengths (see the module docstring).
     """
 
     methods: tuple[str, ...]
@@ -328,6 +342,7 @@ class ComparisonResult:
     image_shape: tuple[int, int]
     seconds: dict[str, float] = field(default_factory=dict)
     label: str = ""
+    shading_norm: dict[str, Any] = field(default_factory=lambda: {"mode": "per_image"})
 
     @property
     def n_directions(self) -> int:
@@ -432,6 +447,14 @@ class ComparisonResult:
                 )
                 + f"; best mean: {'yes' if claim['best_mean'] else 'no'}."
             )
+        mode = self.shading_norm.get("mode")
+        scale = {
+            "reference": "one scale for every rendering, the frame's Lambert under #1",
+            "per_image": "each rendering on its own scale",
+            "pinned": f"a pinned scale ({self.shading_norm.get('value')})",
+        }
+        if mode in scale:
+            lines.append(f"Shading strengths: {scale[mode]}.")
         return "\n".join(lines)
 
     def to_dict(self) -> dict[str, Any]:
@@ -457,6 +480,7 @@ class ComparisonResult:
             "means": self.means,
             "claim": self.claims(),
             "params": self.params,
+            "shading_norm": self.shading_norm,
             "seconds": {k: round(v, 4) for k, v in self.seconds.items()},
         }
 
@@ -478,6 +502,7 @@ class ComparisonResult:
             image_shape=(int(data["image_shape"][0]), int(data["image_shape"][1])),
             seconds=dict(data.get("seconds", {})),
             label=str(data.get("label", "")),
+            shading_norm=dict(data.get("shading_norm", {"mode": "per_image"})),
         )
 
     def to_json(self, indent: int | None = 2) -> str:
@@ -521,6 +546,7 @@ def compare(
     albedo: str = "white",
     keep_images: bool | Iterable[int] = True,
     label: str = "",
+    shading_norm: str | float = "reference",
 ) -> ComparisonResult:
     """Shade ``frame`` with each method under each light direction and score it (LLA §7).
 
@@ -545,6 +571,8 @@ def compare(
     keep_images : keep every rendering (True), none (False), or those of these direction numbers
         (for :func:`contact_sheet`; 21 × 5 renderings of a 1080p frame take ~0.9 GB).
     label : a name for the input, carried into tables and plots.
+    shading_norm : ``"reference"`` (default: every rendering on the scale of the frame's
+        Lambert rendering under #1), ``"per_image"``, or a number (see the module docstring).
 
     Returns
     -------
@@ -570,7 +598,28 @@ def compare(
         keep = {int(k) for k in keep_images}
     resolved = resolve_params(params)
     geo = _frame_geometry(frame, albedo, resolved)
-    cong = resolved["congruence"]
+    cong = dict(resolved["congruence"])
+    if shading_norm == "reference":
+        reference = _call(
+            "congruence",
+            congruence,
+            _lambert(geo, sweep[0]),
+            geo.depth,
+            geo.mask,
+            image_height=geo.image_height,
+            **cong,
+        )
+        cong["shading_norm"] = reference.shading_norm
+        norm = {"mode": "reference", "value": reference.shading_norm}
+    elif shading_norm == "per_image":
+        norm = {"mode": "per_image", "value": None}
+    elif isinstance(shading_norm, int | float) and not isinstance(shading_norm, bool):
+        cong["shading_norm"] = float(shading_norm)
+        norm = {"mode": "pinned", "value": float(shading_norm)}
+    else:
+        raise ValueError(
+            f"shading_norm must be 'reference', 'per_image' or a number, got {shading_norm!r}"
+        )
 
     scores = np.zeros((len(ms), len(numbers)), np.float64)
     results: dict[str, list[CongruenceResult]] = {m: [] for m in ms}
@@ -610,6 +659,7 @@ def compare(
         image_shape=(int(geo.depth.shape[0]), int(geo.depth.shape[1])),
         seconds=seconds,
         label=label,
+        shading_norm=norm,
     )
 
 

@@ -268,10 +268,10 @@ def compare_job(
     """``depict compare``: the comparison bench (LLA §7) on an EXR frame (``read`` given) or a
     mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``).
 
-    ``options``: ``methods``, ``directions``, ``params``, ``albedo`` (:func:`service.compare.
-    compare`), and for meshes ``width``, ``height``, ``azimuth``, ``elevation``. Returns
-    :meth:`ComparisonResult.to_dict`, with ``sheet``, plus ``sheet_png``: the contact sheet as a
-    base64 PNG.
+    ``options``: ``methods``, ``directions``, ``params``, ``albedo``, ``shading_norm``
+    (:func:`service.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
+    ``elevation``. Returns :meth:`ComparisonResult.to_dict`, with ``sheet``, plus
+    ``sheet_png``: the contact sheet as a base64 PNG.
     """
     import base64
     import tempfile
@@ -302,6 +302,7 @@ def compare_job(
         albedo=opts.get("albedo", "white"),
         keep_images=SHEET_DIRECTIONS if sheet else False,
         label=opts.get("label", ""),
+        shading_norm=opts.get("shading_norm", "reference"),
     )
     out = result.to_dict()
     if sheet:

@@ -82,10 +82,29 @@ def test_lambert_method_is_ops_shading_lambert(frame: Frame, result: ComparisonR
 
 
 def test_scores_are_the_congruence_of_the_images(frame: Frame, result: ComparisonResult) -> None:
+    """Every rendering is scored on the scale of the frame's Lambert rendering under #1."""
+    depth = np.where(frame.mask > 0.5, frame.buffers["depth"], np.inf).astype(np.float32)
+    assert result.shading_norm["mode"] == "reference"
+    reference = congruence(result.image("lambert", 1), depth, frame.mask > 0.5)
+    assert result.shading_norm["value"] == pytest.approx(reference.shading_norm, rel=1e-6)
+    for m in ("lambert", "light_alignment"):
+        direct = congruence(
+            result.image(m, 3), depth, frame.mask > 0.5, shading_norm=reference.shading_norm
+        )
+        assert result.score(m, 3) == pytest.approx(direct.score, abs=1e-9)
+        own = congruence(result.image(m, 3), depth, frame.mask > 0.5)
+        assert own.shading_norm != pytest.approx(reference.shading_norm)
+
+
+def test_per_image_normalisation_scores_each_rendering_alone(frame: Frame) -> None:
+    res = compare(frame, ["lambert", "light_alignment"], directions=[1, 3], shading_norm="per_image")
     depth = np.where(frame.mask > 0.5, frame.buffers["depth"], np.inf).astype(np.float32)
     for m in ("lambert", "light_alignment"):
-        direct = congruence(result.image(m, 3), depth, frame.mask > 0.5)
-        assert result.score(m, 3) == pytest.approx(direct.score, abs=1e-9)
+        direct = congruence(res.image(m, 3), depth, frame.mask > 0.5)
+        assert res.score(m, 3) == pytest.approx(direct.score, abs=1e-9)
+    assert res.shading_norm == {"mode": "per_image", "value": None}
+    with pytest.raises(ValueError, match="shading_norm"):
+        compare(frame, ["lambert"], directions=1, shading_norm="nope")
 
 
 def test_enhancements_beat_lambert_behind_the_object(frame: Frame) -> None:
@@ -107,7 +126,8 @@ def test_table_markdown_shape(result: ComparisonResult) -> None:
     assert [float(c) for c in mean_cells] == pytest.approx(
         [round(v, 3) for v in result.means.values()], abs=1e-9
     )
-    assert "Light Alignment above Lambert at" in lines[-1]
+    assert "Light Alignment above Lambert at" in lines[-2]
+    assert lines[-1].startswith("Shading strengths: one scale")
 
 
 def test_to_json_shapes(result: ComparisonResult) -> None:

@@ -72,6 +72,32 @@ def test_score_invariant_to_brightness_and_depth_units() -> None:
     assert congruence(img, depth * np.float32(100.0)).score == pytest.approx(ref, abs=1e-3)
 
 
+def test_a_shared_shading_scale_keeps_extra_contrast() -> None:
+    """With the reference's scale, more contrast never lowers the score (the clamp of Eq. 2)
+    and less contrast lowers it; each image on its own scale sees no difference at all."""
+    normal, depth = sphere()
+    shading = lambert(normal, (0.3, 0.4, 1.0))
+    ref = congruence(shading, depth)
+    assert ref.shading_norm > 0
+    same = congruence(shading, depth, shading_norm=ref.shading_norm)
+    assert same.score == pytest.approx(ref.score, abs=1e-9)
+    stronger = congruence(3.0 * shading, depth, shading_norm=ref.shading_norm)
+    weaker = congruence(0.3 * shading, depth, shading_norm=ref.shading_norm)
+    assert stronger.score >= ref.score - 1e-9
+    assert weaker.score < ref.score - 0.05
+    assert congruence(0.3 * shading, depth).score == pytest.approx(ref.score, abs=1e-6)
+    with pytest.raises(ValueError, match="shading_norm"):
+        congruence(shading, depth, shading_norm=0.0)
+
+
+@pytest.mark.parametrize(("size", "integration"), [(513, 0.01), (512, 0.02), (97, 0.05)])
+def test_sizes_that_do_not_divide_the_analysis_levels(size: int, integration: float) -> None:
+    normal, depth = sphere(size)
+    res = congruence(lambert(normal, (0.2, 0.3, 1.0)), depth, integration_scale=integration)
+    assert 0.5 < res.score <= 1.0
+    assert res.score_map.shape == (size, size)
+
+
 def test_background_does_not_bleed_into_the_score() -> None:
     normal, depth = sphere()
     img = lambert(normal, (0.5, 0.5, 0.7))
