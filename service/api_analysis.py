@@ -134,6 +134,9 @@ def install(
         depth_jump: Annotated[
             float | None, Form(gt=0, le=100, description="largest log-depth step of a surface")
         ] = None,
+        shading_norm: Annotated[
+            float | None, Form(gt=0, description="pinned shading strength scale")
+        ] = None,
     ) -> dict[str, Any]:
         from service import pipeline as pipelines
 
@@ -147,6 +150,7 @@ def install(
             "integration_scale": integration_scale,
             "percentile": percentile,
             "depth_jump": depth_jump,
+            "shading_norm": shading_norm,
         }
         options = {k: v for k, v in given.items() if v is not None}
         out = await upload_job(

@@ -34,6 +34,7 @@ def _score_options(args: argparse.Namespace) -> dict[str, float]:
         "integration_scale": args.integration_scale,
         "percentile": args.percentile,
         "depth_jump": args.depth_jump,
+        "shading_norm": args.shading_norm,
     }
     return {k: v for k, v in given.items() if v is not None}
 
@@ -236,6 +237,9 @@ def add_analysis_commands(sub: Any) -> None:
     p.add_argument("--integration-scale", type=float, help="integration σ / image height (0.01)")
     p.add_argument("--percentile", type=float, help="strength normalisation percentile (95)")
     p.add_argument("--depth-jump", type=float, help="largest log-depth step of a surface (0.05)")
+    p.add_argument(
+        "--shading-norm", type=float, help="pinned shading strength scale (default: per image)"
+    )
     add_pipeline_options(p, "score the frame after these steps")
     add_read_options(p)
     add_server_option(p)

@@ -212,6 +212,11 @@ def test_score_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert after["score"] != pytest.approx(data["score"], abs=1e-4)
     assert depict("score", exr, "--json", "--percentile", "50") == 0
     assert json.loads(capsys.readouterr().out)["params"]["percentile"] == 50.0
+    # a pinned shading scale far below the image's own saturates e_shading: a different score
+    assert depict("score", exr, "--json", "--shading-norm", "1e-9") == 0
+    pinned = json.loads(capsys.readouterr().out)
+    assert pinned["params"]["shading_norm"] == 1e-9
+    assert pinned["score"] != pytest.approx(data["score"], abs=1e-4)
 
 
 def test_compare_json_plot_and_sheet(

@@ -42,6 +42,12 @@ class CongruenceParams(Params):
     depth_jump: float = Field(
         0.05, gt=0.0, le=100.0, description="largest log-depth step still one surface"
     )
+    shading_norm: float | None = Field(
+        None,
+        gt=0.0,
+        description="shading strength mapped to 1 (default: the image's own percentile); pin "
+        "it to compare frames or renderings on one scale",
+    )
 
 
 @register(
@@ -58,6 +64,6 @@ class CongruenceParams(Params):
     ),
 )
 def apply_congruence(frame: Frame, p: CongruenceParams, ctx: Context) -> None:
-    result = score_frame(frame, maps=True, **p.model_dump())
+    result = score_frame(frame, maps=True, **p.model_dump(exclude_none=True))
     frame.outputs.update(result["layers"])
     frame.attributes["depict/congruence"] = float(result["score"])
