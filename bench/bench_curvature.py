@@ -4,6 +4,11 @@ Run: ``.venv/bin/python -m bench.bench_curvature``. Targets (ratios to the copy 
 ``principal_curvatures + isotropic`` <= 4x, ``principal_curvatures + scale_lobes`` (3 lobes) <= 8x.
 The frame is analytic (tests/analytic.py): two overlapping spheres (a depth jump) on a background,
 with lobes made from a Lambert and a Phong term so the scaling sees real lighting variation.
+
+The ``floor`` rows time the memory traffic alone, on the same row strips and threads: one cv2
+pass that reads each input once and writes each output once (normal, depth and mask in, κ out;
+three lobes, three lights and κ in, the beauty and three σ out). They bound what any
+implementation of the operation can reach on this machine.
 """
 
 from __future__ import annotations
@@ -12,7 +17,7 @@ import cv2
 import numpy as np
 
 from bench.common import HD, Report
-from ops.curvature import isotropic, principal_curvatures
+from ops.curvature import isotropic, principal_curvatures, run_rows
 from ops.scaling import scale_lobes
 from tests.analytic import two_spheres
 
@@ -47,8 +52,11 @@ def main() -> None:
     rep.time(
         "principal_curvatures + isotropic",
         lambda: isotropic(principal_curvatures(normal, depth, mask)),
-        repeat=15,
+        repeat=21,
         target_ratio=4,
+    )
+    rep.time(
+        "  floor: normal, depth, mask in; κ out", lambda: _curvature_floor(normal, depth, mask)
     )
     curv = principal_curvatures(normal, depth, mask)
     rep.time("  materialise k1, k2, dir, weight", lambda: _materialise(normal, depth, mask))
@@ -57,18 +65,65 @@ def main() -> None:
     rep.time(
         "scale_lobes (3 lobes, pinned whites)",
         lambda: scale_lobes(lobes, lights, kappa, 0.5, 3.0, whites),
+        repeat=15,
+    )
+    rep.time(
+        "  floor: lobes, lights, κ in; beauty, σ out", lambda: _lobes_floor(lobes, lights, kappa)
     )
     rep.time(
         "principal_curvatures + scale_lobes (3 lobes)",
         lambda: scale_lobes(
             lobes, lights, isotropic(principal_curvatures(normal, depth, mask)), 0.5, 3.0, whites
         ),
+        repeat=21,
         target_ratio=8,
     )
     rep.time(
         "scale_lobes (3 lobes, white='auto')",
         lambda: scale_lobes(lobes, lights, kappa, 0.5, 3.0, "auto", mask=mask),
     )
+
+
+_FLOOR_ROWS = 64
+
+
+def _curvature_floor(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Read normal, depth and mask once, write an (H, W) float32 image once."""
+    hgt, wid = depth.shape
+    out = np.empty((hgt, wid), np.float32)
+    ones = np.ones((1, 3), np.float32)
+    m8 = mask.view(np.uint8)
+
+    def strip(r0: int) -> None:
+        r = slice(r0, min(hgt, r0 + _FLOOR_ROWS))
+        cv2.transform(normal[r], ones, dst=out[r])
+        cv2.add(out[r], depth[r], dst=out[r], mask=m8[r])
+
+    run_rows(range(0, hgt, _FLOOR_ROWS), strip)
+    return out
+
+
+def _lobes_floor(
+    lobes: dict[str, np.ndarray], lights: dict[str, np.ndarray], kappa: np.ndarray
+) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """Read each lobe, light and κ once; write the beauty and one σ per lobe once."""
+    hgt, wid = kappa.shape
+    names = list(lobes)
+    beauty = np.empty((hgt, wid, 3), np.float32)
+    sigmas = {n: np.empty((hgt, wid), np.float32) for n in names}
+
+    def strip(r0: int) -> None:
+        r = slice(r0, min(hgt, r0 + _FLOOR_ROWS))
+        acc = beauty[r]
+        cv2.add(lobes[names[0]][r], lights[names[0]][r], dst=acc)
+        for n in names[1:]:
+            cv2.add(acc, lobes[n][r], dst=acc)
+            cv2.add(acc, lights[n][r], dst=acc)
+        for n in names:
+            np.copyto(sigmas[n][r], kappa[r])
+
+    run_rows(range(0, hgt, _FLOOR_ROWS), strip)
+    return beauty, sigmas
 
 
 def _materialise(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) -> None:

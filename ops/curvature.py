@@ -35,8 +35,11 @@ occlusion boundaries and nothing of one surface leaks into another.
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import threading
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -62,7 +65,7 @@ _FLT_MAX = float(np.finfo(np.float32).max)
 _NZ_MIN = 1e-2  # n_z is clamped to this before n_z^f (f > 0); |q| ≤ 1 / _NZ_MIN^f
 _TARGET_SIGMA = 1.5  # downsample while σ stays >= this many working pixels
 _MIN_SIDE = 16  # never downsample below this many pixels per side
-_STRIP_ROWS = 96  # working-grid rows per strip
+_STRIP_ROWS = 135  # working-grid rows per strip (4 strips at 1080p, level 1)
 
 
 @dataclass(init=False)
@@ -134,15 +137,48 @@ _FIELDS = ("k1", "k2", "dir_x", "dir_y", "weight")
 
 @dataclass
 class _Coarse:
-    """Working-grid results and the full size (H, W) they are interpolated to."""
+    """Working-grid results and the full size (H, W) they are interpolated to.
 
-    k1: np.ndarray
-    k2: np.ndarray
-    d: np.ndarray  # (a - c) / 2 of the Hessian
-    b: np.ndarray  # its off-diagonal term
+    The Hessian H = ∇q = [[a, b], [b, c]] is kept as the field q it differentiates and its
+    trace a + c (all :func:`isotropic` needs); d = (a - c)/2, b and the principal curvatures
+    κ1,2 = trace/2 ± sqrt(d² + b²) are derived on first access (the same arithmetic as in
+    :func:`_hessian_rows`).
+    """
+
+    qx: np.ndarray
+    qy: np.ndarray
     weight: np.ndarray
     trace: np.ndarray
     size: tuple[int, int]
+    sx: float  # derivative scales of q (see _Params)
+    sy: float
+
+    @functools.cached_property
+    def d(self) -> np.ndarray:
+        """(a - c) / 2 of the Hessian."""
+        n = self.qx.shape[0]
+        a = _deriv_x(self.qx, self.sx)
+        c = _deriv_y(self.qy, 0, n, -self.sy)
+        return np.asarray(cv2.addWeighted(a, 0.5, c, -0.5, 0.0), np.float32)
+
+    @functools.cached_property
+    def b(self) -> np.ndarray:
+        """The off-diagonal term of the (symmetrised) Hessian."""
+        n = self.qx.shape[0]
+        by = _deriv_y(self.qx, 0, n, -0.5 * self.sy)
+        return np.asarray(cv2.add(by, _deriv_x(self.qy, 0.5 * self.sx)), np.float32)
+
+    @functools.cached_property
+    def _radius(self) -> np.ndarray:
+        return np.asarray(cv2.magnitude(self.d, self.b), np.float32)
+
+    @functools.cached_property
+    def k1(self) -> np.ndarray:
+        return np.asarray(cv2.scaleAdd(self.trace, 0.5, self._radius), np.float32)
+
+    @functools.cached_property
+    def k2(self) -> np.ndarray:
+        return np.asarray(cv2.scaleAdd(self._radius, -2.0, self.k1), np.float32)
 
     def upsample(self, img: np.ndarray) -> np.ndarray:
         h, w = self.size
@@ -232,16 +268,19 @@ def _working_level(sigma_px: float, shape: tuple[int, int]) -> int:
 
 
 def _jump_band(depth_l: np.ndarray, cov: np.ndarray, depth_jump: float, radius: int) -> np.ndarray:
-    """uint8 255 on pixels within ``radius`` of a depth jump between two covered neighbours."""
-    off = cov == 0
-    logd = depth_l.copy()
-    np.copyto(logd, np.float32(1.0), where=off)  # cv2.log is slow on inf/NaN
-    cv2.log(logd, dst=logd)
-    lo = logd.copy()
-    np.copyto(lo, np.float32(np.inf), where=off)
-    np.copyto(logd, np.float32(-np.inf), where=off)
-    spread = cv2.subtract(_cv.dilate(logd, None), _cv.erode(lo, None))  # over covered 3x3
-    jump = _cv.compare(spread, float(depth_jump), cv2.CMP_GT)
+    """uint8 255 on pixels within ``radius`` of a depth jump between two covered neighbours.
+
+    A jump is ``log d_max - log d_min > depth_jump`` over the covered pixels of a 3x3
+    neighbourhood, tested without logarithms as ``e^-depth_jump · d_max > d_min``.
+    """
+    hi = np.zeros_like(depth_l)
+    cv2.copyTo(depth_l, cov, hi)  # covered depth, 0 elsewhere (below any covered depth)
+    lo = np.full_like(depth_l, np.inf)
+    cv2.copyTo(depth_l, cov, lo)  # covered depth, +inf elsewhere
+    hi = _cv.dilate(hi, None)  # the default border is ignored by both
+    lo = _cv.erode(lo, None)
+    np.multiply(hi, np.float32(math.exp(-depth_jump)), out=hi)
+    jump = cv2.compare(hi, lo, cv2.CMP_GT)
     if radius > 0 and cv2.countNonZero(jump):
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         jump = cv2.dilate(jump, k)
@@ -311,16 +350,24 @@ def principal_curvatures(
     # σ in working pixels, less the smoothing of the box downsampling and the central difference.
     var = sigma_px * sigma_px - box_var - k * k / 3.0
     sigma_l = math.sqrt(var) / k if var > 0.0 else 0.0
+    nchan = 2 if f == 0.0 else 3  # n_z is only needed for the foreshortening
     if not exact:  # working-grid inputs for the whole frame at once
-        whole = _working_inputs(normal, depth, mask, level, (w_l, h_l))
+        whole_n = _downsample(normal, level, (w_l, h_l))
+        whole_c = _working_coverage(depth, mask, level, (w_l, h_l))
 
-    def inputs(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Working-grid normal, coverage and depth of working rows a0..a1."""
+    def normals(a0: int, a1: int) -> list[np.ndarray]:
+        """Planes (new arrays) of the working-grid normals of working rows a0..a1."""
         if not exact:
-            return whole[0][a0:a1], whole[1][a0:a1], whole[2][a0:a1]
+            return [cv2.extractChannel(whole_n[a0:a1], c) for c in range(nchan)]
+        return _working_normals(normal[a0 * k : a1 * k], level, nchan)
+
+    def coverage(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray]:
+        """Working-grid coverage and depth of working rows a0..a1."""
+        if not exact:
+            return whole_c[0][a0:a1], whole_c[1][a0:a1]
         rows = slice(a0 * k, a1 * k)  # box blocks never straddle strips
         m = None if mask is None else mask[rows]
-        return _working_inputs(normal[rows], depth[rows], m, level, (w_l, a1 - a0))
+        return _working_coverage(depth[rows], m, level, (w_l, a1 - a0))
 
     radius = max(1, round(1.5 * sigma_l))
     ks = 2 * math.ceil(2.5 * sigma_l) + 1 if sigma_l > 0.0 else 1
@@ -332,57 +379,128 @@ def principal_curvatures(
         depth_jump=depth_jump,
         sx=0.5 * img_h * w_l / wid,  # [-1, 0, 1] spans 2 working pixels
         sy=0.5 * img_h * h_l / hgt,
+        nscale=float(k) if exact else 1.0,
     )
     # Row strips (with a halo covering every neighbourhood the chain uses) keep the working
     # set in cache and run on parallel threads; the result is the same as one whole pass.
-    halo = 3 + radius + max(ks // 2, 2)
-    outs = [np.empty((h_l, w_l), np.float32) for _ in range(6)]
+    # The smoothing needs normals 1 + g rows around the strip (g: the kernel's half size), the
+    # jump band coverage and depth 2 + radius rows further.
+    nhalo = 1 + max(ks // 2, 2)
+    halo = 2 + radius + nhalo
+    outs = [np.empty((h_l, w_l), np.float32) for _ in range(4)]
 
     def strip(r0: int) -> None:
         r1 = min(h_l, r0 + _STRIP_ROWS)
         a0, a1 = max(0, r0 - halo), min(h_l, r1 + halo)
-        res = _hessian_rows(*inputs(a0, a1), prm)
-        for o, x in zip(outs, res, strict=True):
-            o[r0:r1] = x[r0 - a0 : r1 - a0]
+        chans = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo))
+        cov, depth_l = coverage(a0, a1)
+        _hessian_rows(chans, cov, depth_l, prm, r0 - a0, r1 - a0, [o[r0:r1] for o in outs])
 
-    starts = range(0, h_l, _STRIP_ROWS)
-    workers = max(1, min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1))
-    if workers == 1:
-        for r0 in starts:
-            strip(r0)
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            list(pool.map(strip, starts))
-    k1, k2, d, b, wgt, trace = outs
-    return Curvature._lazy(
-        _Coarse(k1=k1, k2=k2, d=d, b=b, weight=wgt, trace=trace, size=(hgt, wid))
-    )
+    run_rows(range(0, h_l, _STRIP_ROWS), strip)
+    trace, qx, qy, wgt = outs
+    coarse = _Coarse(qx=qx, qy=qy, weight=wgt, trace=trace, size=(hgt, wid), sx=prm.sx, sy=prm.sy)
+    return Curvature._lazy(coarse)
 
 
-def _working_inputs(
-    normal: np.ndarray,
-    depth: np.ndarray,
-    mask: np.ndarray | None,
-    level: int,
-    size: tuple[int, int],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Normals box-averaged over 2^level blocks, coverage (uint8 255 where the whole block is
-    covered) and depth sampled once per block (nearest: a jump stays a jump)."""
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+
+
+def run_rows(starts: range, fn: Callable[[int], None]) -> None:
+    """Call ``fn(start)`` for each of ``starts``, on a shared pool of up to
+    ``min(cv2.getNumThreads(), os.cpu_count())`` threads (cv2 and NumPy free the GIL); ``fn``
+    must only write its own rows. ``cv2.setNumThreads(1)`` makes it sequential."""
+    global _POOL
+    workers = min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1)
+    if workers <= 1:
+        for s in starts:
+            fn(s)
+        return
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max(2, os.cpu_count() or 1), "depict-rows")
+        pool = _POOL
+    # At most ``workers`` tasks in flight, each working through strips in turn.
+    todo = iter(starts)
+    lock = threading.Lock()
+
+    def worker() -> None:
+        while True:
+            with lock:
+                s = next(todo, None)
+            if s is None:
+                return
+            fn(s)
+
+    for fut in [pool.submit(worker) for _ in range(workers)]:
+        fut.result()
+
+
+def _working_normals(normal: np.ndarray, level: int, nchan: int) -> list[np.ndarray]:
+    """The first ``nchan`` channels of the normals box-averaged over 2^level blocks, as planes;
+    the image's height and width are multiples of 2^level.
+
+    Each halving sums pairs of rows and averages pairs of columns (two streaming passes, cheaper
+    than one bilinear 2x2 halving on data that comes from memory, and, unlike a bilinear
+    horizontal halving, never mixing in the next row), so the planes are 2^level times the box
+    average; :func:`principal_curvatures` divides that factor out. A non-finite normal makes
+    its block non-finite and nothing else, as with a plain box average.
+    """
     if level == 0:
-        return normal, _valid_u8(depth, mask), depth
+        return [cv2.extractChannel(normal, c) for c in range(nchan)]
+    img = normal
+    for _ in range(level - 1):
+        pairs = _halve(img)
+        img = np.empty((pairs.shape[0], pairs.shape[1], 3), np.float32)
+        cv2.mixChannels([pairs], [img], [0, 0, 1, 1, 2, 2])
+    pairs = _halve(img)
+    return [cv2.extractChannel(pairs, c) for c in range(nchan)]
+
+
+def _halve(img: np.ndarray) -> np.ndarray:
+    """Sums of row pairs, then means of column pairs of an (h, w, 3) image with even h and w,
+    as (h/2, w/2, 6): channels 0-2 are the block values (3-5 straddle two blocks)."""
+    rows = cv2.add(img[0::2], img[1::2])
+    # (rows[x] + rows[x+1]) / 2 for every x; on even x, the mean of the pair.
+    pairs = cv2.filter2D(rows, -1, _PAIR_MEAN, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
+    return pairs.reshape(rows.shape[0], rows.shape[1] // 2, 6)
+
+
+_PAIR_MEAN = np.array([[0.5, 0.5]], np.float32)
+
+
+def _working_coverage(
+    depth: np.ndarray, mask: np.ndarray | None, level: int, size: tuple[int, int]
+) -> tuple[np.ndarray, np.ndarray]:
+    """Coverage (uint8 255 where the whole 2^level block is covered) and depth sampled once per
+    block (nearest: a jump stays a jump)."""
+    if level == 0:
+        return _valid_u8(depth, mask), depth
     k = 2**level
-    nl = _downsample(normal, level, size)
     # Non-finite depth (inf/NaN) propagates through the box average; the mask's 255 only
     # survives when the whole block is 255.
-    cov = cv2.inRange(_downsample(depth, level, size), 1e-30, _FLT_MAX)
-    if mask is not None:
-        m = _downsample(_mask_u8(mask), level, size)
-        cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
-    if depth.shape[0] % k == 0 and depth.shape[1] % k == 0:
-        depth_l = np.ascontiguousarray(depth[::k, ::k])
+    exact = depth.shape[0] % k == 0 and depth.shape[1] % k == 0
+    if exact:
+        dbox = depth
+        for _ in range(level):  # exact 2x2 averages (INTER_AREA's fast path)
+            dbox = cv2.resize(dbox, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
+        # Top-left sample of each block: every k-th row, read as k-channel pixels, channel 0.
+        rows = depth[::k]
+        depth_l = cv2.extractChannel(rows.reshape(rows.shape[0], rows.shape[1] // k, k), 0)
     else:
+        dbox = cv2.resize(depth, size, interpolation=cv2.INTER_AREA)
         depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
-    return nl, cov, depth_l
+    cov = cv2.inRange(dbox, 1e-30, _FLT_MAX)
+    if mask is not None:
+        m = _mask_u8(mask)
+        if level == 1 and exact:
+            # The whole 2x2 block is 255: both rows, then both bytes of each uint16 pair.
+            both = cv2.bitwise_and(m[0::2], m[1::2]).view(np.uint16)
+            cv2.bitwise_and(cov, _cv.compare(both, 0xFFFF, cv2.CMP_EQ), dst=cov)
+        else:
+            m = _downsample(m, level, size)
+            cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
+    return cov, depth_l
 
 
 @dataclass(frozen=True)
@@ -394,66 +512,82 @@ class _Params:
     depth_jump: float
     sx: float  # derivative scales (per unit image height, sign of camera y included below)
     sy: float
+    nscale: float  # the working-grid normals are this many times the box average
 
 
 def _hessian_rows(
-    nl: np.ndarray, cov: np.ndarray, depth_l: np.ndarray, prm: _Params
-) -> tuple[np.ndarray, ...]:
-    """(k1, k2, d, b, weight, trace) on a block of working-grid rows (RS §4, see
-    :func:`principal_curvatures`)."""
+    chans: list[np.ndarray],
+    cov: np.ndarray,
+    depth_l: np.ndarray,
+    prm: _Params,
+    o0: int,
+    o1: int,
+    out: list[np.ndarray],
+) -> None:
+    """(trace, q_x, q_y, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
+    see :func:`principal_curvatures`); the block (``cov``, ``depth_l``) holds the neighbourhoods
+    those rows need, the planes of the normals (n_x, n_y[, n_z]; overwritten) only its rows
+    b0..b1 (below).
+
+    Each step runs only on the rows the next one needs: the jump band on the whole block, the
+    smoothing on ``o0 - 1 - g .. o1 + 1 + g`` (g: the kernel's half size; the rows it gets wrong
+    at a cut-off edge are not used), q on ``o0 - 1 .. o1 + 1``, derivatives and weight on o0..o1.
+    """
+    n = cov.shape[0]
     band = _jump_band(depth_l, cov, prm.depth_jump, prm.radius)
     covp = cv2.subtract(cov, band)  # covered and away from depth jumps (saturating)
-    wmap = np.multiply(covp, np.float32(1.0 / 255.0), dtype=np.float32)
+    ks, sigma = prm.ksize, prm.sigma
+    g = max(ks // 2, 2)
+    q0, q1 = max(0, o0 - 1), min(n, o1 + 1)
+    b0, b1 = max(0, q0 - g), min(n, q1 + g)
+    wmap = np.multiply(covp[b0:b1], np.float32(1.0 / 255.0), dtype=np.float32)
 
     # Normalised convolution of the normals with the weight map: G*(n·w) / G*w.
-    chans = list(cv2.split(np.ascontiguousarray(nl)))
-    if prm.f == 0.0:
-        chans = chans[:2]  # n_z is not needed
-    ks, sigma = prm.ksize, prm.sigma
+    assert chans[0].shape[0] == b1 - b0
     for i, ch in enumerate(chans):
-        cv2.patchNaNs(ch, 0.0)
-        cv2.multiply(ch, wmap, dst=ch)
+        cv2.multiply(ch, wmap, dst=ch, scale=1.0 / prm.nscale)  # exact: a power of 2
+        cv2.patchNaNs(ch, 0.0)  # after: non-finite normals where w = 0 give 0
         if sigma > 0.0:
             chans[i] = cv2.GaussianBlur(ch, (ks, ks), sigma)
     wsm = cv2.GaussianBlur(wmap, (ks, ks), sigma) if sigma > 0.0 else wmap
 
-    # q = n_xy / n_z^f of the smoothed normal n = N / W.
-    inv = np.maximum(wsm, np.float32(1e-6))
+    # q = n_xy / n_z^f of the smoothed normal n = N / W, on rows q0..q1.
+    rq = slice(q0 - b0, q1 - b0)
+    inv = _cv.max(wsm[rq], 1e-6)
     np.divide(np.float32(1.0), inv, out=inv)
     if prm.f > 0.0:
-        nzs = cv2.multiply(chans[2], inv)
-        np.maximum(nzs, np.float32(_NZ_MIN), out=nzs)
+        nzs = _cv.max(cv2.multiply(chans[2][rq], inv), _NZ_MIN)
         cv2.multiply(inv, cv2.pow(nzs, -prm.f), dst=inv)
-    qx = cv2.multiply(chans[0], inv)
-    qy = cv2.multiply(chans[1], inv)
+    qx = cv2.multiply(chans[0][rq], inv)
+    qy = cv2.multiply(chans[1][rq], inv)
 
-    # H = ∇q per unit image height; rows grow downward (∂/∂y = -∂/∂row).
-    a = _deriv(qx, 1, prm.sx)
-    c = _deriv(qy, 0, -prm.sy)
-    b = _deriv(qx, 0, -0.5 * prm.sy)
-    cv2.add(b, _deriv(qy, 1, 0.5 * prm.sx), dst=b)
-
-    trace = cv2.add(a, c)
-    d = cv2.addWeighted(a, 0.5, c, -0.5, 0.0)
-    r = cv2.magnitude(d, b)
-    k1 = cv2.scaleAdd(trace, 0.5, r)
-    k2 = cv2.scaleAdd(r, -2.0, k1)
+    # Trace of H = ∇q per unit image height on rows o0..o1; rows grow downward
+    # (∂/∂y = -∂/∂row). The rest of H is derived from q when needed (_Coarse).
+    s0, s1 = o0 - q0, o1 - q0  # output rows within q0..q1
+    trace, qx_out, qy_out, wgt = out
+    a = _deriv_x(qx[s0:s1], prm.sx)
+    c = _deriv_y(qy, s0, s1, -prm.sy)
+    cv2.add(a, c, dst=trace)
+    np.copyto(qx_out, qx[s0:s1])
+    np.copyto(qy_out, qy[s0:s1])
 
     # Weight: 0 on the border pixels of the coverage (whose derivative stencil reaches outside
     # it; this also keeps an interpolated weight off the background), rising to 1 over about
     # 1.65 σ inside: a smoothstep of the smoothed coverage W (smoothed over >= 1 px) between the
     # values W takes 1 px and 1 + 1.65σ px inside a straight edge, Φ(1/σ) and Φ(1/σ + 1.65).
+    ro = slice(o0 - b0, o1 - b0)
     sigma_w = sigma
     if sigma < 1.0:
         sigma_w = 1.0
         wsm = cv2.GaussianBlur(wmap, (5, 5), 1.0)
     w0, w1 = _phi(1.0 / sigma_w), _phi(1.0 / sigma_w + 1.65)
-    wgt = cv2.addWeighted(wsm, 1.0 / (w1 - w0), wsm, 0.0, -w0 / (w1 - w0))
-    np.clip(wgt, 0.0, 1.0, out=wgt)
-    wgt = wgt * wgt * (3.0 - 2.0 * wgt)
-    inner = _cv.erode(covp, None, borderType=cv2.BORDER_REPLICATE)
-    wgt = _cv.multiply(wgt, inner, scale=1.0 / 255.0, dtype=cv2.CV_32F)
-    return k1, k2, d, b, wgt, trace
+    t = cv2.addWeighted(wsm[ro], 1.0 / (w1 - w0), wsm[ro], 0.0, -w0 / (w1 - w0))
+    np.clip(t, np.float32(0.0), np.float32(1.0), out=t)
+    u = cv2.addWeighted(t, -2.0, t, 0.0, 3.0)  # 3 - 2t
+    cv2.multiply(t, t, dst=t)
+    cv2.multiply(t, u, dst=t)  # smoothstep t²(3 - 2t)
+    inner = _cv.erode(covp[q0:q1], None, borderType=cv2.BORDER_REPLICATE)[s0:s1]
+    _cv.multiply(t, inner, dst=wgt, scale=1.0 / 255.0, dtype=cv2.CV_32F)
 
 
 def _phi(x: float) -> float:
@@ -461,17 +595,39 @@ def _phi(x: float) -> float:
     return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
 
 
-def _deriv(img: np.ndarray, axis: int, scale: float) -> np.ndarray:
-    """``scale`` · (img[+1] - img[-1]) along columns (axis=1) or rows (axis=0); one-sided
-    (doubled) on the first and last column/row."""
-    kern = np.array([-scale, 0.0, scale], np.float32)
-    kern = kern[None, :] if axis == 1 else kern[:, None]
-    out = np.asarray(
-        cv2.filter2D(img, cv2.CV_32F, kern, borderType=cv2.BORDER_REPLICATE), np.float32
-    )
-    if img.shape[axis] >= 2:  # replicate gives half the one-sided difference on the edges
-        edge = (slice(None), [0, -1]) if axis == 1 else ([0, -1], slice(None))
-        out[edge] *= 2.0
+def _deriv_x(q: np.ndarray, scale: float) -> np.ndarray:
+    """``scale`` · (q[:, x+1] - q[:, x-1]); one-sided (doubled) on the first and last column."""
+    out = np.empty_like(q)
+    w = q.shape[1]
+    if w >= 3:
+        cv2.addWeighted(q[:, 2:], scale, q[:, :-2], -scale, 0.0, dst=out[:, 1:-1])
+    if w >= 2:
+        s2 = np.float32(2.0 * scale)
+        np.multiply(np.subtract(q[:, 1], q[:, 0]), s2, out=out[:, 0])
+        np.multiply(np.subtract(q[:, -1], q[:, -2]), s2, out=out[:, -1])
+    else:
+        out[...] = 0.0
+    return out
+
+
+def _deriv_y(q: np.ndarray, r0: int, r1: int, scale: float) -> np.ndarray:
+    """``scale`` · (q[y+1] - q[y-1]) for rows r0..r1 of ``q``; one-sided (doubled) on the first and
+    last row of ``q`` (the image's: inner strips always have a neighbour row)."""
+    n = q.shape[0]
+    out = np.empty((r1 - r0, q.shape[1]), np.float32)
+    lo, hi = max(r0, 1), min(r1, n - 1)
+    if hi > lo:
+        cv2.addWeighted(
+            q[lo + 1 : hi + 1], scale, q[lo - 1 : hi - 1], -scale, 0.0, dst=out[lo - r0 : hi - r0]
+        )
+    if n >= 2:
+        s2 = np.float32(2.0 * scale)
+        if r0 == 0:
+            np.multiply(np.subtract(q[1], q[0]), s2, out=out[0])
+        if r1 == n:
+            np.multiply(np.subtract(q[n - 1], q[n - 2]), s2, out=out[-1])
+    else:
+        out[...] = 0.0
     return out
 
 

@@ -17,13 +17,13 @@ evaluates Eq. 2 with ``e^{-γκ}``, so convexities brighten what is above α, as
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Mapping
-from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike
+
+from ops.curvature import run_rows
 
 #: Rec. 709 / sRGB luminance weights (linear RGB).
 REC709 = (0.2126, 0.7152, 0.0722)
@@ -174,8 +174,43 @@ def white_level(
     y = y[np.isfinite(y)]
     if y.size == 0:
         return 1.0
-    level = float(np.percentile(y, p))
+    level = _percentile(y, p)
     return level if level > 0.0 else 1.0
+
+
+_BAND_MIN = 1 << 16  # below this many values np.percentile is cheap enough
+_BAND_SAMPLES = 1 << 15
+
+
+def _percentile(y: np.ndarray, p: float) -> float:
+    """``np.percentile(y, p)`` (linear) of a 1-D finite float32 array, which it may reorder.
+
+    Exact and deterministic, without partitioning all of ``y``: a strided subsample brackets the
+    two order statistics the percentile interpolates, one pass counts the values below the
+    bracket and keeps those inside it, and only those are partitioned; numpy's own interpolation
+    of the two values gives the result. Falls back to ``np.percentile`` if the bracket misses.
+    """
+    n = y.size
+    q = np.true_divide(p, 100)
+    g = (n - 1) * q  # numpy's virtual index for the linear method
+    k = math.floor(g)
+    if n < _BAND_MIN or k + 1 > n - 1:
+        return float(np.percentile(y, p, overwrite_input=True))
+    sub = y[:: n // _BAND_SAMPLES].copy()
+    ns = sub.size
+    centre = k / (n - 1) * (ns - 1)
+    margin = 6.0 * math.sqrt(ns * q * (1.0 - q)) + 8.0  # order-statistic spread, with room
+    lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
+    sub.partition([lo_r, hi_r])
+    below = y < sub[lo_r]
+    n_below = int(np.count_nonzero(below))
+    band = y[(y <= sub[hi_r]) & ~below]
+    if not (n_below <= k and n_below + band.size > k + 1):
+        return float(np.percentile(y, p, overwrite_input=True))
+    band.partition([k - n_below, k + 1 - n_below])
+    pair = np.array([band[k - n_below], band[k + 1 - n_below]], y.dtype)
+    # quantile of the pair at the fractional part: numpy's lerp, with the same (weak) weight.
+    return float(np.quantile(pair, float(g - k)))
 
 
 def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
@@ -277,43 +312,52 @@ def scale_lobes(
         n: white_level(luminance(light_arr[n]), mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
-    beauty = (
-        rgb(remainder, "remainder").copy()
-        if remainder is not None
-        else np.zeros((hgt, wid, 3), np.float32)
-    )
+    luma = {n: _LUMA * np.float32(1.0 / levels[n]) for n in names}
+    rem = None if remainder is None else rgb(remainder, "remainder")
+    beauty = np.empty((hgt, wid, 3), np.float32)
     sigmas = {n: np.empty((hgt, wid), np.float32) for n in names}
 
     def strip(r0: int) -> None:
-        # Row strips keep the chain of per-pixel operations in cache (about 2x faster at 1080p
-        # than whole-frame passes) and let strips run on parallel threads (cv2 frees the GIL).
+        # Row strips keep the chain of per-pixel operations in cache and let strips run on
+        # parallel threads (cv2 frees the GIL). Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E),
+        # P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of _sigma_from over max(α, 1 - α) (one
+        # multiplication less), E = e^{-γκ} shared by the lobes of one γ; exactly 1 where E = 1.
         r1 = min(hgt, r0 + _STRIP_ROWS)
         rows = r1 - r0
         expk: dict[float, np.ndarray] = {}
         delta = np.empty((rows, wid), np.float32)
-        scratch = np.empty((rows, wid), np.float32)
+        p1 = np.empty((rows, wid), np.float32)
         s3 = np.empty((rows, wid, 3), np.float32)
+        s3f = s3.reshape(rows, wid * 3)
         acc = beauty[r0:r1].reshape(rows, wid * 3)
-        for n in names:
-            cv2.transform(light_arr[n][r0:r1], _LUMA * np.float32(1.0 / levels[n]), dst=delta)
+        if rem is not None:
+            np.copyto(acc, rem[r0:r1].reshape(rows, wid * 3))
+        elif not names:
+            acc.fill(0.0)
+        for i, n in enumerate(names):
+            cv2.transform(light_arr[n][r0:r1], luma[n], dst=delta)  # as reflectance_delta
             # δ̄ clipped to [0, 1]; a NaN light is NaN in its lobe too, so NaN is not patched.
             _clip01(delta, patch_nan=False)
-            g = gammas[n]
+            g, a = gammas[n], alphas[n]
             if g not in expk:
                 expk[g] = _exp_term(kap[r0:r1], g)
-            s = _sigma_from(
-                expk[g], delta, alphas[n], scratch=scratch, consume=True, out=sigmas[n][r0:r1]
-            )
+            e = expk[g]
+            s = sigmas[n][r0:r1]
+            np.subtract(np.float32(1.0), delta, out=p1)
+            if a > 0.5:  # P' = 1 - δ̄, Q' = δ̄ (1 - α) / α (both <= 1, as P and Q)
+                np.multiply(delta, np.float32((1.0 - a) / a), out=delta)
+            elif a < 0.5:  # over 1 - α instead: P' = (1 - δ̄) α / (1 - α), Q' = δ̄
+                np.multiply(p1, np.float32(a / (1.0 - a)), out=p1)
+            cv2.multiply(p1, e, dst=s)
+            cv2.add(s, delta, dst=s)  # P'E + Q'
+            cv2.accumulateProduct(delta, e, p1)  # P' + Q'E
+            cv2.divide(s, p1, dst=s)
             cv2.merge((s, s, s), dst=s3)
             lobe = lobe_arr[n][r0:r1].reshape(rows, wid * 3)
-            cv2.accumulateProduct(lobe, s3.reshape(rows, wid * 3), acc)
+            if i == 0 and rem is None:
+                cv2.multiply(lobe, s3f, dst=acc)
+            else:
+                cv2.accumulateProduct(lobe, s3f, acc)
 
-    starts = range(0, hgt, _STRIP_ROWS)
-    workers = max(1, min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1))
-    if workers == 1:
-        for r0 in starts:
-            strip(r0)
-    else:
-        with ThreadPoolExecutor(workers) as pool:
-            list(pool.map(strip, starts))
+    run_rows(range(0, hgt, _STRIP_ROWS), strip)
     return beauty, sigmas

@@ -91,13 +91,16 @@ def test_scores_are_the_congruence_of_the_images(frame: Frame, result: Compariso
         direct = congruence(
             result.image(m, 3), depth, frame.mask > 0.5, shading_norm=reference.shading_norm
         )
-        assert result.score(m, 3) == pytest.approx(direct.score, abs=1e-9)
+        # the threaded strips sum in varying order: the scale and the score agree to ~1e-9
+        assert result.score(m, 3) == pytest.approx(direct.score, abs=1e-7)
         own = congruence(result.image(m, 3), depth, frame.mask > 0.5)
         assert own.shading_norm != pytest.approx(reference.shading_norm)
 
 
 def test_per_image_normalisation_scores_each_rendering_alone(frame: Frame) -> None:
-    res = compare(frame, ["lambert", "light_alignment"], directions=[1, 3], shading_norm="per_image")
+    res = compare(
+        frame, ["lambert", "light_alignment"], directions=[1, 3], shading_norm="per_image"
+    )
     depth = np.where(frame.mask > 0.5, frame.buffers["depth"], np.inf).astype(np.float32)
     for m in ("lambert", "light_alignment"):
         direct = congruence(res.image(m, 3), depth, frame.mask > 0.5)
