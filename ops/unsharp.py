@@ -18,7 +18,9 @@ Colour handling (paper §4): with φ the centred CIELAB cube-root coordinates
 (:func:`ops.color.rgb_to_lab_phi`, L* = 116 φ_y, a* = 500 (φ_x − φ_y), b* = 200 (φ_y − φ_z)),
 the enhanced colour is (U(L*), k a*, k b*) with k = U(L*)/L*, i.e. φ' = k φ: the hue angle
 atan2(b*, a*) and the saturation √(a*² + b*²)/L* are unchanged. U is clamped at 0 (no negative
-lightness); k = U / max(L*, 1e-3) (black stays black).
+lightness); k = U / max(L*, 1e-3) (black stays black). Only L* is ever formed on the way in
+(:func:`ops.color.lightness`); on the way out :func:`ops.color.scale_lab` applies φ' = k φ strip
+by strip, with k (and the gain, Eq. 1) formed for each strip of rows while it is in cache.
 
 The surface pyramid (``_surface_pyramid``), in short: level k holds cells of 2^k pixels that
 each keep the front-most surface of their block (depth steps are told from steep surfaces by
@@ -26,13 +28,15 @@ extrapolating each cell's plane, from its normal); each level is smoothed by a d
 guided by the depth (so its distances are the surface's own); levels are combined coarse to
 fine, each pixel mixing the two levels around its σ_px = σ / pixel_size, with an upsampling that
 only interpolates between cells of the pixel's own surface. Only the bounding box of the
-surface is processed, and a level only where some pixel needs it.
+surface is processed, and a level only where some pixel needs it. The full-resolution fields
+(depth guide, L*, the averages that make level 1) are formed in one pass over strips of rows.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -77,6 +81,7 @@ _BOX_MARGIN = 8
 _LEVEL_SIGMA = 2.218
 _LN2 = math.log(2.0)
 _L_EPS = 1.0e-3  # L* below which k = U/L is not formed (black)
+_STRIP_PIXELS = 1 << 17  # pixels per strip of rows in the passes over full-resolution fields
 
 Array = np.ndarray
 
@@ -123,16 +128,13 @@ def _plane(name: str, a: Array | float, shape: tuple[int, int]) -> Array:
 # colour: lightness in, lightness out
 
 
-def _lightness(beauty: Array, white: float) -> tuple[Array, Array]:
-    """φ (H, W, 3) and L* = 116 φ_y (H, W) of linear RGB relative to ``white``."""
-    phi = color.rgb_to_lab_phi(beauty, white)
-    lum = _cv.transform(phi, np.array([[0.0, 116.0, 0.0]], dtype=np.float32))
-    return phi, lum
+def _lightness(beauty: Array, white: float, out: Array | None = None) -> Array:
+    """L* (H, W) of linear RGB relative to ``white`` (a*, b* are never formed)."""
+    return color.lightness(beauty, white, out)
 
 
 def _with_lightness(
     beauty: Array,
-    phi: Array,
     lum: Array,
     new_lum: Array,
     white: float,
@@ -142,19 +144,12 @@ def _with_lightness(
     """Linear RGB with L* replaced by ``new_lum`` and (a*, b*) scaled by k = new/old (§4).
 
     U is clamped at 0; k = U / max(L*, 1e-3) (below L* = 1e-3, black, the scaling saturates).
-    ``phi`` and ``new_lum`` are consumed. Pixels where ``keep`` (uint8, non-zero) get ``beauty``
-    back bit for bit. ``out``: where to write (an (H, W, 3) view), else a new array.
+    ``new_lum`` is consumed. Pixels where ``keep`` (uint8, non-zero) get ``beauty`` back bit
+    for bit. ``out``: where to write (an (H, W, 3) view), else a new array.
     """
     _cv.max(new_lum, 0.0, dst=new_lum)
     k = _cv.divide(new_lum, _cv.max(lum, _L_EPS), dst=new_lum)
-    _cv.multiply(phi, _cv.merge([k, k, k]), dst=phi)
-    res = color.lab_phi_to_rgb(phi, white, out=out)
-    if keep is not None and _cv.countNonZero(keep):
-        if res.flags.c_contiguous:
-            _cv.copyTo(beauty, keep, res)
-        else:
-            np.copyto(res, beauty, where=keep.view(bool)[..., None])
-    return res
+    return color.scale_lab(beauty, k, white, keep=keep, out=out)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -200,7 +195,6 @@ class _Surface:
     """What the smoothing needs to know about the visible surface, at full resolution."""
 
     valid: Array  # uint8 0/1: pixel on the surface
-    w: Array  # float32 0/1
     iz: Array  # depth guide, image-pixel units, 0 off the surface (see _surface)
     lps: Array | None  # ln(pixel_size), 0 off the surface; None: derived from iz (lps_from)
     lps_from: tuple[float, float]  # ln(pixel_size) = a · iz + b where ``lps`` is None
@@ -212,14 +206,35 @@ class _Surface:
     centre: tuple[float, float]  # optical centre (column, row) in this (cropped) grid
 
 
-def _valid(depth: Array, pixel_size: Array, mask: Array) -> Array:
-    """uint8 0/1: mask > 0 and finite, positive depth and pixel size."""
-    valid = _cv.bitwise_and(
-        _cv.inRange(depth, 1e-30, 3.0e38), _cv.inRange(pixel_size, 1e-30, 3.0e38)
-    )
+def _valid(depth: Array, pixel_size: Array, mask: Array) -> tuple[Array, tuple[float, float]]:
+    """uint8 0/1: mask > 0 and finite, positive depth and pixel size; and the (min, max) of the
+    pixel size there ((0, 0) where there is none). Only the bounding box of the mask is
+    tested, in strips of rows (each strip's depth and pixel size read once)."""
     vm = mask.view(np.uint8) if mask.dtype == np.bool_ else _cv.compare(mask, 0.0, _cv.CMP_GT)
-    _cv.bitwise_and(valid, vm, dst=valid)
-    return _cv.min(valid, 1, dst=valid)
+    valid = np.zeros(vm.shape, np.uint8)
+    mb = _crop(vm)
+    if mb is None:
+        return valid, (0.0, 0.0)
+    d, ps, m, out = depth[mb], pixel_size[mb], vm[mb], valid[mb]
+    lo, hi = math.inf, -math.inf
+    step = max(1, _STRIP_PIXELS // max(d.shape[1], 1))
+    for r0 in range(0, d.shape[0], step):
+        r = slice(r0, r0 + step)
+        v = _cv.bitwise_and(_cv.inRange(d[r], 1e-30, 3.0e38), _cv.inRange(ps[r], 1e-30, 3.0e38))
+        _cv.bitwise_and(v, m[r], dst=v)
+        _cv.min(v, 1, dst=v)
+        out[r] = v
+        if _cv.countNonZero(v):
+            a, b, _, _ = _cv.minMaxLoc(ps[r], mask=v)
+            lo, hi = min(lo, a), max(hi, b)
+    return valid, ((lo, hi) if lo <= hi else (0.0, 0.0))
+
+
+def _write(res: Array, dst: Array, box: tuple[slice, slice] | slice) -> None:
+    """Make sure ``dst[box]`` holds ``res`` (the result of a cv2 call given ``dst=dst[box]``:
+    OpenCV writes through views of rows with a stride, but allocates anew for others)."""
+    if not np.shares_memory(res, dst):
+        dst[box] = res
 
 
 def _outside(img: Array, box: tuple[slice, slice]) -> Array:
@@ -248,7 +263,10 @@ def _surface(
     normal: Array | None,
     depth_sigma: float,
     centre: tuple[float, float],
-) -> _Surface:
+    ps_range: tuple[float, float],
+    signal: Callable[[slice, Array], object],
+    squares: bool,
+) -> tuple[_Surface, Array, _Level | None]:
     """Depth guide and footprint of the visible surface (``valid``: uint8 0/1, not all 0).
 
     The depth guide I is built so that |ΔI| between neighbouring pixels is the depth step over
@@ -260,6 +278,14 @@ def _surface(
     image-space stand-in for distances over the mesh (``_smooth_level`` scales it by
     _DT_DEPTH_GAIN and flattens slopes below _KNEE). ``depth_sigma`` divides I. ``centre``:
     the optical centre (column, row) in this grid (the image centre, shifted by any crop).
+    ``ps_range``: (min, max) of ``pixel_size`` where ``valid``.
+
+    In the same pass over strips of rows (each strip's fields are formed and averaged while in
+    cache), returns the signal at full resolution (``signal(rows, out)`` writes those rows of
+    it into ``out``, e.g. L* of the beauty's rows) and level 1 of the pyramid: 2×2 area
+    averages of the signal, of its square if ``squares``, of I and of the normals, normalised by
+    the cell's coverage, and the guide's slopes (``_guide_gradient``); ``_finish_first_level``
+    does the rest. Level 1 is None where the image is too small for a level.
     """
     sub_v = valid[::7, ::7].view(bool)
     sub_z = depth[::7, ::7][sub_v]
@@ -267,26 +293,40 @@ def _surface(
     if sub_z.size == 0:
         vb = valid.view(bool)
         sub_z, sub_ps = depth[vb], pixel_size[vb]
-    ps_min, ps_max, _, _ = _cv.minMaxLoc(pixel_size, mask=valid)
-    w = valid.astype(np.float32)
+    ps_min, ps_max = ps_range  # of pixel_size where valid (from _valid)
+    h, w = valid.shape
     ratio = sub_z / sub_ps
-    lps: Array | None = None
+    measure_lps = False
     focal: float | None = None
     if ps_max <= 1.001 * ps_min:  # orthographic: constant footprint
         p0 = float(np.median(sub_ps))
-        iz = _cv.multiply(_cv.copyTo(depth, valid), 1.0 / (p0 * depth_sigma))
+        iz_scale = 1.0 / (p0 * depth_sigma)
         lps_from = (0.0, math.log(p0))
     else:  # perspective: footprint ∝ depth (also the fallback for anything else)
         f = float(np.median(ratio))
         focal = f
-        iz = _cv.log(_cv.copyTo(depth, valid, np.ones_like(w)))  # ln 1 = 0 off the surface
-        _cv.multiply(iz, f / depth_sigma, dst=iz)
+        iz_scale = f / depth_sigma
         lps_from = (depth_sigma / f, -math.log(f))
-        if float(ratio.max()) > 1.001 * float(ratio.min()):  # not pixel_size = z / f: measure
-            lps = _cv.log(_cv.copyTo(pixel_size, valid, np.ones_like(w)))
-    return _Surface(
+        # not pixel_size = z / f: measure
+        measure_lps = float(ratio.max()) > 1.001 * float(ratio.min())
+    iz = np.empty((h, w), np.float32)
+    lps = np.empty((h, w), np.float32) if measure_lps else None
+    sig = np.empty((h, w), np.float32)
+    first = min(h, w) // 2 >= _MIN_LEVEL_SIDE
+    hc, wc = (h + 1) // 2, (w + 1) // 2
+    nsig = 2 if squares else 1
+
+    def cells() -> Array:
+        return np.empty((hc, wc), np.float32)
+
+    cov, iz1 = cells(), cells()
+    sig1 = [cells() for _ in range(nsig)]
+    lps1 = cells() if measure_lps else None
+    nrm1 = None if normal is None else [cells() for _ in range(3)]
+    grad1 = None if normal is None else (cells(), cells())
+    uv1 = None if focal is None or not first else _view_grid(hc, wc, 1, centre, focal)
+    surf = _Surface(
         valid,
-        w,
         iz,
         lps,
         lps_from,
@@ -297,6 +337,57 @@ def _surface(
         depth_sigma,
         centre,
     )
+    step = max(2, (_STRIP_PIXELS // max(w, 1)) & ~1)  # even: strips hold whole cells
+
+    def strip(r: slice) -> None:
+        r0 = r.start
+        v = valid[r]
+        w_r = np.empty((r.stop - r0, w), np.float32)  # the weight: 1 on the surface, 0 elsewhere
+        iz_r = iz[r]
+        if focal is None:
+            _write(_cv.multiply(_cv.copyTo(depth[r], v), iz_scale, dst=iz_r), iz, r)
+        else:  # ln 1 = 0 off the surface
+            w_r.fill(1.0)
+            _write(_cv.log(_cv.copyTo(depth[r], v, w_r), dst=iz_r), iz, r)
+            _cv.multiply(iz_r, iz_scale, dst=iz_r)
+        if lps is not None:
+            w_r.fill(1.0)
+            _write(_cv.log(_cv.copyTo(pixel_size[r], v, w_r), dst=lps[r]), lps, r)
+        s_r = sig[r]
+        signal(r, s_r)
+        if not first:
+            return
+        np.copyto(w_r, v, casting="unsafe")
+        c = slice(r0 // 2, (r.stop + 1) // 2)
+        cv_c = cov[c]
+        _write(_area_half(w_r), cov, c)
+        inv = _cv.divide(1.0, _cv.max(cv_c, 1e-12))  # fields are 0 in empty cells: stay 0
+        sw = _cv.copyTo(s_r, v)  # 0 off the surface
+        _write(_cv.multiply(_area_half(sw), inv, dst=sig1[0][c]), sig1[0], c)
+        if squares:
+            _write(_cv.multiply(_area_half(_cv.multiply(sw, sw)), inv, dst=sig1[1][c]), sig1[1], c)
+        _write(_cv.multiply(_area_half(iz_r), inv, dst=iz1[c]), iz1, c)
+        if lps is not None and lps1 is not None:
+            _write(_cv.multiply(_area_half(lps[r]), inv, dst=lps1[c]), lps1, c)
+        if normal is not None and nrm1 is not None:
+            # normals off the surface may be anything (0, NaN): average them in and zero the
+            # NaN; a partial cell's sum is renormalised by its coverage
+            n3 = _area_half(normal[r])
+            _cv.patchNaNs(n3, 0.0)
+            for i, ch in enumerate(_cv.split(n3)):
+                _write(_cv.multiply(ch, inv, dst=nrm1[i][c]), nrm1[i], c)
+            if grad1 is not None:  # the guide's slopes at the cells (_guide_gradient)
+                uv = None if uv1 is None else (uv1[0][c], uv1[1][c])
+                gx, gy = _cell_slopes([a[c] for a in nrm1], cv_c, uv, surf)
+                grad1[0][c], grad1[1][c] = gx, gy
+
+    color.row_strips(h, w, strip, step)
+    if not first:
+        return surf, sig, None
+    if lps1 is None:
+        a, b = lps_from
+        lps1 = _cv.addWeighted(iz1, a, iz1, 0.0, b)
+    return surf, sig, _Level(1, cov, sig1, iz1, lps1, nrm1, grad1)
 
 
 @dataclass
@@ -310,6 +401,7 @@ class _Level:
     lps: Array  # ln(pixel_size)
     nrm: list[Array] | None  # normal x, y, z (averaged, not renormalised)
     grad: tuple[Array, Array] | None = None  # ∂I/∂column, ∂I/∂row from the normals
+    flags: tuple[float, Array] | None = None  # (thr, _block_flags(self, thr)) once known
     _valid: Array | None = None
 
     @property
@@ -325,42 +417,26 @@ class _Level:
 
 
 def _area_half(a: Array) -> Array:
-    """2×2 area average (pads odd sizes with zeros: coverage-weighted fields stay exact)."""
+    """2×2 area average (pads odd sizes with zeros: coverage-weighted fields stay exact).
+
+    Multi-channel arrays go through INTER_LINEAR, which at a scale of exactly 1/2 samples the
+    midpoint of each 2×2 block with weights ½, ½: the same average, 3× faster than OpenCV's
+    INTER_AREA on three channels (one channel: INTER_AREA is the faster).
+    """
     h, w = a.shape[:2]
     if h % 2 or w % 2:
         a = _cv.copyMakeBorder(a, 0, h % 2, 0, w % 2, _cv.BORDER_CONSTANT, value=0.0)
-    return _cv.resize(a, (a.shape[1] // 2, a.shape[0] // 2), interpolation=_cv.INTER_AREA)
+    interp = _cv.INTER_AREA if a.ndim == 2 else _cv.INTER_LINEAR
+    return _cv.resize(a, (a.shape[1] // 2, a.shape[0] // 2), interpolation=interp)
 
 
-def _first_level(surf: _Surface, sig_w: list[Array]) -> _Level:
-    """Level 1 (2×2 area averages) from full-resolution fields that are 0 off the surface."""
-    cov = _area_half(surf.w)
-    inv = _cv.divide(1.0, _cv.max(cov, 1e-12))  # fields are 0 in empty cells: stay 0
-
-    def avg(a: Array) -> Array:
-        return _cv.multiply(_area_half(a), inv)
-
-    sig = [avg(s) for s in sig_w]
-    iz = avg(surf.iz)
-    if surf.lps is not None:
-        lps = avg(surf.lps)
-    else:
-        a, b = surf.lps_from
-        lps = _cv.addWeighted(iz, a, iz, 0.0, b)
-    nrm = None
-    if surf.normal is not None:
-        # normals off the surface may be anything (0, NaN): average them in and zero the NaN;
-        # a partial cell's sum is renormalised by its coverage
-        n3 = _area_half(surf.normal)
-        _cv.patchNaNs(n3, 0.0)
-        nrm = [_cv.multiply(np.ascontiguousarray(n3[:, :, i]), inv) for i in range(3)]
-    lv = _Level(1, cov, sig, iz, lps, nrm)
-    lv.grad = _guide_gradient(lv, surf)
-    _front_most_cells(lv, surf, sig_w)
-    return lv
+def _finish_first_level(lv: _Level, surf: _Surface, sig: Array) -> None:
+    """Level 1 as ``_surface`` averaged it (with the guide's slopes), the cells on a step
+    holding the front-most surface only (``sig``: the signal at full resolution)."""
+    _front_most_cells(lv, surf, sig)
 
 
-def _front_most_cells(lv: _Level, surf: _Surface, sig_w: list[Array]) -> None:
+def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
     """Make the level-1 cells that straddle a depth step hold the front-most surface only.
 
     The area average mixes the 2×2 pixels of a cell whatever they show; where a cell sits on a
@@ -371,57 +447,107 @@ def _front_most_cells(lv: _Level, surf: _Surface, sig_w: list[Array]) -> None:
     """
     thr = np.float32(_JUMP * 2)
     fl = _block_flags(lv, thr)
-    cand = _cv.max(_cv.max(fl[:-1, :-1], fl[1:, :-1]), _cv.max(fl[:-1, 1:], fl[1:, 1:]))
+    cand = _cv.dilate(fl, _BLOCK, anchor=(0, 0))[:-1, :-1]  # cell touches a flagged block
     _cv.bitwise_and(cand, lv.valid_u8, dst=cand)
     pts = _cv.findNonZero(cand)
     if pts is None:
         return
     pts = pts.reshape(-1, 2)
     cx, cy = pts[:, 0].astype(np.int64), pts[:, 1].astype(np.int64)
+    cell = cy * lv.cov.shape[1] + cx  # flat index of the cell in its level
     hf, wf = surf.iz.shape
-    px = (2 * cx)[:, None] + np.array([0, 1, 0, 1])[None, :]
-    py = (2 * cy)[:, None] + np.array([0, 0, 1, 1])[None, :]
+    # (4, N): the cell's pixels (top-left, top-right, bottom-left, bottom-right), then cells
+    px = (2 * cx)[None, :] + np.array([0, 1, 0, 1])[:, None]
+    py = (2 * cy)[None, :] + np.array([0, 0, 1, 1])[:, None]
     inside = (px < wf) & (py < hf)
     flat = np.minimum(py, hf - 1) * wf + np.minimum(px, wf - 1)
     ok = inside & surf.valid.ravel()[flat].view(bool)
     iz = surf.iz.ravel()[flat]
     slope = np.float32(0.0)
     if lv.grad is not None:
-        slope = (np.abs(lv.grad[0][cy, cx]) + np.abs(lv.grad[1][cy, cx]))[:, None]
-    front = np.where(ok, iz, np.float32(_BIG)).min(axis=1, keepdims=True)
+        slope = (np.abs(lv.grad[0].ravel()[cell]) + np.abs(lv.grad[1].ravel()[cell]))[None, :]
+    front = np.where(ok, iz, np.float32(_BIG)).min(axis=0, keepdims=True)
     # weight 1 within _JUMP/2 (+ the cell's slope) of the front, fading to 0 at _JUMP
     half = np.float32(0.5) * thr
     keep = np.clip((front + thr + 2.0 * slope - iz) / half, 0.0, 1.0) * ok
-    n = keep.sum(axis=1).astype(np.float32)
-    wk = keep / np.maximum(n, np.float32(1e-6))[:, None]
-    lv.cov[cy, cx] = n * np.float32(0.25)
-    for dst, src in zip(lv.sig, sig_w, strict=True):
-        dst[cy, cx] = (wk * src.ravel()[flat]).sum(axis=1)
-    lv.iz[cy, cx] = (wk * iz).sum(axis=1)
+    n = _sum_taps(keep).astype(np.float32)
+    wk = keep / np.maximum(n, np.float32(1e-6))[None, :]
+    np.put(lv.cov, cell, n * np.float32(0.25))
+    vals = np.where(ok, sig.ravel()[flat], np.float32(0.0))  # the signal, 0 off the surface
+    np.put(lv.sig[0], cell, _sum_taps(wk * vals))
+    if len(lv.sig) > 1:  # and its square
+        np.put(lv.sig[1], cell, _sum_taps(wk * (vals * vals)))
+    iz_c = _sum_taps(wk * iz)
+    np.put(lv.iz, cell, iz_c)
     if surf.lps is not None:
-        lv.lps[cy, cx] = (wk * surf.lps.ravel()[flat]).sum(axis=1)
+        np.put(lv.lps, cell, _sum_taps(wk * surf.lps.ravel()[flat]))
     else:
         a, b = surf.lps_from
-        lv.lps[cy, cx] = a * lv.iz[cy, cx] + b
+        np.put(lv.lps, cell, a * iz_c + b)
     if lv.nrm is not None and surf.normal is not None:
-        nf = surf.normal.reshape(-1, 3)
+        nv = surf.normal.reshape(-1, 3)[flat]  # (4, N, 3)
+        np.nan_to_num(nv, copy=False)
+        nc = _sum_taps(wk[:, :, None] * nv)  # (N, 3)
         for i in range(3):
-            vals = np.nan_to_num(nf[flat, i])
-            lv.nrm[i][cy, cx] = (wk * vals).sum(axis=1)
+            np.put(lv.nrm[i], cell, nc[:, i])
         if lv.grad is not None:  # the re-averaged cells' slopes
             gx, gy = _plane_slope(
-                lv.nrm[0][cy, cx],
-                lv.nrm[1][cy, cx],
-                lv.nrm[2][cy, cx],
+                nc[:, 0],
+                nc[:, 1],
+                nc[:, 2],
                 cy.astype(np.float32),
                 cx.astype(np.float32),
                 1,
                 surf,
             )
             bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
-            lv.grad[0][cy, cx] = np.where(bad, 0.0, gx)
-            lv.grad[1][cy, cx] = np.where(bad, 0.0, gy)
+            np.put(lv.grad[0], cell, np.where(bad, 0.0, gx))
+            np.put(lv.grad[1], cell, np.where(bad, 0.0, gy))
     lv._valid = None
+    # the blocks' flags after the change: only blocks touching a changed cell can differ (cell
+    # validity is kept: each changed cell keeps at least its front-most pixel)
+    lv.flags = (float(thr), _update_flags(lv, thr, fl, cand))
+
+
+def _touching(cells: Array) -> Array:
+    """uint8 (h + 1, w + 1): the 2×2 blocks (the bilinear taps, as in ``_block_flags``) that
+    hold a cell where ``cells`` (uint8, (h, w)) is non-zero; block (i, j) holds cells
+    i−1…i, j−1…j."""
+    near = _cv.copyMakeBorder(cells, 1, 0, 1, 0, _cv.BORDER_CONSTANT, value=0)
+    return _cv.dilate(near, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_CONSTANT, borderValue=0)
+
+
+def _update_flags(lv: _Level, thr: np.float32, fl: Array, changed: Array) -> Array:
+    """``_block_flags(lv, thr)`` from ``fl``, the flags before the cells where ``changed``
+    (uint8, non-zero) changed their guide or slope (not their validity): the blocks touching
+    them are tested again, sparsely, with the same float32 operations."""
+    h, w = lv.cov.shape
+    pts = _cv.findNonZero(_touching(changed))
+    out = fl.copy()
+    if pts is None:
+        return out
+    pts = pts.reshape(-1, 2)
+    bi, bj = pts[:, 1].astype(np.int64), pts[:, 0].astype(np.int64)
+    r0, r1 = np.clip(bi - 1, 0, h - 1) * w, np.clip(bi, 0, h - 1) * w
+    c0, c1 = np.clip(bj - 1, 0, w - 1), np.clip(bj, 0, w - 1)
+    cells = (r0 + c0, r0 + c1, r1 + c0, r1 + c1)  # tl, tr, bl, br
+    cov = lv.cov.ravel()
+    bad = (cov[cells[0]] <= 0) | (cov[cells[1]] <= 0) | (cov[cells[2]] <= 0) | (cov[cells[3]] <= 0)
+    iz = lv.iz.ravel()
+    if lv.grad is None:
+        tl, tr, bl, br = (iz[c] for c in cells)
+    else:
+        hd = np.float32(0.5 * 2**lv.k)  # a power of 2: the products are exact, as in OpenCV
+        gx, gy = lv.grad[0].ravel(), lv.grad[1].ravel()
+        tl = gy[cells[0]] * hd + (gx[cells[0]] * hd + iz[cells[0]])
+        tr = gy[cells[1]] * hd + (gx[cells[1]] * -hd + iz[cells[1]])
+        bl = gy[cells[2]] * -hd + (gx[cells[2]] * hd + iz[cells[2]])
+        br = gy[cells[3]] * -hd + (gx[cells[3]] * -hd + iz[cells[3]])
+    hi = np.maximum(np.maximum(tl, tr), np.maximum(bl, br))
+    lo = np.minimum(np.minimum(tl, tr), np.minimum(bl, br))
+    step = (hi - lo) > thr
+    out[bi, bj] = (bad | step).view(np.uint8)
+    return out
 
 
 def _guide_gradient(lv: _Level, surf: _Surface) -> tuple[Array, Array] | None:
@@ -437,13 +563,55 @@ def _guide_gradient(lv: _Level, surf: _Surface) -> tuple[Array, Array] | None:
     if lv.nrm is None:
         return None
     h, w = lv.cov.shape
-    rows = np.arange(h, dtype=np.float32)[:, None]
-    cols = np.arange(w, dtype=np.float32)[None, :]
-    gx, gy = _plane_slope(lv.nrm[0], lv.nrm[1], lv.nrm[2], rows, cols, lv.k, surf)
-    bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (lv.cov <= 0.0)
+    uv = None if surf.focal is None else _view_grid(h, w, lv.k, surf.centre, surf.focal)
+    return _cell_slopes(lv.nrm, lv.cov, uv, surf)
+
+
+def _cell_slopes(
+    nrm: list[Array], cov: Array, uv: tuple[Array, Array] | None, surf: _Surface
+) -> tuple[Array, Array]:
+    """_plane_slope on (part of) a level: normals ``nrm``, coverage ``cov``, ``uv`` the
+    ``_view_grid`` of those cells (None: orthographic); 0 in empty cells and where not finite.
+    The same float32 operations as _plane_slope, in OpenCV where that is faster."""
+    nx, ny, nz = nrm
+    if uv is not None:
+        den = _cv.subtract(nz, _cv.multiply(nx, uv[0]))
+        _cv.subtract(den, _cv.multiply(ny, uv[1]), dst=den)
+    else:
+        den = nz.copy()
+    np.maximum(den, np.float32(0.02), out=den)
+    scale = np.float32(1.0 / surf.depth_sigma)
+    with np.errstate(invalid="ignore"):
+        gx = np.multiply(nx, scale)
+        np.divide(gx, den, out=gx)
+        gy = np.multiply(ny, -scale)
+        np.divide(gy, den, out=gy)
+    bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (cov <= 0.0)
     gx[bad] = 0.0
     gy[bad] = 0.0
     return gx, gy
+
+
+@functools.lru_cache(maxsize=32)
+def _view_grid(
+    h: int, w: int, k: int, centre: tuple[float, float], focal: float
+) -> tuple[Array, Array]:
+    """(u/f, v/f) at the cell centres of a level-k grid of (h, w) cells (as in _plane_slope):
+    u = (column + ½) 2^k − c_x, v = c_y − (row + ½) 2^k. Read-only, cached per grid."""
+    d = np.float32(2**k)
+    cx, cy = centre
+    inv_f = np.float32(1.0 / focal)
+    cols = np.arange(w, dtype=np.float32)[None, :]
+    rows = np.arange(h, dtype=np.float32)[:, None]
+    u = np.ascontiguousarray(
+        np.broadcast_to(((cols + np.float32(0.5)) * d - np.float32(cx)) * inv_f, (h, w))
+    )
+    v = np.ascontiguousarray(
+        np.broadcast_to((np.float32(cy) - (rows + np.float32(0.5)) * d) * inv_f, (h, w))
+    )
+    u.flags.writeable = False
+    v.flags.writeable = False
+    return u, v
 
 
 def _plane_slope(
@@ -463,15 +631,6 @@ def _plane_slope(
         return nx * scale / den, ny * -scale / den
 
 
-def _predict(lv: _Level, dcol: float, drow: float) -> Array:
-    """The guide predicted (dcol, drow) cells away from each cell centre, along its plane."""
-    if lv.grad is None:
-        return lv.iz.copy()
-    d = float(2**lv.k)
-    out = _cv.scaleAdd(lv.grad[0], dcol * d, lv.iz)
-    return _cv.scaleAdd(lv.grad[1], drow * d, out, dst=out)
-
-
 def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     """Next coarser level, each cell keeping only the front-most surface of its 2×2 block.
 
@@ -482,31 +641,27 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     """
     h, w = lv.cov.shape
     hp, wp = h + h % 2, w + w % 2
-    pad = (0, hp - h, 0, wp - w)
-    iz = _cv.copyMakeBorder(lv.iz, *pad, _cv.BORDER_CONSTANT, value=0.0)
-    ok = _cv.copyMakeBorder(lv.valid_u8, *pad, _cv.BORDER_CONSTANT, value=0).view(bool)
-    grad = None
-    if lv.grad is not None:
-        grad = [_cv.copyMakeBorder(g, *pad, _cv.BORDER_CONSTANT, value=0.0) for g in lv.grad]
     d = float(2**lv.k)
-    preds = {}
-    for r0 in (0, 1):
-        for c0 in (0, 1):
-            # sample (r0, c0) of each block lies half a cell from the block centre
-            sl = (slice(r0, None, 2), slice(c0, None, 2))
-            p = iz[sl]
-            if grad is not None:
-                p = p + np.float32((0.5 - c0) * d) * grad[0][sl]
-                p += np.float32((0.5 - r0) * d) * grad[1][sl]
-            preds[r0, c0] = np.where(ok[sl], p, _BIG)
-    near = np.minimum(np.minimum(preds[0, 0], preds[0, 1]), np.minimum(preds[1, 0], preds[1, 1]))
+    # each sample's prediction at its block centre, half a cell away along its plane
+    if lv.grad is not None:
+        sc, sr = _parity(h, w, d)
+        p = _cv.add(lv.iz, _cv.multiply(lv.grad[0], sc))
+        _cv.add(p, _cv.multiply(lv.grad[1], sr), dst=p)
+    else:
+        p = lv.iz.copy()
+    p[~lv.valid] = _BIG
+    if (hp, wp) != (h, w):
+        p = _cv.copyMakeBorder(p, 0, hp - h, 0, wp - w, _cv.BORDER_CONSTANT, value=float(_BIG))
+    # the nearest prediction of each block (a 2×2 minimum), back on the cells
+    near = _cv.erode(p, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_REPLICATE)[::2, ::2]
     # weight 1 within _JUMP/2 of the front, fading to 0 at _JUMP (no hard switch along a contact)
     half = np.float32(0.5 * _JUMP * 2**lv.k)
-    near += np.float32(2.0) * half
-    keep = np.zeros((hp, wp), np.float32)
-    for (r0, c0), p in preds.items():
-        keep[r0::2, c0::2] = np.clip((near - p) / half, 0.0, 1.0)
-    sel = _cv.multiply(lv.cov, keep[:h, :w])
+    near = near + np.float32(2.0) * half
+    keep = _cv.resize(near, (wp, hp), interpolation=_cv.INTER_NEAREST)[:h, :w]
+    np.subtract(keep, p[:h, :w], out=keep)
+    np.divide(keep, half, out=keep)
+    np.clip(keep, 0.0, 1.0, out=keep)
+    sel = _cv.multiply(lv.cov, keep)
     cov = _area_half(sel)
     inv = _cv.divide(1.0, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
 
@@ -529,6 +684,21 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     )
     out.grad = _guide_gradient(out, surf)
     return out
+
+
+_BLOCK = np.ones((2, 2), np.uint8)
+
+
+@functools.lru_cache(maxsize=32)
+def _parity(h: int, w: int, d: float) -> tuple[Array, Array]:
+    """(+d/2, −d/2, +d/2, …) along the columns and along the rows of an (h, w) grid: the
+    offset of each cell from the centre of its 2×2 block, in image pixels. Read-only."""
+    alt = np.array([0.5 * d, -0.5 * d], np.float32)
+    sc = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (w + 1) // 2)[None, :w], (h, w)))
+    sr = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (h + 1) // 2)[:h, None], (h, w)))
+    sc.flags.writeable = False
+    sr.flags.writeable = False
+    return sc, sr
 
 
 @functools.lru_cache(maxsize=16)
@@ -588,17 +758,24 @@ def _block_flags(lv: _Level, thr: np.float32) -> Array:
 
     Entry (i, j) covers cells (i−1…i, j−1…j) (clamped at the borders). A block is flagged when
     one of its cells is empty, or when the four cells, each extrapolating the depth guide along
-    its own plane (``_predict``) to the block's centre, disagree by more than ``thr``: a step
+    its own plane (``grad``) to the block's centre, disagree by more than ``thr``: a step
     between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1).
     """
     rep = _cv.BORDER_REPLICATE
     inv = _cv.copyMakeBorder(_cv.compare(lv.cov, 0.0, _cv.CMP_LE), 1, 1, 1, 1, rep)
-    bad = _cv.max(_cv.max(inv[:-1, :-1], inv[1:, :-1]), _cv.max(inv[:-1, 1:], inv[1:, 1:]))
-    c = [
-        _cv.copyMakeBorder(_predict(lv, dc, dr), 1, 1, 1, 1, rep)
-        for dc, dr in ((0.5, 0.5), (-0.5, 0.5), (0.5, -0.5), (-0.5, -0.5))
-    ]
-    tl, tr, bl, br = c[0][:-1, :-1], c[1][:-1, 1:], c[2][1:, :-1], c[3][1:, 1:]
+    bad = _cv.dilate(inv, _BLOCK, anchor=(0, 0), borderType=rep)[:-1, :-1]  # 2×2 maximum
+    # the four cells' predictions at the block centre, I + (±½, ±½) 2^k ∇I (on the padded grid)
+    iz = _cv.copyMakeBorder(lv.iz, 1, 1, 1, 1, rep)
+    if lv.grad is None:
+        tl, tr, bl, br = iz[:-1, :-1], iz[:-1, 1:], iz[1:, :-1], iz[1:, 1:]
+    else:
+        d = float(2**lv.k)
+        gx, gy = (_cv.copyMakeBorder(g, 1, 1, 1, 1, rep) for g in lv.grad)
+        right, left = _cv.scaleAdd(gx, 0.5 * d, iz), _cv.scaleAdd(gx, -0.5 * d, iz)
+        tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
+        tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
+        bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
+        br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
     hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
     lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
     step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
@@ -632,23 +809,41 @@ def _upsample(
         np.ascontiguousarray(_cv.resize(c, size, interpolation=_cv.INTER_LINEAR)[:hf, :wf])
         for c in coarse
     ]
-    blocks = _block_flags(lv, thr)
+    blocks = lv.flags[1] if lv.flags is not None and lv.flags[0] == thr else _block_flags(lv, thr)
     half = f // 2
-    flag = _cv.resize(blocks, ((wc + 1) * f, (hc + 1) * f), interpolation=_cv.INTER_NEAREST)
-    need = _cv.bitwise_and(flag[half : half + hf, half : half + wf], fine_valid)
-    if f > 2:
+    if f == 2:
+        # the fine pixels of the flagged blocks that hold some surface (block (i, j) holds
+        # cells i−1…i, j−1…j and fine pixels 2i−1…2i, 2j−1…2j), found on the coarse grid
+        some = _touching(lv.valid_u8)
+        bp = _cv.findNonZero(_cv.bitwise_and(blocks, some, dst=some))
+        if bp is None:
+            return ups
+        bp = bp.reshape(-1, 2).astype(np.int64)
+        xx = (2 * bp[:, 0] - 1)[:, None] + np.array([0, 1, 0, 1])[None, :]
+        yy = (2 * bp[:, 1] - 1)[:, None] + np.array([0, 0, 1, 1])[None, :]
+        ok = (xx >= 0) & (xx < wf) & (yy >= 0) & (yy < hf)
+        xx, yy = xx[ok], yy[ok]
+        idx = yy * wf + xx
+        on = fine_valid.ravel()[idx].view(bool)
+        xx, yy, idx = xx[on], yy[on], idx[on]
+    else:
+        flag = _cv.resize(blocks, ((wc + 1) * f, (hc + 1) * f), interpolation=_cv.INTER_NEAREST)
+        need = _cv.bitwise_and(flag[half : half + hf, half : half + wf], fine_valid)
         # a fine pixel whose own guide departs from the interpolated one: a small object
         # inside a cell (at f = 2 any such cell already differs from its neighbours)
         izn = _cv.resize(lv.iz, size, interpolation=_cv.INTER_LINEAR)[:hf, :wf]
         far = _cv.compare(_cv.absdiff(fine_iz, izn), float(thr), _cv.CMP_GT)
         _cv.bitwise_and(far, fine_valid, dst=far)
         _cv.bitwise_or(need, far, dst=need)
-    pts = _cv.findNonZero(need)
-    if pts is None:
+        pts = _cv.findNonZero(need)
+        if pts is None:
+            return ups
+        pts = pts.reshape(-1, 2)
+        xx, yy = pts[:, 0], pts[:, 1]
+        idx = yy.astype(np.int64) * wf + xx
+    if idx.size == 0:
         return ups
-    pts = pts.reshape(-1, 2)
-    idx = pts[:, 1].astype(np.int64) * wf + pts[:, 0]
-    vals = _fixup(pts[:, 0], pts[:, 1], f, lv, coarse, fine_iz.ravel()[idx], thr)
+    vals = _fixup(xx, yy, f, lv, coarse, fine_iz.ravel()[idx], thr)
     none = np.isnan(vals[:, 0])
     for c, (u, fb) in enumerate(zip(ups, fallback, strict=True)):
         col = vals[:, c]
@@ -679,47 +874,83 @@ def _fixup(
     y0 = np.floor(v).astype(np.int32)
     inv_thr = np.float32(1.0 / thr)
     n = xx.size
-    out = np.full((n, len(coarse)), np.nan, dtype=np.float32)
-    todo = np.arange(n, dtype=np.int32)
+    out = np.full((len(coarse), n), np.nan, dtype=np.float32)
+    todo: Array | None = None  # None: all
     zero, one = np.float32(0.0), np.float32(1.0)
+    # arrays are (taps, points): each tap's values are contiguous, sums over taps add rows
     for radius, offs in ((1.0, (0, 1)), (2.0, (-1, 0, 1, 2))):
-        if todo.size == 0:
-            break
-        ut, vt, it = u[todo], v[todo], iz_p[todo]
+        if todo is None:
+            ut, vt, it, xt, yt = u, v, iz_p, x0, y0
+        else:
+            if todo.size == 0:
+                break
+            ut, vt, it, xt, yt = u[todo], v[todo], iz_p[todo], x0[todo], y0[todo]
+        npt = ut.size
         m = len(offs)
-        o = np.array(offs, np.int32)[None, :]
-        cx = x0[todo, None] + o  # (N, m)
-        cy = y0[todo, None] + o
-        dx = ut[:, None] - cx
-        dy = vt[:, None] - cy
+        o = np.array(offs, np.int32)[:, None]
+        cx = xt[None, :] + o  # (m, N)
+        cy = yt[None, :] + o
+        dx = ut[None, :] - cx
+        dy = vt[None, :] - cy
         inv_r = np.float32(1.0 / radius)
         tx = np.maximum(zero, one - np.abs(dx) * inv_r)
         ty = np.maximum(zero, one - np.abs(dy) * inv_r)
         tx[(cx < 0) | (cx >= wc)] = 0.0
         ty[(cy < 0) | (cy >= hc)] = 0.0
-        flat = (np.clip(cy, 0, hc - 1) * np.int32(wc))[:, :, None] + np.clip(cx, 0, wc - 1)[
-            :, None, :
-        ]  # (N, m, m): rows of taps, columns of taps
+        # (m, m, N): rows of taps, columns of taps
+        flat = (np.clip(cy, 0, hc - 1) * np.int32(wc))[:, None, :] + np.clip(cx, 0, wc - 1)[
+            None, :, :
+        ]
         pred = izc[flat]
         if grad is not None:  # the tap's plane extrapolated to the pixel
-            pred += d * (grad[0][flat] * dx[:, None, :] + grad[1][flat] * dy[:, :, None])
-        miss = np.abs(pred - it[:, None, None])
+            # d (gx dx + gy dy) = gx (d dx) + gy (d dy) exactly: d is a power of 2
+            ddx, ddy = dx * d, dy * d
+            pred += grad[0][flat] * ddx[None, :, :] + grad[1][flat] * ddy[:, None, :]
+        miss = np.abs(pred - it[None, None, :])
         miss *= inv_thr
         wts = np.maximum(zero, one - miss * miss)
-        wts *= ty[:, :, None] * tx[:, None, :]
+        wts *= ty[:, None, :] * tx[None, :, :]
         wts[~valid_c[flat]] = 0.0
-        wts = wts.reshape(todo.size, m * m)
-        flat = flat.reshape(todo.size, m * m)
-        sw = wts.sum(axis=1)
+        wts = wts.reshape(m * m, npt)
+        flat = flat.reshape(m * m, npt)
+        sw = _sum_taps(wts)
         found = sw > 1e-4
-        if found.any():
-            wn = wts[found] / sw[found, None]
-            fl = flat[found]
-            rows = todo[found]
+        nfound = int(np.count_nonzero(found))
+        if nfound:
+            # normalised for every point (the few without a compatible tap are dropped after)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                wts /= sw[None, :]
+            every = nfound == npt
+            rows = (slice(None) if todo is None else todo) if every else None
+            if rows is None:
+                rows = np.flatnonzero(found) if todo is None else todo[found]
             for c, arr in enumerate(coarse):
-                out[rows, c] = (wn * arr.ravel()[fl]).sum(axis=1)
-        todo = todo[~found]
-    return out
+                val = _sum_taps(wts * arr.ravel()[flat])
+                out[c, rows] = val if every else val[found]
+        if nfound == npt:
+            break
+        todo = np.flatnonzero(~found).astype(np.int32) if todo is None else todo[~found]
+    return out.T
+
+
+def _sum_taps(a: Array) -> Array:
+    """Sum of a (taps, points) array over its taps, in the order NumPy sums a (points, taps)
+    row (sequential below 8 terms, 8 partial sums and a pairwise tree from 8 to 128)."""
+    t = a.shape[0]
+    if t < 8:
+        res = a[0].copy()
+        for i in range(1, t):
+            res += a[i]
+        return res
+    r = a[:8].copy()
+    i = 8
+    while i + 8 <= t:
+        r += a[i : i + 8]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for j in range(i, t):
+        res += a[j]
+    return res
 
 
 def _alpha(lv: _Level, sigma: float, bx: tuple[slice, slice]) -> Array:
@@ -747,6 +978,7 @@ def _level_span(sigma: float, surf: _Surface, kmax: int) -> tuple[int, int]:
 def _surface_pyramid(
     surf: _Surface,
     lum: Array,
+    first: _Level | None,
     sigma: float,
     var_sigma: float | None,
     normal_sigma: float | None,
@@ -761,6 +993,9 @@ def _surface_pyramid(
     σ_px = σ / pixel_size: each pixel ends up with the mix of the two levels around its σ_px
     whose second moment is σ_px² (σ_px is clamped to the levels that exist: at most about a
     quarter of the image's smaller side).
+
+    ``first``: level 1 as ``_surface`` made it (from ``lum``, with its square when
+    ``var_sigma`` is given; None: too small), finished here and then reduced.
 
     Returns the smoothed ``lum`` at full resolution (the fade from ``lum`` itself for
     σ_px < s_1 ≈ 4.4 is the caller's, see ``_fade``) and, for the variance chain, (k, Var) at
@@ -783,10 +1018,10 @@ def _surface_pyramid(
         v_hi = max(v_hi, v_lo)
     k_lo, k_hi = min(m_lo, v_lo), max(m_hi, v_hi)
 
-    lum_w = _cv.copyTo(lum, surf.valid, np.zeros_like(lum))
-    sig_w = [lum_w] if var_sigma is None else [lum_w, _cv.multiply(lum_w, lum_w)]
+    assert first is not None and len(first.sig) == (1 if var_sigma is None else 2)
     levels: dict[int, _Level] = {}
-    lv = _first_level(surf, sig_w)
+    lv = first
+    _finish_first_level(lv, surf, lum)
     while True:
         if lv.k >= k_lo:
             levels[lv.k] = lv
@@ -877,23 +1112,34 @@ def _blend(
     return up
 
 
-def _fade(sigma: float, surf: _Surface, pixel_size: Array) -> Array | None:
+def _fade(
+    sigma: float, surf: _Surface, pixel_size: Array
+) -> tuple[tuple[slice, slice], Array] | None:
     """Weight of level 1 against the signal itself where σ_px < s_1: min(σ_px² / s_1², 1)
-    (the mix then has the second moment σ_px²); None where it is 1 everywhere."""
+    (the mix then has the second moment σ_px²), as (box, weight in the box): outside the
+    bounding box of the surface pixels with σ_px < s_1 the weight is exactly 1. None where it
+    is 1 everywhere."""
     s1 = 2.0 * _LEVEL_SIGMA
-    if sigma / (s1 * surf.ps_max) >= 1.0:
+    c = sigma / s1  # pixel size at which σ_px = s_1
+    if c / surf.ps_max >= 1.0:
         return None
-    a0 = _cv.divide(sigma / s1, _cv.max(pixel_size, 1e-30))
+    # (the margin keeps pixels whose weight rounds to just below 1 inside the box)
+    far = _cv.compare(pixel_size, c * (1.0 - 1e-5), _cv.CMP_GT)
+    box = _crop(_cv.bitwise_and(far, surf.valid, dst=far))
+    if box is None:
+        return None
+    a0 = _cv.divide(c, _cv.max(pixel_size[box], 1e-30))
     _cv.multiply(a0, a0, dst=a0)
-    return _cv.min(a0, 1.0, dst=a0)
+    return box, _cv.min(a0, 1.0, dst=a0)
 
 
 def _upsample_plain(a: Array, k: int, shape: tuple[int, int]) -> Array:
-    """Bilinear upsampling of a level-k array to the image grid."""
+    """Bilinear upsampling of a level-k array to the image grid (a view of rows with a stride
+    where the level's cells overhang the image)."""
     f = 2**k
     h, w = a.shape
     big = _cv.resize(a, (w * f, h * f), interpolation=_cv.INTER_LINEAR)
-    return np.ascontiguousarray(big[: shape[0], : shape[1]])
+    return big[: shape[0], : shape[1]]
 
 
 def _normals(normal: Array, shape: tuple[int, int]) -> Array:
@@ -984,24 +1230,34 @@ def surface_blur(
     depth_a = _plane("depth", depth, shape)
     ps = _plane("pixel_size", pixel_size, shape)
     nrm = None if normal is None else _normals(normal, shape)
-    valid = _valid(depth_a, ps, _mask(mask, shape))
+    valid, ps_range = _valid(depth_a, ps, _mask(mask, shape))
     out = sig.copy()
     box = _crop(valid)
     if box is None:
         return out
     ys, xs = box
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
-    surf = _surface(
-        depth_a[box], ps[box], valid[box], None if nrm is None else nrm[box], ds, centre
+    sig_box = sig[box]
+    surf, sub, first = _surface(
+        depth_a[box],
+        ps[box],
+        valid[box],
+        None if nrm is None else nrm[box],
+        ds,
+        centre,
+        ps_range,
+        lambda r, out: np.copyto(out, sig_box[r]),
+        False,
     )
-    sub = np.ascontiguousarray(sig[box])
-    res = _surface_pyramid(surf, sub, sigma, None, ns)
+    res = _surface_pyramid(surf, sub, first, sigma, None, ns)
     if res is None:
         return out
     full = res[0]
-    a0 = _fade(sigma, surf, ps[box])
-    if a0 is not None:
-        full = _cv.scaleAdd(_cv.multiply(_cv.subtract(full, sub), a0), 1.0, sub)
+    fade = _fade(sigma, surf, ps[box])
+    if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
+        fb, a0 = fade
+        fs, ss = full[fb], sub[fb]
+        _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
     np.copyto(out[box], full, where=surf.valid.view(bool))
     return out
 
@@ -1091,7 +1347,7 @@ def unsharp_masking(
     if gain is not None and not _cv.checkRange(gain)[0]:
         raise ValueError("gain_map must be finite everywhere")
 
-    valid = _valid(depth_a, ps, mask_a)
+    valid, ps_range = _valid(depth_a, ps, mask_a)
     box = _crop(valid)
     if box is None:
         return img.copy()
@@ -1101,37 +1357,61 @@ def unsharp_masking(
     sub_shape = (ys.stop - ys.start, xs.stop - xs.start)
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     ps = ps[box]
-    surf = _surface(depth_a[box], ps, valid[box], None if nrm is None else nrm[box], ds, centre)
     img_box = img[box]
-    phi, lum = _lightness(img_box, wl)
+    surf, lum, first = _surface(
+        depth_a[box],
+        ps,
+        valid[box],
+        None if nrm is None else nrm[box],
+        ds,
+        centre,
+        ps_range,
+        lambda r, out: _lightness(img_box[r], wl, out),
+        adaptive,
+    )
+    res = _surface_pyramid(surf, lum, first, sigma, vsig if adaptive else None, ns)
+    cov_a = None if mask_a.dtype == np.bool_ else mask_a[box]
+    gain_a = None if gain is None else gain[box]
+    fade = None if res is None else _fade(sigma, surf, ps)
+    adapt = None
+    if res is not None and res[1] is not None:
+        kv, v = res[1]
+        a = _cv.sqrt(_cv.addWeighted(v, 1e-4, v, 0.0, 1.0))  # √(1 + Var(L*/100))
+        adapt = _upsample_plain(a, kv, sub_shape)
+    smooth = lum if res is None else res[0]  # too small for any level: nothing to smooth with
 
-    res = _surface_pyramid(surf, lum, sigma, vsig if adaptive else None, ns)
-    # λ map: λ g α (√(1 + Var)), 0 off the surface
-    if mask_a.dtype == np.bool_:
-        lam_map = _cv.multiply(surf.w, lam)
-    else:
-        lam_map = _cv.min(_cv.max(mask_a[box], 0.0), 1.0)
-        _cv.multiply(lam_map, surf.w, dst=lam_map, scale=lam)
-    if gain is not None:
-        _cv.multiply(lam_map, gain[box], dst=lam_map)
-    if res is None:  # too small for any level: nothing to smooth with
-        new_lum = lum.copy()
-    else:
-        smooth, var = res
-        a0 = _fade(sigma, surf, ps)
-        if a0 is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S)
-            _cv.multiply(lam_map, a0, dst=lam_map)
-        if var is not None:
-            kv, v = var
-            adapt = _cv.sqrt(_cv.addWeighted(v, 1e-4, v, 0.0, 1.0))  # √(1 + Var(L*/100))
-            _cv.multiply(lam_map, _upsample_plain(adapt, kv, sub_shape), dst=lam_map)
-        contrast = _cv.subtract(lum, smooth, dst=smooth)
-        new_lum = _cv.add(lum, _cv.multiply(lam_map, contrast, dst=contrast))
-    keep = _cv.compare(lam_map, 0.0, _cv.CMP_EQ)
+    def k_rows(r: slice) -> tuple[Array, Array]:
+        """k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4, Eq. 1), and
+        where λ_adapt = 0 (kept bit for bit), for the rows r."""
+        # λ g α: 0 off the surface
+        if cov_a is None:
+            lam_r = _cv.multiply(surf.valid[r], lam, dtype=_cv.CV_32F)
+        else:
+            lam_r = _cv.min(_cv.max(cov_a[r], 0.0), 1.0)
+            _cv.multiply(lam_r, surf.valid[r], dst=lam_r, scale=lam, dtype=_cv.CV_32F)
+        if gain_a is not None:
+            _cv.multiply(lam_r, gain_a[r], dst=lam_r)
+        if fade is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S)
+            (fy, fx), a0 = fade
+            y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
+            if y0 < y1:
+                pb = (slice(y0 - r.start, y1 - r.start), fx)
+                part = lam_r[pb]
+                _write(_cv.multiply(part, a0[y0 - fy.start : y1 - fy.start], dst=part), lam_r, pb)
+        keep_r = _cv.compare(lam_r, 0.0, _cv.CMP_EQ)
+        if adapt is not None:  # √(1 + Var)
+            _cv.multiply(lam_r, adapt[r], dst=lam_r)
+        lum_r = lum[r]
+        new = _cv.subtract(lum_r, smooth[r])
+        _cv.multiply(lam_r, new, dst=new)
+        _cv.add(lum_r, new, dst=new)
+        _cv.max(new, 0.0, dst=new)
+        return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r
+
     if sub_shape == shape:
-        return _with_lightness(img_box, phi, lum, new_lum, wl, keep)
+        return color.scale_lab(img_box, k_rows, wl)
     out = _outside(img, box)
-    _with_lightness(img_box, phi, lum, new_lum, wl, keep, out=out[box])
+    color.scale_lab(img_box, k_rows, wl, out=out[box])
     return out
 
 
@@ -1169,10 +1449,10 @@ def plain_unsharp_mask(
     lam = _finite("amount", amount, -10.0, 10.0)
     hh = img.shape[0] if image_height is None else int(_positive("image_height", image_height))
     wl = color.resolve_white(white, img, None)
-    phi, lum = _lightness(img, wl)
+    lum = _lightness(img, wl)
     smooth = _blur(lum, s * hh)
     new_lum = _cv.scaleAdd(_cv.subtract(lum, smooth), lam, lum)
-    return _with_lightness(img, phi, lum, new_lum, wl, None)
+    return _with_lightness(img, lum, new_lum, wl, None)
 
 
 def depth_unsharp_masking(
@@ -1248,11 +1528,11 @@ def depth_unsharp_masking(
     box = _crop(valid)
     assert box is not None
     ys, xs = box
-    phi, lum = _lightness(img[box], wl)
+    lum = _lightness(img[box], wl)
     new_lum = _cv.scaleAdd(delta[box], 100.0 * lam, lum)
     keep = _cv.compare(valid[box], 0, _cv.CMP_EQ)
     if (ys.stop - ys.start, xs.stop - xs.start) == shape:
-        return _with_lightness(img, phi, lum, new_lum, wl, keep)
+        return _with_lightness(img, lum, new_lum, wl, keep)
     out = _outside(img, box)
-    _with_lightness(img[box], phi, lum, new_lum, wl, keep, out=out[box])
+    _with_lightness(img[box], lum, new_lum, wl, keep, out=out[box])
     return out

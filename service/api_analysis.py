@@ -58,6 +58,9 @@ class Comparison(BaseModel):
     means: dict[str, float]
     claim: dict[str, Any] = Field(description="the paper's claim checked for Light Alignment")
     params: dict[str, Any]
+    shading_norm: dict[str, Any] = Field(
+        description="scale of the shading strengths: mode (reference, per_image, pinned), value"
+    )
     seconds: dict[str, float]
     sheet_png: str | None = Field(None, description="the contact sheet, base64 PNG (sheet=true)")
 
