@@ -1455,6 +1455,10 @@ def plain_unsharp_mask(
     return _with_lightness(img, lum, new_lum, wl, None)
 
 
+#: Normalised depth D of the background in :func:`depth_unsharp_masking` (surfaces span [0, 1]).
+BACKGROUND_DEPTH = 2.0
+
+
 def depth_unsharp_masking(
     beauty: Array,
     depth: Array,
@@ -1475,10 +1479,12 @@ def depth_unsharp_masking(
     saturation are kept, as in :func:`unsharp_masking`.
 
     Normalisation: D = (z − z_near) / (z_far − z_near) with z_near, z_far the smallest and
-    largest depth over the surface (mask > 0, finite depth); background pixels take D = 1 (the
-    far end), so the background just behind a silhouette lies deeper than its blurred
-    surroundings and darkens. Background pixels themselves are returned unchanged (their
-    colour may be premultiplied zero).
+    largest depth over the surface (mask > 0, finite depth); background pixels take
+    D = :data:`BACKGROUND_DEPTH` = 2, one depth range behind the farthest surface (in a depth
+    buffer the far plane lies well beyond the objects): the blur of a surface bordering the
+    background is then pulled back, never forward, so the far edge of a floor or the far side of
+    an object is not darkened as if something stood in front of it. Background pixels
+    themselves are returned unchanged (their colour may be premultiplied zero).
 
     Parameters
     ----------
@@ -1514,12 +1520,13 @@ def depth_unsharp_masking(
     if not _cv.countNonZero(valid):
         return img.copy()
     span = z_far - z_near
-    # D = (z − z_near) / (z_far − z_near) on the surface, 1 (the far end) elsewhere
-    dn = _cv.copyTo(depth_a, valid, np.full(shape, z_far, np.float32))
+    # D = (z − z_near) / (z_far − z_near) on the surface, BACKGROUND_DEPTH elsewhere
+    far = z_far + (BACKGROUND_DEPTH - 1.0) * span
+    dn = _cv.copyTo(depth_a, valid, np.full(shape, far, np.float32))
     if span > 0.0:
         _cv.addWeighted(dn, 1.0 / span, dn, 0.0, -z_near / span, dst=dn)
     else:
-        dn = np.where(valid > 0, np.float32(0.0), np.float32(1.0))
+        dn = np.where(valid > 0, np.float32(0.0), np.float32(BACKGROUND_DEPTH))
     delta = _cv.subtract(_blur(dn, s * hh), dn)
     if mode == "darken":
         _cv.min(delta, 0.0, dst=delta)

@@ -545,3 +545,19 @@ def test_depth_unsharp_masking_darkens_behind_silhouettes_only() -> None:
         depth_unsharp_masking(beauty, depth, mask, mode="lighten")  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="sigma"):
         depth_unsharp_masking(beauty, depth, mask, sigma=2.0)
+
+
+def test_depth_unsharp_masking_leaves_the_far_edge_of_a_floor_alone() -> None:
+    """A floor receding to the top of the frame, with sky above it: its far edge borders the
+    background, which lies beyond it, so the blur pulls the edge back and darkening (ΔD < 0)
+    must not appear there (it did when the background took the farthest surface's depth)."""
+    h, w = 96, 128
+    rows = np.arange(h, dtype=np.float32)[:, None]
+    floor = np.broadcast_to(10.0 - 0.06 * rows, (h, w)).astype(np.float32)  # far at the top
+    sky = rows < 24
+    depth = np.where(sky, np.inf, floor).astype(np.float32)
+    mask = ~np.broadcast_to(sky, (h, w))
+    img = _grey(np.full((h, w), 0.3, np.float32))
+    out = depth_unsharp_masking(img, depth, mask, amount=2.0, sigma=0.05, white=1.0)
+    change = _lightness(out) - _lightness(img)
+    assert np.abs(change[24:-16]).max() < 1e-2  # the whole floor, its far edge included
