@@ -1,15 +1,19 @@
-"""Local Light Alignment at 1920x1080: multi-scale normals + aligned lights + a relit shade.
+"""Local Light Alignment at 1920x1080: multi-scale normals + aligned lights + the relit shade.
 
 The frame: a bumpy dome (features at two sizes) in front of a second, partly hidden dome (a
 depth jump) on background, perspective view vectors, one directional light. Timed:
 
 - ``normal_pyramid``: the depth-guided multi-scale normals (LLA §5), S = 6;
-- ``align_components``: diffuse + specular aligned directions (LLA Eq. 1, §6) from the pyramid;
-- a Lambert + Blinn-Phong shade with the aligned directions (``ops.shading``), emulating the
-  relit output;
-- the whole chain at S = 4, 6 and 8 (the cost should be nearly flat in S).
+- ``align_lights``: diffuse + specular aligned directions (LLA Eq. 1, §6) from the pyramid;
+- ``shade_directions``: Lambert + Blinn-Phong with the aligned directions (the relight);
+- the chain: exactly what the ``light_alignment`` operator (service/operators/light_alignment.py)
+  computes for one directional light with diffuse + specular guides, Lambert + Blinn-Phong,
+  given the frame's normals, depth, coverage, view vectors and positions — at S = 4, 6 and 8
+  (the cost should be nearly flat in S);
+- the whole operator through ``service.pipeline.run`` on a canonical frame (adds the frame's
+  view vectors and positions, the frame copy and the relit lobes and beauty).
 
-Target: the chain (pyramid + both guides + shade) at S = 6 ≤ 50x the copy unit.
+Target: the chain at S = 6 ≤ 50x the copy unit.
 
 Run: ``.venv/bin/python -m bench.bench_light_alignment``
 """
@@ -19,11 +23,16 @@ from __future__ import annotations
 import numpy as np
 
 from bench.common import HD, Report
-from ops import shading
+from gbuffer.camera import Camera
+from gbuffer.frame import Frame
 from ops.filtering import multiscale_normals, normal_pyramid
-from ops.light_alignment import align_components
+from ops.light_alignment import align_lights
+from ops.shading import Light, shade_directions
+from service import pipeline
 
 TARGET = 50.0
+FOV_Y_DEG = 40.0
+LIGHT = (0.6, 0.55, 0.58)
 
 
 def scene(shape: tuple[int, int] = HD) -> dict[str, np.ndarray]:
@@ -32,7 +41,7 @@ def scene(shape: tuple[int, int] = HD) -> dict[str, np.ndarray]:
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
     u = (xx + 0.5 - w / 2) / h  # image-height units, +x right
     v = (h / 2 - yy - 0.5) / h  # +y up
-    tan_half = np.float32(np.tan(np.radians(20.0)))  # 40° vertical field of view
+    tan_half = np.float32(np.tan(np.radians(FOV_Y_DEG / 2)))
     ray = np.stack([2 * u * tan_half, 2 * v * tan_half, -np.ones_like(u)], axis=-1)
 
     def dome(cx: float, cy: float, radius: float, dist: float, seed: int):
@@ -71,39 +80,57 @@ def scene(shape: tuple[int, int] = HD) -> dict[str, np.ndarray]:
     }
 
 
+def sigmas(scales: int) -> dict[str, list[float]]:
+    """σ_1 … σ_{S−1} of the diffuse and specular components, finest first."""
+    return {
+        "diffuse": [0.5, 0.4, 0.4, 0.6, 0.7, 0.7, 0.7][: scales - 1],
+        "specular": [0.7, 0.5, 0.3, 0.2, 0.2, 0.2, 0.2][: scales - 1],
+    }
+
+
 def main() -> None:
     g = scene()
-    normal, depth, mask, view = g["normal"], g["depth"], g["mask"], g["view"]
-    light = np.array([0.6, 0.55, 0.58], np.float32)
-    light /= np.linalg.norm(light)
+    normal, depth, view, position = g["normal"], g["depth"], g["view"], g["position"]
+    mask = np.isfinite(depth).astype(np.float32)  # Frame.mask: coverage from the depth
+    lights = [Light(kind="directional", vector=LIGHT)]
 
-    def sigmas(scales: int) -> dict[str, list[float]]:
-        return {
-            "diffuse": [0.5, 0.4, 0.4, 0.6, 0.7, 0.7, 0.7][: scales - 1],
-            "specular": [0.7, 0.5, 0.3, 0.2, 0.2, 0.2, 0.2][: scales - 1],
-        }
+    # what apply_light_alignment does (relight form, defaults: γ = 3, §5 filtering, Lambert +
+    # Blinn-Phong s = 32, no transmission), given the frame's view vectors and positions
+    def pyramid(scales: int):
+        return normal_pyramid(normal, depth, mask, scales=scales)
 
-    def chain(scales: int) -> np.ndarray:
-        pyr = normal_pyramid(normal, depth, mask, scales=scales)
-        aligned = align_components(light, pyr, sigmas(scales), view=view)
-        return shade(aligned)
+    def align(pyr, scales: int) -> dict[str, list[np.ndarray]]:
+        return align_lights(lights, pyr, position, view, sigmas(scales), mask=mask)
 
-    def shade(aligned: dict[str, np.ndarray]) -> np.ndarray:
-        diffuse = shading.lambert(normal, aligned["diffuse"])
-        return diffuse + shading.blinn_phong(normal, aligned["specular"], view, 32.0)
+    def shade(aligned: dict[str, list[np.ndarray]]) -> dict[str, np.ndarray]:
+        directions = {c: list(v) for c, v in aligned.items()}
+        return shade_directions(normal, view, position, lights, directions)
+
+    def chain(scales: int) -> dict[str, np.ndarray]:
+        return shade(align(pyramid(scales), scales))
+
+    frame = Frame(buffers={"normal": normal, "depth": depth}, camera=Camera(fov_y_deg=FOV_Y_DEG))
+    sig6 = sigmas(6)
+    step = {
+        "op": "light_alignment",
+        "params": {
+            "sigmas": sig6["diffuse"],
+            "specular_sigmas": sig6["specular"],
+            "lights": [",".join(str(c) for c in LIGHT)],
+            "form": "relight",
+        },
+    }
 
     rep = Report("Local Light Alignment (LLA §4-6)")
-    pyr6 = normal_pyramid(normal, depth, mask, scales=6)
-    aligned6 = align_components(light, pyr6, sigmas(6), view=view)
-    rep.time("normal_pyramid, S=6", lambda: normal_pyramid(normal, depth, mask, scales=6))
-    rep.time(
-        "align diffuse+specular from the pyramid, S=6",
-        lambda: align_components(light, pyr6, sigmas(6), view=view),
-    )
-    rep.time("shade Lambert + Blinn-Phong (ops.shading)", lambda: shade(aligned6))
-    rep.time("chain S=6: pyramid + 2 guides + shade", lambda: chain(6), target_ratio=TARGET)
+    pyr6 = pyramid(6)
+    aligned6 = align(pyr6, 6)
+    rep.time("normal_pyramid, S=6", lambda: pyramid(6))
+    rep.time("align_lights diffuse+specular, S=6", lambda: align(pyr6, 6))
+    rep.time("shade_directions Lambert + Blinn-Phong", lambda: shade(aligned6))
+    rep.time("chain S=6: pyramid + 2 guides + relight", lambda: chain(6), target_ratio=TARGET)
     for scales in (4, 8):
         rep.time(f"chain S={scales}", lambda s=scales: chain(s))
+    rep.time("pipeline.run light_alignment, S=6", lambda: pipeline.run(frame, [step]))
     rep.time(
         "multiscale_normals, S=6 (full-res list)",
         lambda: multiscale_normals(normal, depth, mask, scales=6),

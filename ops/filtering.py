@@ -93,18 +93,51 @@ def _check_unit_range(value: float, name: str, lo: float, hi: float) -> float:
     return float(value)
 
 
-def normalize_field(v: np.ndarray) -> F32:
-    """Unit vectors along the last axis of ``v`` (..., 3); zero vectors stay 0."""
+def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
+    """Unit vectors along the last axis of ``v`` (..., 3); zero vectors stay 0. ``mask``: an
+    (H, W) float 0/1 coverage the result is multiplied by."""
     v = np.asarray(v, np.float32)
+    if v.ndim == 3 and v.shape[2] == 3 and v.shape[0] * v.shape[1] >= 4096:
+        # planes (cv2.split / merge): the same arithmetic without strided or broadcast passes
+        x, y, z = cv2.split(v)
+        n2 = x * x
+        n2 += y * y
+        n2 += z * z
+        inv = np.zeros_like(n2)
+        np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
+        if mask is not None:
+            inv *= mask  # 0/1: (v inv) m = v (inv m)
+        for plane in (x, y, z):
+            plane *= inv
+        return np.asarray(cv2.merge([x, y, z]), np.float32)
     n2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2]
     inv = np.zeros_like(n2)
     np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
-    return np.asarray(v * inv[..., None], np.float32)
+    out = np.asarray(v * inv[..., None], np.float32)
+    if mask is not None:
+        out *= mask[..., None]
+    return out
 
 
 #: Log depth of background pixels at level 0 is at least this (a finite sentinel, so that
 #: products with zero weights stay 0).
 BACKGROUND = np.float32(1e30)
+
+
+def _log_depth(depth: F32, mask: np.ndarray | None, out: F32 | None = None) -> F32:
+    """Log depth with background (mask 0, depth not finite or ≤ 0) pushed to ≥ BACKGROUND,
+    by arithmetic only (masked writes cost ~8 ms at 1080p; cv2.log is slow on +inf, so clamp
+    first; fmin maps NaN to 1e30)."""
+    clamped = np.fmin(depth, BACKGROUND)  # NaN, +inf -> 1e30
+    np.fmax(clamped, np.float32(1e-30), out=clamped)
+    logd = cv2.log(clamped)
+    invalid = ~((depth > 0) & (depth < np.inf))
+    if mask is not None:
+        invalid |= ~(mask > 0)
+    if out is None:
+        return np.asarray(cv2.scaleAdd(invalid.astype(np.float32), float(BACKGROUND), logd))
+    cv2.scaleAdd(invalid.astype(np.float32), float(BACKGROUND), logd, out)
+    return out
 
 
 @dataclass
@@ -128,7 +161,6 @@ class DepthPyramid:
     keep: list[F32] = field(default_factory=list)
     cover: list[F32] = field(default_factory=list)
     _keep3: dict[int, F32] = field(default_factory=dict, repr=False)
-    _geo: dict[int, F32] = field(default_factory=dict, repr=False)
     _masks: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -149,23 +181,80 @@ class DepthPyramid:
                     f"mask must have the depth's shape {depth.shape}, got {mask.shape}"
                 )
         pyr = cls(depth_sigma=depth_sigma)
-        # log depth with background pushed to >= BACKGROUND using arithmetic only (masked writes
-        # cost ~8 ms at 1080p; cv2.log is slow on +inf, so clamp first; fmin maps NaN to 1e30)
-        clamped = np.fmin(depth, BACKGROUND)  # NaN, +inf -> 1e30
-        np.fmax(clamped, np.float32(1e-30), out=clamped)
-        logd = np.asarray(cv2.log(clamped), np.float32)
-        invalid = ~((depth > 0) & (depth < np.inf))
-        if mask is not None:
-            invalid |= ~(mask > 0)
-        logd = np.asarray(cv2.scaleAdd(invalid.astype(np.float32), float(BACKGROUND), logd))
-        valid = logd < BACKGROUND
-        pyr.logd.append(logd)
-        pyr.mask.append(valid.astype(np.float32))
-        for _ in range(levels):
+        h, w = depth.shape
+        if levels >= 1 and h % 2 == 0 and w % 2 == 0:
+            pyr._build_01(depth, mask)  # levels 0 and 1 in one pass of row strips
+        else:
+            logd = _log_depth(depth, mask)
+            pyr.logd.append(logd)
+            pyr.mask.append(np.asarray(logd < BACKGROUND, np.float32))
+        for _ in range(levels - pyr.levels):
             low, m = pyr._down_geometry(pyr.logd[-1], pyr.mask[-1])
             pyr.logd.append(low)
             pyr.mask.append(m)
         return pyr
+
+    def _build_01(self, depth: F32, mask: np.ndarray | None) -> None:
+        """Levels 0 and 1 (even-sized level 0), strip by strip on all cores: the same per-pixel
+        and per-block arithmetic as :func:`_log_depth` and :meth:`_down_geometry` (exact 2×2
+        area resizes do not mix blocks), and the level-1 samples that lost pixels to another
+        surface (:meth:`_excluded`)."""
+        h, w = depth.shape
+        logd0 = np.empty((h, w), np.float32)
+        mask0 = np.empty((h, w), np.float32)
+        keep0 = np.empty((h, w), np.float32)
+        cover0 = np.empty((h // 2, w // 2), np.float32)
+        logd1 = np.empty((h // 2, w // 2), np.float32)
+        mask1 = np.empty((h // 2, w // 2), np.float32)
+        excl1 = np.empty((h // 2, w // 2), np.bool_)
+        thr = np.float32(_DOWN_EXCLUDE * self.depth_sigma)
+
+        mask_b = None if mask is None else (mask if mask.dtype == np.bool_ else mask > 0)
+        rows = STRIP_ROWS
+        background = np.full((rows, w), BACKGROUND, np.float32)
+
+        def strip(b0: int, b1: int) -> None:  # level-1 rows b0:b1, level-0 rows 2 b0:2 b1
+            r0, r1 = 2 * b0, 2 * b1
+            d = depth[r0:r1]
+            # log depth, then BACKGROUND where invalid (log of a clamped depth: cv2.log is slow
+            # on +inf; NaN and the rest of the invalid pixels are overwritten)
+            far = logd0[r0:r1]
+            clamped = cv2.min(d, float(BACKGROUND))  # type: ignore[call-overload]
+            cv2.max(clamped, 1e-30, clamped)  # type: ignore[call-overload]
+            cv2.log(clamped, far)
+            valid = (d > 0) & (d < np.inf)
+            if mask_b is not None:
+                valid &= mask_b[r0:r1]
+            invalid = ~valid
+            cv2.copyTo(background[: r1 - r0], invalid.view(np.uint8), far)
+            m = mask0[r0:r1]
+            np.copyto(m, valid)
+            # front surface of each 2×2 block; keep its members within 2 depth_sigma of it
+            rmin = np.minimum(far[0::2], far[1::2])
+            front = np.minimum(rmin[:, 0::2], rmin[:, 1::2])
+            front_rows = np.repeat(front, 2, axis=0)
+            front_up = cv2.merge([front_rows, front_rows]).reshape(r1 - r0, w)
+            keep_b = (far - front_up) <= thr
+            keep_b &= valid
+            keep = keep0[r0:r1]
+            np.copyto(keep, keep_b)
+            half = (w // 2, b1 - b0)
+            wsum = cover0[b0:b1]
+            cv2.resize(keep, half, wsum, interpolation=cv2.INTER_AREA)
+            lsum = cv2.resize(far * keep, half, interpolation=cv2.INTER_AREA)
+            np.greater(wsum, 0, out=mask1[b0:b1], casting="unsafe")
+            # covered block sums are ≥ 1/4: dividing by max(wsum, 1/4) leaves them exact and
+            # the empty blocks (lsum = 0) at 0
+            np.divide(lsum, cv2.max(wsum, 0.25), out=logd1[b0:b1])  # type: ignore[call-overload]
+            lost = cv2.resize(m - keep, half, interpolation=cv2.INTER_AREA)
+            np.greater(lost, 0, out=excl1[b0:b1])
+
+        run_strips(h // 2, strip, rows=STRIP_ROWS // 2)
+        self.logd += [logd0, logd1]
+        self.mask += [mask0, mask1]
+        self.keep.append(keep0)
+        self.cover.append(cover0)
+        self._masks[1001] = excl1
 
     def _down_geometry(self, logd: F32, m: F32) -> tuple[F32, F32]:
         h, w = logd.shape
@@ -230,9 +319,7 @@ class DepthPyramid:
             if not is_unit:
                 wsum = np.asarray(cv2.resize(wk, (pw // 2, ph // 2), interpolation=cv2.INTER_AREA))
         if is_unit:
-            out = normalize_field(v)
-            out *= self.mask[k_to][..., None]
-            return out
+            return normalize_field(v, self.mask[k_to])
         assert wsum is not None
         inv = np.zeros_like(wsum)
         np.divide(1.0, wsum, out=inv, where=wsum > 0)
@@ -260,6 +347,16 @@ class DepthPyramid:
     @property
     def levels(self) -> int:
         return len(self.logd) - 1
+
+    def mask_u8(self, background: bool = False) -> NDArray[np.uint8]:
+        """(H, W) uint8 coverage of level 0, 1 on surfaces (``background``: 1 on background), a
+        ``cv2.copyTo`` mask (cached)."""
+        key = -2 if background else -1
+        got = self._masks.get(key)
+        if got is None:
+            cover = self.mask[0] > 0
+            got = self._masks[key] = np.asarray(~cover if background else cover).view(np.uint8)
+        return got
 
     def shape(self, k: int) -> tuple[int, int]:
         return (int(self.logd[k].shape[0]), int(self.logd[k].shape[1]))
@@ -300,9 +397,8 @@ class DepthPyramid:
         run_strips(h_to, strip)
         return out
 
-    def _jump_geometry(self, k: int) -> F32:
-        """(h_k, w_k, 3): coverage, "no jump" and coverage-weighted log depth of level k for
-        :meth:`up_rows`.
+    def _jumps(self, k: int) -> NDArray[np.bool_]:
+        """(h_k, w_k): the samples of level k next to a depth jump (cached).
 
         A sample is next to a depth jump when the second difference of log depth along x or y,
         taken where both neighbours are covered, exceeds 2 ``depth_sigma`` (a slope does not
@@ -312,8 +408,8 @@ class DepthPyramid:
         jumps: unit-vector fields are 0 there, so bilinear interpolation followed by
         renormalisation averages the covered samples only.
         """
-        key = -1 - k
-        got = self._geo.get(key)
+        key = 3000 + k
+        got = self._masks.get(key)
         if got is not None:
             return got
         logd, m = self.logd[k], self.mask[k] > 0
@@ -334,10 +430,8 @@ class DepthPyramid:
         jump[1:] |= sy
         jump[:-1] |= sy
         jump &= m
-        got = np.dstack([self.mask[k], (~jump).astype(np.float32), logd * self.mask[k]])
-        got = np.ascontiguousarray(got, np.float32)
-        self._geo[key] = got
-        return got
+        self._masks[key] = jump
+        return jump
 
     def _excluded(self, k: int) -> NDArray[np.bool_]:
         """(h_k, w_k): samples of level k whose blocks lost a covered level-0 pixel to the
@@ -362,12 +456,12 @@ class DepthPyramid:
     def _dirty(self, k: int) -> NDArray[np.uint8]:
         """(h_k, w_k) uint8: 1 where a pixel whose parent is this sample may have a bilinear
         footprint that is not all on its own surface: within one sample of a depth jump
-        (:meth:`_jump_geometry`) or of a sample that lost pixels to another surface."""
+        (:meth:`_jumps`) or of a sample that lost pixels to another surface."""
         key = 2000 + k
         got = self._masks.get(key)
         if got is not None:
             return got
-        unsafe = (self._jump_geometry(k)[..., 1] < 0.5) | self._excluded(k)
+        unsafe = self._jumps(k) | self._excluded(k)
         out = np.asarray(cv2.dilate(unsafe.astype(np.uint8), np.ones((3, 3), np.uint8)), np.uint8)
         self._masks[key] = out
         return out
@@ -439,19 +533,37 @@ class DepthPyramid:
         size = ((t1 - t0) * f, (s1 - s0) * f)
         a, b = r0 - s0 * f, r1 - s0 * f
         c, d = x0 - t0 * f, x1 - t0 * f
-        planes = []
-        for ch, plane in enumerate(planes_k):
-            dst = buf(f"up:{k}:{ch}", (size[1], size[0]))
-            cv2.resize(plane[s0:s1, t0:t1], size, dst, interpolation=cv2.INTER_LINEAR)
-            planes.append(dst[a:b, c:d])
+        n_ch, n = len(planes_k), s1 - s0
+        planes: list[F32]
+        stack: F32 | None = None
+        if n_ch > 1 and s0 > 0 and s1 < h_k:
+            # the blocks of all planes one above the other, in one resize (a resize call costs
+            # ~10 µs more than its pixels): the rows used never reach a block's edge (away from
+            # the image's top and bottom, where the resize clamps), so no row mixes two planes
+            src = buf(f"upsrc:{k}", (n_ch * n, t1 - t0))
+            for ch, plane in enumerate(planes_k):
+                src[ch * n : (ch + 1) * n] = plane[s0:s1, t0:t1]
+            dst = buf(f"up:{k}", (n_ch * size[1], size[0]))
+            cv2.resize(src, (size[0], n_ch * size[1]), dst, interpolation=cv2.INTER_LINEAR)
+            stack = dst.reshape(n_ch, size[1], size[0])[:, a:b, c:d]
+            planes = list(stack)
+        else:
+            planes = []
+            for ch, plane in enumerate(planes_k):
+                dst = buf(f"up:{k}:{ch}", (size[1], size[0]))
+                cv2.resize(plane[s0:s1, t0:t1], size, dst, interpolation=cv2.INTER_LINEAR)
+                planes.append(dst[a:b, c:d])
         ys, xs, vals = sparse
         i0, i1 = np.searchsorted(ys, [r0, r1])
         if i1 > i0:
             yy, xx, vv = ys[i0:i1] - r0, xs[i0:i1] - x0, vals[i0:i1]
             inside = (xx >= 0) & (xx < x1 - x0)
             yy, xx, vv = yy[inside], xx[inside], vv[inside]
-            for ch, plane in enumerate(planes):
-                plane[yy, xx] = vv[:, ch]
+            if stack is not None:
+                stack[:, yy, xx] = vv.T
+            else:
+                for ch, plane in enumerate(planes):
+                    plane[yy, xx] = vv[:, ch]
         return planes
 
     def _jb_weights(
@@ -659,9 +771,7 @@ def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
     out = cv2.ximgproc.jointBilateralFilter(
         guide, np.ascontiguousarray(src), 2 * radius + 1, geo.depth_sigma, sigma
     )
-    out = normalize_field(np.asarray(out, np.float32))
-    out *= m[..., None]
-    return out
+    return normalize_field(np.asarray(out, np.float32), m)
 
 
 def multiscale_normals(

@@ -44,9 +44,17 @@ original light; the output directions are unit length.
 Speed: given a :class:`ops.filtering.NormalPyramid`, each scale is aligned at the pyramid level
 its fine field lives on (coarse scales are smooth) and the light is carried to finer levels by
 the pyramid's edge-aware upsampling; only the scales of the full-resolution field n_1 run at
-full resolution, as structure-of-arrays strips of 32 rows (restricted to the columns that hold
-surfaces) in reused scratch buffers, on all cores. Given a plain list of (H, W, 3) fields, every
-scale runs at full resolution (the reference path).
+full resolution. Every level runs the same way (:class:`_Stage`): row strips (restricted to the
+columns that hold surfaces) on all cores, where the coarser fields and lights are upsampled
+(all planes of a level in one resize) into reused structure-of-arrays scratch buffers and Eq. 1
+is one pass-lean chain of cv2 / NumPy calls (:func:`_rotate`); background pixels get the
+original light back by a masked copy, not by blending. Given a plain list of (H, W, 3) fields,
+every scale runs at full resolution (the reference path).
+
+Rounding: √(1 − (a_i·z)²) amplifies the last bits of nearly parallel fields, and λ1 has no limit
+where ℓ̄ → 0 (the light along the frame's z, e.g. at a highlight's centre), so a few pixels of a
+frame move by up to ~1e-2 under any change of float32 rounding (a 1e-7 rad turn of the input
+light does the same); the fields entering a_i·z are therefore normalised with fixed rounding.
 """
 
 from __future__ import annotations
@@ -139,7 +147,6 @@ class _Work:
     def __init__(self, shape: tuple[int, int]) -> None:
         self._flat: dict[str, np.ndarray] = {}
         self._views: dict[str, F32] = {}
-        self.fields: dict[str, SoA] = {}  # per-strip inputs (this thread's strip)
         self.shape = (0, 0)
         self.reshape(shape)
 
@@ -151,17 +158,18 @@ class _Work:
         self.zeros = self._view("#zeros", np.float32, 0.0)
         self.tiny = self._view("#tiny", np.float32, 1e-12)
         self.small = self._view("#small", np.float32, 1e-6)
+        self.ones = self._view("#ones", np.float32, 1.0)
         self.boolean = self._view("#bool", np.bool_, None)
 
     def _view(self, name: str, dtype: type, fill: float | None) -> np.ndarray:
+        """A view of buffer ``name``; ``fill``: a constant, written once (never overwritten)."""
         n = self.shape[0] * self.shape[1]
         flat = self._flat.get(name)
         if flat is None or flat.size < n:
             flat = self._flat[name] = np.empty(max(n, 1), dtype)
-        view = flat[:n].reshape(self.shape)
-        if fill is not None:
-            view.fill(fill)
-        return view
+            if fill is not None:
+                flat.fill(fill)
+        return flat[:n].reshape(self.shape)
 
     def __call__(self, name: str) -> F32:
         view = self._views.get(name)
@@ -190,7 +198,7 @@ class _Work:
         return work
 
 
-def _dot(a: SoA, b: SoA, out: F32, tmp: F32) -> F32:
+def _dot(a: SoA, b: SoA, out: F32, tmp: F32 | None = None) -> F32:
     """out = a·b per pixel (``cv2.accumulateProduct`` fuses the multiply-adds)."""
     np.multiply(a[0], b[0], out=out)
     cv2.accumulateProduct(a[1], b[1], out)
@@ -199,100 +207,115 @@ def _dot(a: SoA, b: SoA, out: F32, tmp: F32) -> F32:
 
 
 def _normalize_soa(v: SoA, ws: _Work) -> SoA:
-    n2 = _dot(v, v, ws("n2"), ws("n2t"))
+    """v / |v| in place, zero vectors (background) stay 0; the same rounding as every field
+    of the reference path (the frame's z = a_{i+1} enters √(1 − (a_i·z)²), which amplifies
+    the last bits of nearly parallel fields)."""
+    n2 = _dot(v, v, ws("n2"))
     np.maximum(n2, ws.tiny, out=n2)
     cv2.sqrt(n2, n2)
-    np.divide(np.float32(1.0), n2, out=n2)
+    np.divide(_ONE, n2, out=n2)
     for comp in v:
         comp *= n2
     return v
 
 
-def _rotate(
-    a: SoA, b: SoA, light: SoA, sigma: float, egam: float, mask: F32, out: SoA, ws: _Work
-) -> SoA:
+def _normalize_fast(v: SoA, ws: _Work) -> SoA:
+    """v / |v| in place, |v| by two ``cv2.magnitude`` calls; zero vectors stay 0. For the
+    lights, whose rounding is not amplified."""
+    norm = ws("norm")
+    cv2.magnitude(v[0], v[1], norm)
+    cv2.magnitude(norm, v[2], norm)
+    np.maximum(norm, ws.tiny, out=norm)
+    for comp in v:
+        cv2.divide(comp, norm, comp)
+    return v
+
+
+def _pos(x: F32) -> F32:
+    """max(x, 0) in place (``cv2.threshold``: ~5x faster than ``np.maximum`` with a scalar)."""
+    cv2.threshold(x, 0.0, 0.0, cv2.THRESH_TOZERO, x)
+    return x
+
+
+_ONE = np.float32(1.0)
+
+
+def _rotate(a: SoA, b: SoA, light: SoA, sigma: float, egam: float, out: SoA, ws: _Work) -> SoA:
     """One scale of Eq. 1 (Mestres et al. 2021, §4-5) on structure-of-arrays fields.
 
-    a = a_i (fine), b = a_{i+1} (coarse, the frame's z), light = ℓ_{i+1}; writes ℓ_i (unit)
-    into ``out`` (which must not alias the inputs). ``mask`` (float 0/1) zeroes θ on background
-    pixels so that they keep their light.
+    a = a_i (fine), b = a_{i+1} (coarse, the frame's z), light = ℓ_{i+1} (unit vectors); writes
+    ℓ_i (unit) into ``out`` (which must not alias the inputs). Every pixel is rotated: callers
+    put the original light back on background pixels.
+
+    With c = a·z, the side test p = |ā| (ℓ·x) = a·ℓ − c (z·ℓ), |ā| = √(1 − c²) = λ2 and
+    q = |ā| |ℓ·y| = √(|ā|² (1 − (z·ℓ)²) − p²): λ1 = (2/π) atan2(|p|, q); g = a where p > 0
+    (at p = 0, λ1 = 0 and θ = 0), else the tangent t = (z − c a)/|ā|; Ω = ∠(ℓ, g) and the
+    rotation is the slerp ℓ_i ∝ sin(Ω − θ) ℓ + sin θ g with θ = σ W_γ(λ1 λ2) Ω.
     """
-    t1 = ws("t1")
-    zeros = ws.zeros
-    c = _dot(a, b, ws("c"), t1)  # a·z
-    al = _dot(a, light, ws("al"), t1)  # a·ℓ
-    bl = _dot(b, light, ws("bl"), t1)  # z·ℓ
+    t = ws("t1")
+    c = _dot(a, b, ws("c"))  # a·z
+    al = _dot(a, light, ws("al"))  # a·ℓ
+    bl = _dot(b, light, ws("bl"))  # z·ℓ
     p = ws("p")  # |ā| (ℓ·x): the side test
     np.multiply(c, bl, out=p)
     np.subtract(al, p, out=p)
-    s = ws("s")  # λ2 = |ā| = sqrt(1 − (a·z)²)
+    s = ws("s")  # |ā|² = 1 − (a·z)²
     np.multiply(c, c, out=s)
-    np.subtract(np.float32(1.0), s, out=s)
-    np.maximum(s, zeros, out=s)
+    np.subtract(_ONE, s, out=s)
+    _pos(s)
     q = ws("q")  # |ā| |ℓ·y| = sqrt(|ā|² (1 − (z·ℓ)²) − p²)
     np.multiply(bl, bl, out=q)
-    np.subtract(np.float32(1.0), q, out=q)
+    np.subtract(_ONE, q, out=q)
     q *= s
-    np.multiply(p, p, out=t1)
-    q -= t1
-    np.maximum(q, zeros, out=q)
-    cv2.sqrt(q, q)
-    cv2.sqrt(s, s)
-    np.abs(p, out=t1)
+    np.multiply(p, p, out=t)
+    q -= t
+    cv2.sqrt(_pos(q), q)
+    cv2.sqrt(s, s)  # λ2 = |ā|
+    np.abs(p, out=t)
     lam = ws("lam")  # λ1 π/2 = atan2(|ℓ·x|, |ℓ·y|), then λ = λ1 λ2
-    cv2.phase(q, t1, lam)
+    cv2.phase(q, t, lam)
     cv2.multiply(lam, s, lam, scale=_TWO_OVER_PI)
-    wgt = ws("w")  # W_γ(λ) = λ / (e^{−γ} + λ (1 − e^{−γ}))
-    cv2.addWeighted(lam, 1.0 - egam, lam, 0.0, egam, t1)
-    np.divide(lam, t1, out=wgt)
-    bright = ws("bright")  # 1 on the lit side (ℓ̄·x ≥ 0), else 0
-    np.greater_equal(p, zeros, out=ws.boolean)
-    np.copyto(bright, ws.boolean)
-    inv_s = ws("inv_s")
-    np.maximum(s, ws.tiny, out=inv_s)
-    np.divide(np.float32(1.0), inv_s, out=inv_s)
-    gl = ws("gl")  # g·ℓ: lit side a·ℓ, other side t·ℓ with t = (z − (a·z) a)/|ā|
+    k = ws("k")  # σ W_γ(λ) = σ λ / (e^{−γ} + λ (1 − e^{−γ}))
+    cv2.addWeighted(lam, 1.0 - egam, lam, 0.0, egam, t)
+    cv2.divide(lam, t, k, scale=sigma)
+    lit, isd = ws("lit"), ws("isd")  # 1 on the lit side (ℓ̄·x > 0), else 0
+    cv2.threshold(p, 0.0, 1.0, cv2.THRESH_BINARY, lit)
+    np.maximum(s, ws.tiny, out=isd)  # 1/|ā| on the other side, 0 on the lit side
+    np.subtract(_ONE, lit, out=t)
+    np.divide(t, isd, out=isd)
+    gl = ws("gl")  # g·ℓ: a·ℓ (lit) or t·ℓ = (z·ℓ − c a·ℓ)/|ā|
     np.multiply(c, al, out=gl)
     np.subtract(bl, gl, out=gl)
-    gl *= inv_s
-    np.subtract(al, gl, out=t1)
-    t1 *= bright
-    gl += t1
+    gl *= isd
+    cv2.accumulateProduct(al, lit, gl)
     np.clip(gl, -1.0, 1.0, out=gl)
-    sin_o = ws("sin_o")
+    sin_o = ws("sin_o")  # sin Ω
     np.multiply(gl, gl, out=sin_o)
-    np.subtract(np.float32(1.0), sin_o, out=sin_o)
-    np.maximum(sin_o, zeros, out=sin_o)
-    cv2.sqrt(sin_o, sin_o)
-    theta = ws("theta")  # θ = σ W_γ ∠(ℓ, g), 0 on background
+    np.subtract(_ONE, sin_o, out=sin_o)
+    cv2.sqrt(_pos(sin_o), sin_o)
+    theta = ws("theta")  # θ = σ W_γ Ω
     cv2.phase(gl, sin_o, theta)
-    cv2.multiply(theta, wgt, theta, scale=sigma)
-    theta *= mask
+    theta *= k
     cos_t, sin_t = ws("cos"), ws("sin")
-    cv2.polarToCart(None, theta, cos_t, sin_t)  # type: ignore[call-overload]
-    # slerp: ℓ' = cosθ ℓ + sinθ (g − (g·ℓ) ℓ)/sinΩ = A ℓ + B g, B = sinθ / sinΩ
-    coef_b = sin_t
-    np.maximum(sin_o, ws.small, out=t1)
-    coef_b /= t1
+    cv2.polarToCart(ws.ones, theta, cos_t, sin_t)
+    # sin(Ω − θ) = sin Ω cos θ − cos Ω sin θ, with sin Ω ≥ 1e-6 (where ℓ and g coincide)
+    np.maximum(sin_o, ws.small, out=sin_o)
     coef_a = cos_t
-    np.multiply(coef_b, gl, out=t1)
-    coef_a -= t1
-    # g = a (lit) or (b − c a)/|ā| (other): ℓ' = A ℓ + Ca a + Cb b
-    cb = ws("cb")
-    np.multiply(coef_b, inv_s, out=cb)
+    coef_a *= sin_o
+    np.multiply(gl, sin_t, out=t)
+    coef_a -= t
+    # g = h a + isd z, h = 1 (lit) or −c/|ā| (other side)
     ca = ws("ca")
-    np.multiply(cb, c, out=ca)
-    np.negative(ca, out=ca)
-    np.subtract(coef_b, ca, out=t1)
-    t1 *= bright
-    ca += t1  # lit: B, other: −B c/|ā|
-    np.multiply(cb, bright, out=t1)
-    cb -= t1  # lit: 0, other: B/|ā|
+    np.multiply(c, isd, out=ca)
+    np.subtract(lit, ca, out=ca)
+    ca *= sin_t
+    cb = isd
+    cb *= sin_t
     for o, lc, acomp, bcomp in zip(out, light, a, b, strict=True):
         np.multiply(coef_a, lc, out=o)
         cv2.accumulateProduct(ca, acomp, o)
         cv2.accumulateProduct(cb, bcomp, o)
-    return _normalize_soa(out, ws)
+    return _normalize_fast(out, ws)
 
 
 def _guide_soa(guide: str, n: SoA, view: SoA | None, ior: float, out: SoA, ws: _Work) -> SoA:
@@ -310,9 +333,8 @@ def _guide_soa(guide: str, n: SoA, view: SoA | None, ior: float, out: SoA, ws: _
     t1 = ws("g1")
     cos_i = _dot(n, view, ws("g0"), t1)
     if guide == "specular":
-        cos_i *= np.float32(2.0)
         for o, nc, vc in zip(out, n, view, strict=True):
-            np.multiply(cos_i, nc, out=o)
+            cv2.multiply(cos_i, nc, o, scale=2.0)  # (n·v) n × 2: exact, as 2 (n·v) × n
             o -= vc
         return out
     eta = np.float32(1.0 / ior)
@@ -427,10 +449,22 @@ def align_components(
             m0 = np.asarray(mask) > 0
             if m0.shape != shape:
                 raise ValueError(f"mask must be (H, W) = {shape}, got {m0.shape}")
-        m0f = m0.astype(np.float32)
-        return _align_full(fields, m0f, comps, gamma, view_f, view_c, ior, const, lfield)
+        inp = _Inputs(
+            shape,
+            comps,
+            math.exp(-gamma),
+            ior,
+            view_f,
+            view_c,
+            const,
+            lfield,
+            fields=[np.asarray(f, np.float32) for f in fields],
+            mask=m0.astype(np.float32),
+        )
+        return _align_full(inp)
     assert pyr is not None
-    return _align_pyramid(pyr, comps, gamma, view_f, view_c, ior, const, lfield)
+    inp = _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, const, lfield, pyr=pyr)
+    return _align_pyramid(inp)
 
 
 def _fill(vec: SoA, value: np.ndarray) -> SoA:
@@ -448,21 +482,30 @@ def _copy_in(vec: SoA, arr: np.ndarray) -> SoA:
     return vec
 
 
-Win = tuple[int, int, int, int]  # rows r0:r1, columns x0:x1
+def _window(v: SoA, win: Win) -> SoA:
+    r0, r1, x0, x1 = win
+    return (v[0][r0:r1, x0:x1], v[1][r0:r1, x0:x1], v[2][r0:r1, x0:x1])
 
 
-class _Level0:
-    """The full-resolution scales, strip by strip: per strip (restricted to the columns that
-    hold surface pixels) the fields of each scale, the view and the incoming light of each
-    component are made into structure-of-arrays buffers, and Eq. 1 is applied from the
-    coarsest level-0 scale to the finest. Pixels outside the windows are background and keep
-    the original light."""
+Win = tuple[int, int, int, int]  # rows r0:r1, columns x0:x1 (at the stage's level)
+State = tuple[int, SoA]  # a component's light aligned so far: (level, planes, 0 on background)
+
+# Rows per strip, and at least this many pixels per strip (coarse levels are narrow): each call
+# then works long enough for the two threads to overlap rather than wait on each other.
+_ROWS = 64
+_STRIP_PIXELS = 1 << 15
+
+
+def _strip_rows(width: int) -> int:
+    return max(_ROWS, -(-_STRIP_PIXELS // max(1, width)))
+
+
+class _Inputs:
+    """What every stage of one :func:`align_components` call shares."""
 
     def __init__(
         self,
         shape: tuple[int, int],
-        mask: F32,
-        steps: list[int],
         comps: dict[str, list[float]],
         egam: float,
         ior: float,
@@ -470,10 +513,11 @@ class _Level0:
         view_const: F32 | None,
         const: F32 | None,
         lfield: F32 | None,
+        pyr: NormalPyramid | None = None,
+        fields: list[F32] | None = None,
+        mask: F32 | None = None,
     ) -> None:
         self.shape = shape
-        self.mask = mask
-        self.steps = sorted(steps, reverse=True)
         self.comps = comps
         self.egam = egam
         self.ior = ior
@@ -481,297 +525,255 @@ class _Level0:
         self.view_const = view_const
         self.const = const
         self.lfield = lfield
+        self.pyr = pyr
+        self.fields = fields
+        if pyr is not None:
+            self.masks = pyr.geometry.mask
+            self.back8 = pyr.geometry.mask_u8(background=True)
+        else:
+            assert mask is not None
+            self.masks = [mask]
+            self.back8 = np.asarray(mask <= 0).view(np.uint8)
+        self._views: dict[int, SoA] = {}
+        self._lights: dict[int, SoA] = {}
+        self.rows: F32 | None = None
+        if const is not None:  # a strip of the constant light (level-0 rows are copied from it)
+            self.rows = np.empty((min(shape[0], _strip_rows(shape[1])), shape[1], 3), np.float32)
+            self.rows[:] = np.tile(const, (shape[1], 1))
         self.outs = {g: np.empty((*shape, 3), np.float32) for g in comps}
 
-    def field(self, i: int, win: Win, ws: _Work) -> SoA:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def needs_view(self, comps: Sequence[str]) -> bool:
+        return any(g != "diffuse" for g in comps)
 
-    def light(self, g: str, win: Win, ws: _Work) -> SoA:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def view_planes(self, k: int) -> SoA:
+        """The view at level k > 0 (the field is smooth: plain area averaging, each level from
+        the finest one already made), renormalised, as planes (cached)."""
+        got = self._views.get(k)
+        if got is None:
+            assert self.view is not None and self.pyr is not None
+            hk, wk = self.pyr.geometry.shape(k)
+            src = max((lv for lv in self._views if lv < k), default=0)
+            base = self.view if src == 0 else cv2.merge(list(self._views[src]))
+            small = cv2.resize(base, (wk, hk), interpolation=cv2.INTER_AREA)
+            got = self._views[k] = _soa(normalize_field(small))
+        return got
 
-    def prepare(self, win: Win, ws: _Work) -> None:
-        """Per-strip inputs shared by the components (the upsampled coarse fields)."""
+    def light_planes(self, k: int) -> SoA:
+        """The original (per-pixel) light at level k > 0, 0 on background (cached)."""
+        got = self._lights.get(k)
+        if got is None:
+            assert self.lfield is not None and self.pyr is not None
+            got = self._lights[k] = _soa(self.pyr.geometry.down(self.lfield, 0, k))
+        return got
 
-    def orig_light(self, win: Win, ws: _Work) -> SoA:
+
+class _Stage:
+    """The scales aligned at one pyramid level k, strip by strip, on the columns that hold
+    surfaces: per strip the fields (those of coarser levels upsampled edge-aware and
+    renormalised), the view and the incoming light of each component become
+    structure-of-arrays buffers, and Eq. 1 is applied from the coarsest scale of the level to
+    the finest. At level 0 the result is written to the outputs, whose other pixels (background,
+    components left unchanged) keep the original light; at coarser levels it becomes the
+    components' new states (0 on background)."""
+
+    def __init__(
+        self, inp: _Inputs, k: int, steps: list[int], states: dict[str, State | None]
+    ) -> None:
+        self.inp = inp
+        self.k = k
+        self.steps = sorted(steps, reverse=True)
+        self.states = states
+        comps = inp.comps
+        active = [g for g, sig in comps.items() if any(sig[j] > 0.0 for j in steps)]
+        if k == 0:
+            active = [g for g in comps if g in active or states.get(g) is not None]
+        self.active = active
+        self.mask = inp.masks[k]
+        self.shape = (int(self.mask.shape[0]), int(self.mask.shape[1]))
+        self.new: dict[str, SoA] = {}
+        if k > 0:
+            for g in active:
+                self.new[g] = (
+                    np.zeros(self.shape, np.float32),
+                    np.zeros(self.shape, np.float32),
+                    np.zeros(self.shape, np.float32),
+                )
+        # what comes from coarser levels: the fields z = a_{j+1} and the lights aligned so far
+        by_level: dict[int, list[tuple[str, SoA]]] = {}
+        pyr = inp.pyr
+        if pyr is not None:
+            for j in steps:
+                if pyr.levels[j + 1] > k and any(comps[g][j] > 0.0 for g in active):
+                    by_level.setdefault(pyr.levels[j + 1], []).append(
+                        (f"n{j + 1}", pyr.planes(j + 1))
+                    )
+            for g in active:
+                state = states.get(g)
+                if state is not None:
+                    by_level.setdefault(state[0], []).append((f"light:{g}", state[1]))
+        self.sources: list[tuple[int, list[str], list[F32], tuple[Any, Any, Any]]] = []
+        for lvl, items in sorted(by_level.items()):
+            planes = [plane for _, vec in items for plane in vec]
+            assert pyr is not None
+            sparse = pyr.geometry.up_sparse(planes, lvl, k)
+            self.sources.append((lvl, [n for n, _ in items], planes, sparse))
+        self.with_view = inp.needs_view(active)
+
+    # -- inputs of a strip ------------------------------------------------------------------
+
+    def upsample(self, win: Win, ws: _Work) -> dict[str, SoA]:
         r0, r1, x0, x1 = win
-        if self.lfield is not None:
-            return _copy_in(ws.vec("light_in"), self.lfield[r0:r1, x0:x1])
-        assert self.const is not None
-        return _fill(ws.vec("light_in"), self.const)
+        ups: dict[str, SoA] = {}
+        if not self.sources:
+            return ups
+        assert self.inp.pyr is not None
+        geo = self.inp.pyr.geometry
+        for lvl, names, planes_k, sparse in self.sources:
+            planes = geo.up_rows(
+                planes_k, lvl, (r0, r1), ws.arr, sparse, k_to=self.k, cols=(x0, x1)
+            )
+            for i, name in enumerate(names):
+                vec = (planes[3 * i], planes[3 * i + 1], planes[3 * i + 2])
+                # bilinear shortens unit vectors (to 0 … 1 next to background): renormalise
+                norm = _normalize_fast if name.startswith("light:") else _normalize_soa
+                ups[name] = norm(vec, ws)
+        return ups
+
+    def field(self, i: int, win: Win, ws: _Work, ups: dict[str, SoA]) -> SoA:
+        r0, r1, x0, x1 = win
+        inp = self.inp
+        if inp.fields is not None:
+            return _copy_in(ws.vec(f"n{i}"), inp.fields[i][r0:r1, x0:x1])
+        assert inp.pyr is not None
+        lvl = inp.pyr.levels[i]
+        if lvl > self.k:
+            return ups[f"n{i}"]
+        if self.k == 0:
+            return _copy_in(ws.vec(f"n{i}"), inp.pyr.normals[i][r0:r1, x0:x1])
+        return _window(inp.pyr.planes(i), win)
+
+    def view(self, win: Win, ws: _Work) -> SoA:
+        r0, r1, x0, x1 = win
+        inp = self.inp
+        if inp.view is None:
+            assert inp.view_const is not None
+            return _fill(ws.vec("view"), inp.view_const)
+        if self.k == 0:
+            return _copy_in(ws.vec("view"), inp.view[r0:r1, x0:x1])
+        return _window(inp.view_planes(self.k), win)
+
+    def light(self, g: str, win: Win, ws: _Work, ups: dict[str, SoA]) -> SoA:
+        if self.states.get(g) is not None:
+            return ups[f"light:{g}"]
+        r0, r1, x0, x1 = win
+        inp = self.inp
+        if inp.lfield is None:
+            assert inp.const is not None
+            return _fill(ws.vec("light_in"), inp.const)
+        if self.k == 0:
+            return _copy_in(ws.vec("light_in"), inp.lfield[r0:r1, x0:x1])
+        return _window(inp.light_planes(self.k), win)
+
+    # -- a strip ------------------------------------------------------------------------------
+
+    def fill(self, out: F32, r0: int, r1: int, x0: int, x1: int) -> None:
+        """Level 0: the original light on rows r0:r1, columns x0:x1 of an output."""
+        inp = self.inp
+        if x1 <= x0:
+            return
+        if inp.lfield is not None:
+            np.copyto(out[r0:r1, x0:x1], inp.lfield[r0:r1, x0:x1])
+        else:  # from rows of the light (a (3,) broadcast over (h, w, 3) is ~10x slower)
+            assert inp.rows is not None
+            out[r0:r1, x0:x1] = inp.rows[: r1 - r0, x0:x1]
 
     def strip(self, r0: int, r1: int) -> None:
-        cols = np.flatnonzero(self.mask[r0:r1].max(axis=0))
-        if not cols.size:
-            return  # all background: the original light, already in place
+        k = self.k
+        inp = self.inp
         width = self.shape[1]
+        cols = np.flatnonzero(self.mask[r0:r1].max(axis=0)) if self.active else np.zeros(0, int)
+        if not cols.size:
+            if k == 0:  # all background, or no component changes
+                for dst in inp.outs.values():
+                    self.fill(dst, r0, r1, 0, width)
+            return
         # window width rounded up (a few scratch-buffer shapes serve every strip)
         x0 = int(cols[0])
-        wd = min(width, -(-(int(cols[-1]) + 1 - x0) // 128) * 128)
+        step = 128 if k == 0 else 16
+        wd = min(width, -(-(int(cols[-1]) + 1 - x0) // step) * step)
         x0 = min(x0, width - wd)
         win = (r0, r1, x0, x0 + wd)
+        if k == 0:  # the original light outside the window (inside it: :meth:`write`)
+            for g, dst in inp.outs.items():
+                if g in self.active:
+                    self.fill(dst, r0, r1, 0, x0)
+                    self.fill(dst, r0, r1, x0 + wd, width)
+                else:
+                    self.fill(dst, r0, r1, 0, width)
         ws = _Work.get((r1 - r0, wd))
-        mrows = self.mask[r0:r1, x0 : x0 + wd]
-        self.prepare(win, ws)
-        view: SoA | None = None
-        if any(g != "diffuse" for g in self.comps):
-            if self.view is not None:
-                view = _copy_in(ws.vec("view"), self.view[r0:r1, x0 : x0 + wd])
-            else:
-                assert self.view_const is not None
-                view = _fill(ws.vec("view"), self.view_const)
+        ups = self.upsample(win, ws)
+        view = self.view(win, ws) if self.with_view else None
         fields: dict[int, SoA] = {}
-        for g in self.comps:
-            light = self.light(g, win, ws)
+        for g in self.active:
+            light = self.light(g, win, ws, ups)
             ping = 0
             for j in self.steps:
-                sig = self.comps[g][j]
+                sig = inp.comps[g][j]
                 if sig <= 0.0:
                     continue
                 for i in (j, j + 1):
                     if i not in fields:
-                        fields[i] = self.field(i, win, ws)
-                a = _guide_soa(g, fields[j], view, self.ior, ws.vec("ga"), ws)
-                b = _guide_soa(g, fields[j + 1], view, self.ior, ws.vec("gb"), ws)
+                        fields[i] = self.field(i, win, ws, ups)
+                a = _guide_soa(g, fields[j], view, inp.ior, ws.vec("ga"), ws)
+                b = _guide_soa(g, fields[j + 1], view, inp.ior, ws.vec("gb"), ws)
                 out = ws.vec(f"light{ping}")
-                light = _rotate(a, b, light, sig, self.egam, mrows, out, ws)
+                light = _rotate(a, b, light, sig, inp.egam, out, ws)
                 ping = 1 - ping
-            light = self.finish(g, light, win, ws)
-            cv2.merge(list(light), self.outs[g][r0:r1, x0 : x0 + wd])
+            self.write(g, light, win, ws)
 
-    def finish(self, g: str, light: SoA, win: Win, ws: _Work) -> SoA:
-        """Last touch on a component's strip before it is written."""
-        return light
-
-    def run(self) -> dict[str, F32]:
-        for out in self.outs.values():  # background everywhere, surfaces overwritten
-            if self.lfield is not None:
-                np.copyto(out, self.lfield)
-            else:  # one row, then rows (a (3,) broadcast over (H, W, 3) is ~10x slower)
-                out[:] = np.tile(np.asarray(self.const, np.float32), (self.shape[1], 1))
-        run_strips(self.shape[0], self.strip)
-        return self.outs
-
-
-class _Level0Fields(_Level0):
-    """Every field given at full resolution (a plain list of normals)."""
-
-    def __init__(self, fields: list[F32], **kw: Any) -> None:
-        super().__init__(**kw)
-        self.fields = fields
-
-    def field(self, i: int, win: Win, ws: _Work) -> SoA:
+    def write(self, g: str, light: SoA, win: Win, ws: _Work) -> None:
         r0, r1, x0, x1 = win
-        return _copy_in(ws.vec(f"n{i}"), self.fields[i][r0:r1, x0:x1])
-
-    def light(self, g: str, win: Win, ws: _Work) -> SoA:
-        return self.orig_light(win, ws)
-
-
-class _Level0Pyramid(_Level0):
-    """Fields of coarser levels and the lights aligned at coarse scales are brought to full
-    resolution strip by strip (:meth:`ops.filtering.DepthPyramid.up_rows`, into cache-sized
-    scratch buffers), renormalised, and background pixels get the original light back."""
-
-    def __init__(
-        self, pyr: NormalPyramid, states: dict[str, tuple[int, SoA | None]], **kw: Any
-    ) -> None:
-        super().__init__(**kw)
-        self.pyr = pyr
-        self.states = states
-        needed = {j + 1 for j in self.steps if any(sig[j] > 0 for sig in self.comps.values())}
-        by_level: dict[int, list[tuple[str, SoA]]] = {}
-        for i in sorted(needed):
-            if pyr.levels[i] > 0:
-                by_level.setdefault(pyr.levels[i], []).append((f"n{i}", pyr.planes(i)))
-        for g, (lvl, cur) in states.items():
-            if cur is not None:
-                by_level.setdefault(lvl, []).append((f"light:{g}", cur))
-        geo = pyr.geometry
-        # per source level: the names, the fields as planes, the sparse joint bilateral pixels
-        self.sources: list[tuple[int, list[str], list[F32], tuple[Any, Any, Any]]] = []
-        for lvl, items in by_level.items():
-            planes = [plane for _, vec in items for plane in vec]
-            self.sources.append((lvl, [n for n, _ in items], planes, geo.up_sparse(planes, lvl)))
-
-    def prepare(self, win: Win, ws: _Work) -> None:
-        r0, r1, x0, x1 = win
-        geo = self.pyr.geometry
-        ups: dict[str, SoA] = {}
-        for lvl, names, planes_k, sparse in self.sources:
-            planes = geo.up_rows(planes_k, lvl, (r0, r1), ws.arr, sparse, cols=(x0, x1))
-            for i, name in enumerate(names):
-                vec = (planes[3 * i], planes[3 * i + 1], planes[3 * i + 2])
-                # bilinear shortens unit vectors (to 0 … 1 next to background): renormalise
-                ups[name] = _normalize_soa(vec, ws)
-        ws.fields = ups
-
-    def finish(self, g: str, light: SoA, win: Win, ws: _Work) -> SoA:
-        """Background keeps the original light: ℓ = ℓ0 + m (ℓ − ℓ0)."""
-        if self.states[g][1] is None:
-            return light
-        r0, r1, x0, x1 = win
+        inp = self.inp
+        if self.k == 0:  # the window, then its background pixels back to the original light
+            out = inp.outs[g][r0:r1, x0:x1]
+            cv2.merge(list(light), out)
+            orig = inp.lfield if inp.lfield is not None else inp.rows
+            assert orig is not None
+            r_o = (r0, r1) if inp.lfield is not None else (0, r1 - r0)
+            cv2.copyTo(orig[r_o[0] : r_o[1], x0:x1], inp.back8[r0:r1, x0:x1], out)
+            return
         mrows = self.mask[r0:r1, x0:x1]
-        orig: Sequence[float | F32]
-        if self.lfield is None:
-            assert self.const is not None
-            orig = [float(c) for c in self.const]
-        else:
-            orig = _copy_in(ws.vec("orig"), self.lfield[r0:r1, x0:x1])
-        for comp, o in zip(light, orig, strict=True):
-            comp -= o
-            comp *= mrows
-            comp += o
-        return light
+        for comp, dst in zip(light, self.new[g], strict=True):
+            np.multiply(comp, mrows, out=dst[r0:r1, x0:x1])
 
-    def field(self, i: int, win: Win, ws: _Work) -> SoA:
-        r0, r1, x0, x1 = win
-        if self.pyr.levels[i] == 0:
-            return _copy_in(ws.vec(f"n{i}"), self.pyr.normals[i][r0:r1, x0:x1])
-        return ws.fields[f"n{i}"]
-
-    def light(self, g: str, win: Win, ws: _Work) -> SoA:
-        if self.states[g][1] is None:
-            return self.orig_light(win, ws)
-        return ws.fields[f"light:{g}"]
+    def run(self) -> None:
+        rows = _strip_rows(self.shape[1])
+        run_strips(self.shape[0], self.strip, rows=rows)
+        for g, planes in self.new.items():
+            self.states[g] = (self.k, planes)
 
 
-def _align_full(
-    fields: list[F32],
-    m0: F32,
-    comps: dict[str, list[float]],
-    gamma: float,
-    view: F32 | None,
-    view_const: F32 | None,
-    ior: float,
-    const: F32 | None,
-    lfield: F32 | None,
-) -> dict[str, F32]:
+def _align_full(inp: _Inputs) -> dict[str, F32]:
     """Every scale at full resolution, strip by strip."""
-    stage = _Level0Fields(
-        fields,
-        const=const,
-        lfield=lfield,
-        shape=m0.shape,
-        mask=m0,
-        steps=list(range(len(fields) - 1)),
-        comps=comps,
-        egam=math.exp(-gamma),
-        ior=ior,
-        view=view,
-        view_const=view_const,
-    )
-    return stage.run()
+    assert inp.fields is not None
+    _Stage(inp, 0, list(range(len(inp.fields) - 1)), {}).run()
+    return inp.outs
 
 
-def _align_pyramid(
-    pyr: NormalPyramid,
-    comps: dict[str, list[float]],
-    gamma: float,
-    view: F32 | None,
-    view_const: F32 | None,
-    ior: float,
-    const: F32 | None,
-    lfield: F32 | None,
-) -> dict[str, F32]:
-    """Coarse scales at their pyramid levels, the level-0 scales in full-resolution strips."""
-    geo = pyr.geometry
-    egam = math.exp(-gamma)
-    levels = pyr.levels
-    views: dict[int, F32] = {}
-
-    def view_at(k: int) -> F32:
-        # the view field is smooth (it does not depend on depth): plain area averaging, each
-        # level from the next finer one already made
-        if k not in views:
-            hk, wk = geo.shape(k)
-            if view is None:
-                assert view_const is not None
-                arr = np.empty((hk, wk, 3), np.float32)
-                arr[...] = view_const
-                views[k] = arr
-            else:
-                src = max((lv for lv in views if lv < k), default=0)
-                base = view if src == 0 else views[src]
-                small = cv2.resize(base, (wk, hk), interpolation=cv2.INTER_AREA)
-                views[k] = normalize_field(small)
-        return views[k]
-
-    def orig_light_at(k: int) -> SoA:
-        hk, wk = geo.shape(k)
-        if lfield is None:
-            assert const is not None
-            return tuple(np.full((hk, wk), float(c), np.float32) for c in const)  # type: ignore[return-value]
-        return _soa(geo.down(lfield, 0, k))
-
-    def zero_background(vec: SoA, m_k: F32) -> SoA:
-        for comp in vec:
-            comp *= m_k
-        return vec
-
-    # coarse scales (fine field above level 0), coarsest first; the states are 0 on background
-    states: dict[str, tuple[int, SoA | None]] = {g: (0, None) for g in comps}
-    n_steps = pyr.scales - 1
-    needed = [j for j in range(n_steps) if levels[j] > 0 and any(s[j] > 0 for s in comps.values())]
-    for k in sorted({levels[j] for j in needed}):  # finest first: each from the previous
-        if any(g != "diffuse" for g in comps):
-            view_at(k)
-
-    def alloc(name: str, shape: tuple[int, ...]) -> F32:
-        return np.empty(shape, np.float32)
-
-    for j in sorted(needed, reverse=True):
-        k = levels[j]
-        active = [g for g, sig in comps.items() if sig[j] > 0.0]
-        hk, wk = geo.shape(k)
-        ws = _Work((hk, wk))
-        m_k = geo.mask[k]
-        # what comes from coarser levels: z = n_{j+1} and the lights aligned so far
-        sources: dict[int, list[tuple[str, SoA]]] = {}
-        if levels[j + 1] > k:
-            sources.setdefault(levels[j + 1], []).append(("z", pyr.planes(j + 1)))
-        lights: dict[str, SoA] = {}
-        for g in active:
-            lvl, cur = states[g]
-            if cur is None:
-                lights[g] = zero_background(orig_light_at(k), m_k)
-            elif lvl == k:
-                lights[g] = cur
-            else:
-                sources.setdefault(lvl, []).append((g, cur))
-        ups: dict[str, SoA] = {}
-        for lvl, items in sources.items():
-            planes_k = [plane for _, vec in items for plane in vec]
-            sparse = geo.up_sparse(planes_k, lvl, k_to=k)
-            planes = geo.up_rows(planes_k, lvl, (0, hk), alloc, sparse, k_to=k)
-            for i, (name, _) in enumerate(items):
-                vec = (planes[3 * i], planes[3 * i + 1], planes[3 * i + 2])
-                ups[name] = _normalize_soa(vec, ws)
-        lights.update({g: ups[g] for g in active if g in ups})
-        a_n = pyr.planes(j)
-        b_n = ups["z"] if "z" in ups else pyr.planes(j + 1)
-        vk = _soa(view_at(k)) if any(g != "diffuse" for g in active) else None
-        for g in active:
-            a = _guide_soa(g, a_n, vk, ior, ws.vec("ga"), ws)
-            b = _guide_soa(g, b_n, vk, ior, ws.vec("gb"), ws)
-            out = (np.empty((hk, wk), np.float32) for _ in range(3))
-            new = _rotate(a, b, lights[g], comps[g][j], egam, m_k, tuple(out), ws)  # type: ignore[arg-type]
-            states[g] = (k, zero_background(new, m_k))
-
-    stage = _Level0Pyramid(
-        pyr,
-        states,
-        const=const,
-        lfield=lfield,
-        shape=pyr.shape,
-        mask=geo.mask[0],
-        steps=[j for j in range(n_steps) if levels[j] == 0],
-        comps=comps,
-        egam=egam,
-        ior=ior,
-        view=view,
-        view_const=view_const,
-    )
-    return stage.run()
+def _align_pyramid(inp: _Inputs) -> dict[str, F32]:
+    """Each scale at the level of its fine field, coarsest first, and the lights carried to
+    finer levels by the pyramid's edge-aware upsampling; level 0 writes the outputs."""
+    pyr = inp.pyr
+    assert pyr is not None
+    active = [j for j in range(pyr.scales - 1) if any(sig[j] > 0.0 for sig in inp.comps.values())]
+    states: dict[str, State | None] = {g: None for g in inp.comps}
+    for k in sorted({pyr.levels[j] for j in active} | {0}, reverse=True):
+        if k > 0 and inp.needs_view(list(inp.comps)):
+            for lv in sorted({pyr.levels[j] for j in active if 0 < pyr.levels[j] <= k}):
+                if inp.view is not None:
+                    inp.view_planes(lv)  # finest first: each from the previous
+        _Stage(inp, k, [j for j in active if pyr.levels[j] == k], states).run()
+    return inp.outs
 
 
 def align_light(
