@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+import cv2
 import numpy as np
 
 from gbuffer.errors import FrameError
@@ -112,16 +113,29 @@ class Camera:
         if self.projection == "orthographic":
             out[...] = (0.0, 0.0, 1.0)
             return out
+        xs, ys = self.image_coordinates(shape, display_size, origin)
+        # the eye is at the origin; the point is at (x, -y, -1) * depth: eye - point ∝ (-x, y, 1)
+        inv = np.add(np.square(xs)[None, :], np.square(ys)[:, None])
+        inv += np.float32(1.0)
+        cv2.sqrt(inv, dst=inv)
+        cv2.divide(1.0, inv, dst=inv)
+        cv2.merge([inv * -xs[None, :], inv * ys[:, None], inv], dst=out)
+        return out
+
+    def image_coordinates(
+        self,
+        shape: tuple[int, int],
+        display_size: tuple[int, int],
+        origin: tuple[int, int] = (0, 0),
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(x per column, y per row) of pixel centres on the image plane at unit depth
+        (perspective): x right, y **down** (rows), 0 at the display window's centre."""
+        h, w = shape
         dw, dh = display_size
         f = self.focal_px(dh)
-        xs = (np.arange(w, dtype=np.float32) + origin[0] + 0.5 - dw / 2.0) / f
-        ys = (np.arange(h, dtype=np.float32) + origin[1] + 0.5 - dh / 2.0) / f
-        # the eye is at the origin; the point is at (x, -y, -1) * depth: eye - point ∝ (-x, y, 1)
-        out[..., 0] = -xs[None, :]
-        out[..., 1] = ys[:, None]
-        out[..., 2] = 1.0
-        out /= np.linalg.norm(out, axis=2, keepdims=True)
-        return out
+        xs = (np.arange(w, dtype=np.float32) + origin[0] + 0.5 - dw / 2.0) / np.float32(f)
+        ys = (np.arange(h, dtype=np.float32) + origin[1] + 0.5 - dh / 2.0) / np.float32(f)
+        return xs.astype(np.float32), ys.astype(np.float32)
 
     # -- JSON -------------------------------------------------------------------------------
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
+import cv2
 import numpy as np
 
 from gbuffer.camera import Camera
@@ -162,8 +163,9 @@ class Frame:
     def positions(self) -> np.ndarray:
         """(H, W, 3) camera-space positions: the ``position`` buffer, else rebuilt from depth.
 
-        Perspective: the point on the eye ray at planar depth d is −v·d/v_z (v towards the
-        eye). Orthographic: (x, y, −d) with x, y from the pixel's place in the display window.
+        Perspective: the point on the eye ray at planar depth d, (x d, −y d, −d) with (x, y) the
+        pixel on the image plane at unit depth. Orthographic: (x, y, −d) with x, y from the
+        pixel's place in the display window. Without a camera: (0, 0, −d).
         """
         if "position" in self.buffers:
             return self.buffers["position"]
@@ -180,8 +182,13 @@ class Frame:
             return np.dstack(
                 [np.broadcast_to(xs[None, :], (h, w)), np.broadcast_to(ys[:, None], (h, w)), -d]
             ).astype(np.float32)
-        v = self.view_vectors()
-        return (-v * (d / np.maximum(v[..., 2], 1e-6))[..., None]).astype(np.float32)
+        if camera is None:  # view_vectors' default (0, 0, 1): the point straight ahead
+            zero = np.zeros_like(d)
+            return np.asarray(cv2.merge([zero, zero, -d]), np.float32)
+        # the point on the eye ray at planar depth d is (x d, −y d, −d) (image rows grow down)
+        assert self.display_size is not None
+        xs, ys = camera.image_coordinates(self.shape, self.display_size, self.origin)
+        return np.asarray(cv2.merge([d * xs[None, :], d * -ys[:, None], -d]), np.float32)
 
     def set_layer(self, layer: str, channels: dict[str, np.ndarray]) -> None:
         """Add output channels ``layer.<name>`` (e.g. ``set_layer("curvature", {"H": h})``)."""

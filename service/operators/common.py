@@ -5,6 +5,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Annotated, Literal
 
+import cv2
 import numpy as np
 from pydantic import Field, field_validator
 
@@ -94,4 +95,5 @@ def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
 
 def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:
     """An (H, W, C) field as output channels ``{"X": ..., "Y": ..., "Z": ...}``."""
-    return {n: np.ascontiguousarray(field[..., i]) for i, n in enumerate(names)}
+    planes = cv2.split(np.ascontiguousarray(field, np.float32))
+    return {n: np.asarray(planes[i]) for i, n in enumerate(names)}

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from typing import Literal
 
+import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
@@ -222,32 +223,40 @@ def lights_power(lights: list[Light]) -> float:
 def _relight(frame: Frame, p: LightAlignmentParams, light: dict[str, np.ndarray]) -> None:
     """Deferred shading: ambient (× AO) + the lobes lit by the aligned lights."""
     mask = frame.mask
-    albedo = np.broadcast_to(frame_albedo(frame, p.albedo), (*frame.shape, 3)).astype(np.float32)
-    amb = np.float32(p.ambient) * mask
+    shape = (*frame.shape, 3)
+    albedo = frame_albedo(frame, p.albedo)
+    amb = np.multiply(mask, np.float32(p.ambient), dtype=np.float32)
     if "ao" in frame.buffers:
-        amb = amb * frame.buffers["ao"]
+        amb *= frame.buffers["ao"]
+    specular = np.float32(1.0 if p.specular == "ggx" else p.specular_color)
     colors = {
         "ambient": albedo,
         "diffuse": albedo,
-        "specular": np.full_like(albedo, 1.0 if p.specular == "ggx" else p.specular_color),
+        "specular": np.full(3, specular, np.float32),
         "transmission": albedo * np.float32(p.transmission_weight),
     }
-    lights = {"ambient": np.repeat(amb[..., None], 3, axis=2), **light}
+    lights = {"ambient": np.asarray(cv2.merge([amb, amb, amb])), **light}
     for lobe in LOBES:  # a lobe not relit (specular 'none', no transmission) is not in the beauty
         if lobe not in lights:
             for name in (lobe, f"{lobe}.light", f"{lobe}.color"):
                 frame.buffers.pop(name, None)
-    beauty = np.zeros((*frame.shape, 3), np.float32)
+    beauty = np.zeros(shape, np.float32)
     for lobe, lit in lights.items():
-        radiance = (lit * colors[lobe]).astype(np.float32)
+        color = colors[lobe]
+        if color.ndim == 3:
+            radiance = np.asarray(cv2.multiply(lit, color))
+        else:  # a constant colour: broadcast, and stored as a read-only view
+            radiance = np.asarray(cv2.multiply(lit, (*color.tolist(), 0.0)))
+            color = np.broadcast_to(color, shape)
         frame.buffers[lobe] = radiance
-        frame.buffers[f"{lobe}.light"] = lit.astype(np.float32)
-        frame.buffers[f"{lobe}.color"] = colors[lobe]
-        beauty += radiance
+        frame.buffers[f"{lobe}.light"] = lit
+        frame.buffers[f"{lobe}.color"] = color
+        cv2.add(beauty, radiance, dst=beauty)
     frame.buffers.pop("remainder", None)
     old = frame.buffers.get("beauty")
-    covered = (mask > 0)[..., None]
-    frame.buffers["beauty"] = beauty if old is None else np.where(covered, beauty, old)
+    if old is not None:  # the renderer's background stays
+        cv2.copyTo(old, (mask <= 0).view(np.uint8), dst=beauty)
+    frame.buffers["beauty"] = beauty
 
 
 def _ratio(
