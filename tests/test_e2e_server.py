@@ -263,7 +263,7 @@ def assert_close(a: object, b: object, where: str = "") -> None:
         for i, (x, y) in enumerate(zip(a, b, strict=True)):
             assert_close(x, y, f"{where}[{i}]")
     elif isinstance(b, float):
-        assert a == pytest.approx(b, rel=1e-6, abs=1e-9), where
+        assert a == pytest.approx(b, rel=1e-6, abs=1e-6), where
     else:
         assert a == b, where
 
