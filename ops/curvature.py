@@ -25,12 +25,20 @@ that scale anyway; the box and difference filters' own variance is subtracted fr
 full-resolution fields are interpolated bilinearly (the direction from the interpolated
 doubled-angle vector), lazily, on first access (:class:`Curvature`).
 
-Discontinuities. A depth jump is a relative depth change ``|Δ log d| > depth_jump`` between
-neighbouring samples (MeshLab's Radiance Scaling shader likewise weights each of the 8 neighbours
-by its depth jump). Those pixels, widened by 1.5σ, and the background are cut out of the
-smoothing, and ``weight`` fades from 1 on reliable pixels to 0 about 1 + 1.65σ pixels from them
-(0 on background and on the first covered pixel), so no curvature appears at silhouettes or
-occlusion boundaries and nothing of one surface leaks into another.
+Discontinuities. An occlusion (one surface in front of another, a silhouette against a farther
+surface) is a relative depth jump ``|Δ log d| > depth_jump`` between neighbouring samples
+(MeshLab's Radiance Scaling shader likewise weights each of the 8 neighbours by its depth jump)
+that the surfaces do not explain: along a row or a column, the far sample lies behind both of its
+neighbours, ``2d - d- - d+ > (1 - e^-depth_jump)·d`` (:func:`_mark_occlusions`). A jump alone is
+not enough, since the depth change per pixel of a slanted surface grows as the image shrinks (a
+receding ground plane changes by several per cent per pixel at 120 px high); but a plane's depth
+is affine in the image (orthographic) or convex (perspective), and near its occluding contour so
+is any smooth surface's, so that second difference never has that sign on them, at any slant or
+resolution. Between fronto-parallel surfaces the test is the jump alone. The samples on both
+sides of an occlusion, widened by 1.5σ, and the background are cut out of the smoothing, and
+``weight`` fades from 1 on reliable pixels to 0 about 1 + 1.65σ pixels from them (0 on background
+and on the first covered pixel), so no curvature appears at silhouettes or occlusion boundaries
+and nothing of one surface leaks into another.
 """
 
 from __future__ import annotations
@@ -55,7 +63,7 @@ _cv: Any = cv2
 DEFAULT_SCALE = 0.003
 #: Default foreshortening f (0: curvature of the projected normal field; 1: Hessian of depth).
 DEFAULT_FORESHORTENING = 0.0
-#: Default relative depth jump |Δd|/d (as |Δ log d|) between neighbours that is a discontinuity.
+#: Default relative depth jump |Δ log d| between neighbours at an occlusion (module docstring).
 DEFAULT_DEPTH_JUMP = 0.03
 #: Default gain s of the mapping tanh(s·(κ1 + κ2)): a sphere spanning half the image height has
 #: κ1 + κ2 = 8 per unit image height, mapped to tanh(0.8) ≈ 0.66.
@@ -66,6 +74,7 @@ _NZ_MIN = 1e-2  # n_z is clamped to this before n_z^f (f > 0); |q| ≤ 1 / _NZ_M
 _TARGET_SIGMA = 1.5  # downsample while σ stays >= this many working pixels
 _MIN_SIDE = 16  # never downsample below this many pixels per side
 _STRIP_ROWS = 135  # working-grid rows per strip (4 strips at 1080p, level 1)
+_LIMB_RATIO = 3.0  # a jump this many times the step before it is not a limb (<= 1 + sqrt 2)
 
 
 @dataclass(init=False)
@@ -268,23 +277,115 @@ def _working_level(sigma_px: float, shape: tuple[int, int]) -> int:
 
 
 def _jump_band(depth_l: np.ndarray, cov: np.ndarray, depth_jump: float, radius: int) -> np.ndarray:
-    """uint8 255 on pixels within ``radius`` of a depth jump between two covered neighbours.
+    """uint8 255 on pixels within ``radius`` of a depth discontinuity (module docstring).
 
-    A jump is ``log d_max - log d_min > depth_jump`` over the covered pixels of a 3x3
-    neighbourhood, tested without logarithms as ``e^-depth_jump · d_max > d_min``.
+    Candidates are the pixels whose 3x3 neighbourhood holds a relative jump ``log d_max - log
+    d_min > depth_jump`` between covered pixels (tested without logarithms as ``e^-depth_jump ·
+    d_max > d_min``): cheap, and on most frames rare. Among them :func:`_mark_occlusions` keeps
+    the two sides of the jumps that the surfaces do not explain.
     """
     hi = np.zeros_like(depth_l)
     cv2.copyTo(depth_l, cov, hi)  # covered depth, 0 elsewhere (below any covered depth)
     lo = np.full_like(depth_l, np.inf)
     cv2.copyTo(depth_l, cov, lo)  # covered depth, +inf elsewhere
-    hi = _cv.dilate(hi, None)  # the default border is ignored by both
-    lo = _cv.erode(lo, None)
-    np.multiply(hi, np.float32(math.exp(-depth_jump)), out=hi)
-    jump = cv2.compare(hi, lo, cv2.CMP_GT)
+    dmax = _cv.dilate(hi, None)  # the default border is ignored by both
+    dmin = _cv.erode(lo, None)
+    np.multiply(dmax, np.float32(math.exp(-depth_jump)), out=dmax)
+    jump = cv2.compare(dmax, dmin, cv2.CMP_GT)
+    if cv2.countNonZero(jump):
+        _mark_occlusions(jump, cov, hi, lo, depth_jump)
     if radius > 0 and cv2.countNonZero(jump):
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         jump = cv2.dilate(jump, k)
     return jump
+
+
+def _mark_occlusions(
+    jump: np.ndarray, cov: np.ndarray, hi: np.ndarray, lo: np.ndarray, depth_jump: float
+) -> None:
+    """Keep the candidates in ``jump`` (uint8 255) that are next to the far side of an
+    occlusion and clear the others; ``cov`` is the coverage (uint8), ``hi`` and ``lo`` the
+    covered depth, 0 and +inf elsewhere.
+
+    Along a row or a column, a covered pixel of depth d whose two neighbours d-, d+ are covered
+    (and inside the image) is the far side of an occlusion when it lies behind both of them by
+    more than its own surface can, the nearer one a jump away::
+
+        d- + d+ < (1 + e^-t)·d    and    min(d-, d+) < e^-t·d,    t = depth_jump
+
+    (the first is a second difference of depth, ``2d - d- - d+ > (1 - e^-t)·d``). A plane's
+    depth is affine in the image (orthographic camera) or convex (perspective: 1/d is affine),
+    and near an occluding contour the visible sheet's depth is convex too, so none of them is a
+    far side however fast its depth grows per pixel, at any slant or resolution; at a step
+    between fronto-parallel surfaces both conditions read ``|Δ log d| > t``. With one neighbour
+    missing (background or outside the image), the other, d-, a jump nearer and its own other
+    neighbour d-- covered, the pixel is a far side when that jump is over ``_LIMB_RATIO`` times
+    the step before it, ``d - d- > 3·(d- - d--)``: the last steps of a limb (a square-root
+    profile) grow by at most 1 + √2 times, and a far surface seen as a thin strip between an
+    occluder and the background is still cut off.
+
+    Kept are the candidates within one pixel (3x3) of a far side: both sides of the jump, as the
+    3x3 test marks them at an occlusion. The tests read each candidate's neighbours (work
+    proportional to the candidates); where candidates are dense (a slanted surface at low
+    resolution) the second difference is first filtered over their bounding box with cv2.
+    """
+    bx, by, bw, bh = cv2.boundingRect(jump)
+    h, w = lo.shape
+    # The candidates' box with 2 pixels around it, +inf (missing) outside the image.
+    x0, y0, x1, y1 = max(bx - 2, 0), max(by - 2, 0), min(bx + bw + 2, w), min(by + bh + 2, h)
+    borders = (2 - (by - y0), 2 - (y1 - by - bh), 2 - (bx - x0), 2 - (x1 - bx - bw))
+    pad = cv2.copyMakeBorder(lo[y0:y1, x0:x1], *borders, cv2.BORDER_CONSTANT, value=math.inf)
+    roi = jump[by : by + bh, bx : bx + bw]
+    covered = cv2.bitwise_and(roi, cov[by : by + bh, bx : bx + bw])  # background: never far
+    if cv2.countNonZero(covered) > 1000 + bw * bh // 8:
+        # Dense: keep the candidates behind their neighbours along a row or a column first,
+        # 2d - d- - d+ > c/2·d over the box (missing neighbours, and those outside the box, as
+        # 0: a superset of the far sides).
+        box = hi[by : by + bh, bx : bx + bw]
+        kern = _second_diff(-0.5 * math.expm1(-depth_jump))
+        sx = cv2.filter2D(box, -1, kern, borderType=cv2.BORDER_CONSTANT)
+        sy = cv2.filter2D(box, -1, kern.T, borderType=cv2.BORDER_CONSTANT)
+        behind = _cv.compare(sx, 0, cv2.CMP_GT)
+        cv2.bitwise_or(behind, _cv.compare(sy, 0, cv2.CMP_GT), dst=behind)
+        cv2.bitwise_and(covered, behind, dst=covered)
+    pts = cv2.findNonZero(covered)  # (x, y) in the box, or None
+    if pts is None:
+        roi[...] = 0
+        return
+    stride = pad.shape[1]
+    pts = pts.reshape(-1, 2)
+    at = pts[:, 1] * stride + pts[:, 0] + (2 * stride + 2)  # flat index in ``pad``
+    # Depth at (-1, +1, -2, +2) along the row, then along the column: (candidate, axis, offset).
+    nb = pad.take(at[:, None] + _offsets(stride)).reshape(-1, 2, 4)
+    dm, dp = nb[..., 0], nb[..., 1]
+    d = pad.take(at)[:, None]
+    e = math.exp(-depth_jump)
+    near = np.minimum(dm, dp)
+    pair = dm + dp  # +inf when a neighbour is missing
+    jumps = near < e * d
+    far = jumps & (pair < (1 + e) * d)
+    # One neighbour missing: the far side is found from the near one and its other neighbour.
+    k = np.flatnonzero(jumps & (pair == np.inf))  # (candidate, axis) as 2·candidate + axis
+    if k.size:
+        m, dn, dk = nb.reshape(-1, 4)[k], near.reshape(-1)[k], d[k >> 1, 0]
+        dnn = np.where(m[:, 0] < m[:, 1], m[:, 2], m[:, 3])
+        far.reshape(-1)[k] = (dnn < np.inf) & (dk - dn > _LIMB_RATIO * (dn - dnn))
+    keep = np.zeros(pad.shape, np.uint8)  # far sides, in the pad's frame
+    keep.reshape(-1)[at[far[:, 0] | far[:, 1]]] = 255
+    np.bitwise_and(roi, _cv.dilate(keep, None)[2:-2, 2:-2], out=roi)  # the rest of ``jump`` is 0
+
+
+@functools.lru_cache(maxsize=64)
+def _offsets(stride: int) -> np.ndarray:
+    """Flat offsets of (-1, +1, -2, +2) along a row, then along a column, in an image of
+    ``stride`` columns."""
+    return np.array([-1, 1, -2, 2, -stride, stride, -2 * stride, 2 * stride], np.intp)
+
+
+@functools.lru_cache(maxsize=16)
+def _second_diff(c: float) -> np.ndarray:
+    """Row kernel of ``2d - d- - d+ - c·d``."""
+    return np.array([[-1.0, 2.0 - c, -1.0]], np.float32)
 
 
 def principal_curvatures(
@@ -325,7 +426,10 @@ def principal_curvatures(
         height); default ``H``. Sets the units (per image height) and σ in pixels.
     depth_jump : float
         Relative depth jump ``|Δ log d|`` between neighbouring samples above which they belong to
-        different surfaces, in (0, 10].
+        different surfaces, in (0, 10], provided the farther one also lies behind its other
+        neighbour (``2d - d- - d+ > (1 - e^-depth_jump)·d`` along a row or column): a slanted
+        or curved surface, however fast its depth changes per pixel, is not cut; between
+        fronto-parallel surfaces it is the jump alone (module docstring).
 
     Returns
     -------
@@ -384,9 +488,10 @@ def principal_curvatures(
     # Row strips (with a halo covering every neighbourhood the chain uses) keep the working
     # set in cache and run on parallel threads; the result is the same as one whole pass.
     # The smoothing needs normals 1 + g rows around the strip (g: the kernel's half size), the
-    # jump band coverage and depth 2 + radius rows further.
+    # jump band coverage and depth 3 + radius rows further (the occlusion test reads 2 rows
+    # either way, its result is widened by 1 row, then by the radius).
     nhalo = 1 + max(ks // 2, 2)
-    halo = 2 + radius + nhalo
+    halo = 3 + radius + nhalo
     outs = [np.empty((h_l, w_l), np.float32) for _ in range(4)]
 
     def strip(r0: int) -> None:
