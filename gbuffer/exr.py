@@ -48,6 +48,11 @@ from gbuffer.errors import FrameError, LimitError
 from gbuffer.frame import Passthrough
 
 MAGIC = b"\x76\x2f\x31\x01"
+
+#: Threads the OpenEXR library compresses and decompresses chunks with (its default is 0: the
+#: calling thread only); ``DEPICT_EXR_THREADS`` overrides the machine's core count.
+EXR_THREADS = int(os.environ.get("DEPICT_EXR_THREADS") or os.cpu_count() or 1)
+OpenEXR.set_global_thread_count(max(0, EXR_THREADS))
 _TILED = 0x200
 _LONG_NAMES = 0x400
 _NON_IMAGE = 0x800

@@ -655,7 +655,8 @@ def _check_finite(
 
 
 def _sum(arrays: Sequence[np.ndarray]) -> np.ndarray:
-    out = arrays[0].copy()
+    """Σ arrays, accumulated into the first (the caller's own new array: no copy)."""
+    out = arrays[0]
     for a in arrays[1:]:
         cv2.add(out, a, dst=out)
     return out

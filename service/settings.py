@@ -15,6 +15,7 @@ variable                   default        meaning
 ``DEPICT_QUEUE``           ``8``          jobs waiting for a worker; one more answers 429
 ``DEPICT_TIMEOUT_S``       ``120``        time limit of a job, queue wait included (504 after)
 ``DEPICT_LOG_LEVEL``       ``info``       ``debug``, ``info``, ``warning`` or ``error``
+``DEPICT_EXR_THREADS``     cores          OpenEXR's (de)compression threads (read by gbuffer.exr)
 =========================  =============  ==========================================================
 """
 
