@@ -34,7 +34,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, get_args
 
 os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
@@ -49,6 +49,7 @@ from ops import relief as rl
 from ops.scaling import luminance
 from ops.unsharp import plain_unsharp_mask
 from service import pipeline
+from service.operators.radiance_scaling import Scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
@@ -62,19 +63,8 @@ BACKGROUND = 0.18
 #: Display exposure (stops) of the mesh renders: their white surface under the default lights
 #: reaches about 0.6 linear, washed out in sRGB; the same for every before / after.
 MESH_EXPOSURE = -0.6
-#: Radiance Scaling scenarios, in the order of the paper's §5.
-RS_SCENARIOS = (
-    "lobes",
-    "beauty",
-    "ao",
-    "phong",
-    "sub_lambert",
-    "toon",
-    "ashikhmin_shirley",
-    "lit_sphere",
-    "mirror",
-    "refraction",
-)
+#: Radiance Scaling scenarios (those of the operator, in the order of the paper's §5).
+RS_SCENARIOS = tuple(s for s in get_args(Scenario) if s != "auto")
 #: Scenarios that post-process the renderer's image (their "before" is the input beauty).
 RS_POST = ("lobes", "beauty")
 #: Radiance Scaling parameters of the sheets. The default curvature gain (0.1 per image height)

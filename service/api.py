@@ -601,8 +601,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     ) -> Response:
         from service import pipeline as pipelines
 
-        spec = pipelines.parse(pipeline) if pipeline else pipelines.DEFAULT_PIPELINE
-        pipelines.compile_steps(spec)  # 422 before any pixel work
+        spec = pipelines.checked(pipeline) if pipeline else pipelines.DEFAULT_PIPELINE
         fields = _read_fields(preset, camera, map, normal_space)
         work = new_work()
         src = work / "in.exr"

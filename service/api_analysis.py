@@ -143,11 +143,7 @@ def install(
     ) -> dict[str, Any]:
         from service import pipeline as pipelines
 
-        spec_json = None
-        if pipeline:
-            spec = pipelines.parse(pipeline)
-            pipelines.compile_steps(spec)
-            spec_json = spec.model_dump_json()
+        spec_json = pipelines.checked(pipeline).model_dump_json() if pipeline else None
         given = {
             "gradient_scale": gradient_scale,
             "integration_scale": integration_scale,

@@ -225,7 +225,7 @@ def run_batch(
     """
     from service import pipeline
 
-    pipeline.compile_steps(pipeline.parse(spec_json))  # bad pipelines fail before any work
+    pipeline.checked(spec_json)  # bad pipelines fail before any work
     _token(in_pattern)
     _token(out_pattern)
     if in_pattern == out_pattern:

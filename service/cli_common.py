@@ -75,13 +75,10 @@ def pipeline_spec(args: argparse.Namespace, default: Any) -> Any:
     if args.pipeline and steps:
         raise UsageError("give either --pipeline or --op steps, not both")
     if args.pipeline:
-        spec = pipeline.load(args.pipeline)
-    elif steps:
-        spec = pipeline.parse(steps)
-    else:
-        return default
-    pipeline.compile_steps(spec)  # refuse bad parameters before reading pixels
-    return spec
+        return pipeline.checked(pipeline.load(args.pipeline))
+    if steps:
+        return pipeline.checked(steps)
+    return default
 
 
 def add_read_options(p: argparse.ArgumentParser) -> None:

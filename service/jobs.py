@@ -169,8 +169,7 @@ def enhance_file(
     from service import pipeline
     from service.registry import Context
 
-    spec = pipeline.parse(spec_json)
-    pipeline.compile_steps(spec)
+    spec = pipeline.checked(spec_json)
     frame = read_frame(in_path, read, max_pixels)
     context = Context(
         debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}), files=files
@@ -245,9 +244,7 @@ def score_job(
     frame = read_frame(in_path, read, max_pixels)
     op_s: list[tuple[str, float]] = []
     if spec_json:
-        spec = pipeline.parse(spec_json)
-        pipeline.compile_steps(spec)
-        frame, op_s = run_steps(frame, spec, Context(files=files))
+        frame, op_s = run_steps(frame, pipeline.checked(spec_json), Context(files=files))
     out = score_frame(frame, maps=False, **options)
     return {
         "score": float(out["score"]),

@@ -79,6 +79,14 @@ def compile_steps(spec: PipelineSpec) -> list[tuple[Operator, Params]]:
     return [(get(step.op), get(step.op).parse(step.params)) for step in spec.steps]
 
 
+def checked(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> PipelineSpec:
+    """:func:`parse` ``spec`` and validate every step's parameters (:func:`compile_steps`), so a
+    bad pipeline is refused before any pixel is read."""
+    out = parse(spec)
+    compile_steps(out)
+    return out
+
+
 def run(
     frame: Frame,
     spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str,
