@@ -3,9 +3,11 @@
 Run: ``.venv/bin/python -m bench.bench_relief``. Target (issue 8): descriptor + lookup + style,
 curvature included as the operator runs it, <= 10x the copy unit. The operator's path is
 ``principal_curvatures(scale=ops.relief.DEFAULT_SCALE)`` -> ``relief`` (descriptor and lookup
-fused on the curvature's working grid) -> a style (with n·l where the style uses it). Each part is
-also timed alone, the totals again at ``ops.curvature.DEFAULT_SCALE``, and the full-resolution
-variants for reference.
+fused on the curvature's working grid) -> a style, which computes n·l itself from the normals and
+a directional light in the same pass (``normal=``, ``light=``). Each part is also timed alone,
+the styles also from a precomputed n·l, the totals again at ``ops.curvature.DEFAULT_SCALE``, the
+full-resolution variants for reference, and the whole operator through ``service.pipeline.run``
+(curvature, relief with the full-resolution S layers, style, composite over the beauty).
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import numpy as np
 
 from bench.bench_congruence import scene
 from bench.common import Report
+from gbuffer.frame import Frame
 from ops.curvature import DEFAULT_SCALE as CURVATURE_SCALE
 from ops.curvature import principal_curvatures
 from ops.relief import (
@@ -30,6 +33,7 @@ from ops.relief import (
     xtoon,
 )
 from ops.shading import dot
+from service import pipeline
 
 TARGET = 10.0
 
@@ -65,14 +69,29 @@ def main() -> None:
         lambda: relief(curv, arm, curvedness_norm=desc.norm),
         9,
     )
+    report.time(
+        "relief + full-res S planes (the operator's)",
+        lambda: relief(curv, arm, with_descriptor=True),
+        9,
+    )
     report.time("relief, full_resolution lookup", lambda: relief(curv, arm, full_resolution=True))
     report.time("descriptor (full-res S, auto norm)", lambda: descriptor(curv), 9)
     report.time("arm_lookup(S) (full res)", lambda: arm_lookup(desc.s, arm), 9)
     report.time("descriptor_colors (visualisation)", lambda: descriptor_colors(desc.s), 5)
     report.time("n.l (ops.shading.dot)", lambda: dot(normal, light), 9)
     report.time("style: cel", lambda: cel(r), 9)
-    report.time("style: counter shading", lambda: counter_shading(r, ndotl), 9)
-    report.time("style: x-toon (RGB)", lambda: xtoon(r, ndotl, toon), 9)
+    report.time("style: counter shading, n.l given", lambda: counter_shading(r, ndotl), 9)
+    report.time(
+        "style: counter shading + n.l (fused)",
+        lambda: counter_shading(r, normal=normal, light=light),
+        9,
+    )
+    report.time("style: x-toon (RGB), n.l given", lambda: xtoon(r, ndotl, toon), 9)
+    report.time(
+        "style: x-toon (RGB) + n.l (fused)",
+        lambda: xtoon(r, toon=toon, normal=normal, light=light),
+        9,
+    )
     report.time("style: masked (H, W)", lambda: masked(r, base, effect), 9)
 
     def total(style: str, scale: float = DEFAULT_SCALE, full: bool = False) -> object:
@@ -81,8 +100,8 @@ def main() -> None:
         if style == "cel":
             return cel(rr)
         if style == "counter":
-            return counter_shading(rr, dot(normal, light))
-        return xtoon(rr, dot(normal, light), toon)
+            return counter_shading(rr, normal=normal, light=light)
+        return xtoon(rr, toon=toon, normal=normal, light=light)
 
     for sc in (DEFAULT_SCALE, CURVATURE_SCALE):
         print(f"-- operator at scale {sc}: curvature + descriptor + lookup + style (+ n.l)")
@@ -97,13 +116,26 @@ def main() -> None:
     print("-- without the curvature (from a computed Curvature)")
     report.time("relief + cel", lambda: cel(relief(curv, arm).r), 9)
     report.time(
-        "relief + n.l + counter shading",
-        lambda: counter_shading(relief(curv, arm).r, dot(normal, light)),
+        "relief + counter shading (n.l fused)",
+        lambda: counter_shading(relief(curv, arm).r, normal=normal, light=light),
         9,
     )
     report.time(
-        "relief + n.l + x-toon", lambda: xtoon(relief(curv, arm).r, dot(normal, light), toon), 9
+        "relief + x-toon (n.l fused)",
+        lambda: xtoon(relief(curv, arm).r, toon=toon, normal=normal, light=light),
+        9,
     )
+
+    print("-- the operator: pipeline.run(frame, [apparent_relief]) on normal + depth + beauty")
+    beauty = np.repeat(np.clip(ndotl, 0.0, 1.0)[..., None], 3, axis=2)
+    frame = Frame(buffers={"normal": normal, "depth": depth, "beauty": beauty})
+    for style in ("cel", "counter", "xtoon"):
+        steps = [{"op": "apparent_relief", "params": {"style": style}}]
+        report.time(
+            f"pipeline.run apparent_relief, style {style}",
+            lambda steps=steps: pipeline.run(frame, steps),
+            9,
+        )
 
 
 if __name__ == "__main__":

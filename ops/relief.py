@@ -46,13 +46,16 @@ Use. ``curv = principal_curvatures(normal, depth, mask, scale=DEFAULT_SCALE)``, 
 ``r = relief(curv, arm).r`` (fused, fast: the operator's path) or ``s = descriptor(curv).s`` and
 ``r = arm_lookup(s, arm)`` (S itself is needed for :func:`descriptor_colors` and :func:`pick`);
 then a style: :func:`cel`, :func:`counter_shading`, :func:`xtoon` (with :func:`default_toon`) or
-:func:`masked` over another operator's result. Shipped ARMs: :data:`SHIPPED_ARMS`,
-:func:`shipped_arm_path`, :func:`make_arm`; the painting template: :func:`arm_template`;
-"pick a feature": :func:`pick` and :func:`paint_arm`.
+:func:`masked` over another operator's result. Counter shading and X-Toon take n·ℓ, or the normals
+and a directional light (``normal=``, ``light=``) to compute it in their own pass, strip by strip
+on both cores (the operator's path: no full-size n·ℓ or texture-coordinate map is written).
+Shipped ARMs: :data:`SHIPPED_ARMS`, :func:`shipped_arm_path`, :func:`make_arm`; the painting
+template: :func:`arm_template`; "pick a feature": :func:`pick` and :func:`paint_arm`.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 import pathlib
 from collections.abc import Callable, Sequence
@@ -62,7 +65,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.curvature import Curvature
+from ops.curvature import Curvature, run_rows
 
 F32 = NDArray[np.float32]
 
@@ -115,6 +118,9 @@ _ARM_DIR = pathlib.Path(__file__).resolve().parent / "data" / "arm"
 _SQRT1_2 = 1.0 / math.sqrt(2.0)
 _PERCENTILE_SAMPLES = 1 << 15  # the auto percentile is taken on at most ~this many pixels
 _MAX_TEX = 32000  # cv2.remap sources must stay below 32767 texels per side
+_PAD = 2  # replicated texels below and right of a lookup texture (see _prepare)
+_PAD_MAX_TEXELS = 1 << 20  # larger textures are looked up as they are (no padded copy)
+_STRIP_ROWS = 64  # full-resolution rows per strip of the fused styles (both cores, in cache)
 
 
 class Descriptor(NamedTuple):
@@ -126,11 +132,14 @@ class Descriptor(NamedTuple):
 
 
 class Relief(NamedTuple):
-    """Result of :func:`relief`: ``r`` the relief value (H, W) in [0, 1] and ``norm`` the L_norm
-    used (as in :class:`Descriptor`)."""
+    """Result of :func:`relief`: ``r`` the relief value (H, W) in [0, 1], ``norm`` the L_norm
+    used (as in :class:`Descriptor`) and, when asked for, the descriptor planes ``s1``, ``s2``
+    (H, W) at full resolution."""
 
     r: F32
     norm: float
+    s1: F32 | None = None
+    s2: F32 | None = None
 
 
 class Pick(NamedTuple):
@@ -160,6 +169,18 @@ def _f32(a: NDArray[np.generic], name: str, ndim: tuple[int, ...]) -> F32:
     if arr.dtype.kind not in "fiub":
         raise ValueError(f"{name} must be numeric, got dtype {arr.dtype}")
     return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def _f32_rows(a: NDArray[np.generic], name: str, ndim: tuple[int, ...]) -> F32:
+    """As :func:`_f32`, but a float32 array whose rows are each contiguous (a crop of an image:
+    only the row stride is larger) is taken as it is, not copied: cv2 reads such views in place."""
+    arr = np.asarray(a)
+    if arr.dtype == np.float32 and arr.ndim in ndim and arr.ndim >= 2 and arr.size:
+        pixel = arr.itemsize * (arr.shape[2] if arr.ndim == 3 else 1)
+        inner = arr.strides[-1] == arr.itemsize and (arr.ndim == 2 or arr.strides[1] == pixel)
+        if inner and arr.strides[0] >= pixel * arr.shape[1]:
+            return arr
+    return _f32(a, name, ndim)
 
 
 def _check_s(s: NDArray[np.generic]) -> F32:
@@ -215,10 +236,23 @@ def _auto_norm(mag: np.ndarray, weight: np.ndarray, percentile: float) -> float:
     step = max(1, math.ceil(math.sqrt(mag.size / _PERCENTILE_SAMPLES)))
     sub_w = weight[::step, ::step]
     sel = (mag[::step, ::step] * sub_w)[sub_w > 0.5] * np.float32(_SQRT1_2)
-    if sel.size == 0:
+    if sel.size == 0 or np.isnan(sel).any():
         return AUTO_NORM_FLOOR
-    value = float(np.percentile(sel, percentile))
+    value = _percentile(sel, percentile)
     return max(value, AUTO_NORM_FLOOR) if math.isfinite(value) else AUTO_NORM_FLOOR
+
+
+def _percentile(a: np.ndarray, percentile: float) -> float:
+    """``float(np.percentile(a, percentile))`` of a 1-D float32 array without NaN, bit for bit
+    (NumPy's default "linear" method: a partition and the same float32 lerp), without NumPy's
+    generic quantile machinery (~0.15 ms a call, more than the partition itself)."""
+    pos = (a.size - 1) * float(np.true_divide(percentile, 100))
+    lo = math.floor(pos)
+    hi = min(lo + 1, a.size - 1)
+    part = np.partition(a, (lo, hi))
+    below, above, t = part[lo], part[hi], pos - lo
+    diff = above - below
+    return float(above - diff * (1 - t)) if t >= 0.5 else float(below + diff * t)
 
 
 def _grid_descriptor(
@@ -423,24 +457,54 @@ def arm_lookup(s: NDArray[np.generic], arm: NDArray[np.generic]) -> F32:
     arr = _check_s(s)
     tex = _check_arm(arm)
     h, w = tex.shape[:2]
-    return _remap(tex, _texel_map(arr, h, w), None)
+    return _lookup(_prepare(tex), _texel_map(arr, h, w), None)
 
 
-def _remap(tex: F32, mx: np.ndarray, my: np.ndarray | None) -> F32:
-    """Bilinear, edge-replicating cv2.remap in float precision. (OpenCV 5 interpolates a
-    2-channel source in fixed point, with 1/32-texel steps: its channels are remapped one by one.
-    A 3-channel source is remapped as RGBA, whose vectorised path is ~2x faster even with the
-    conversion back.)
+class _Texture(NamedTuple):
+    """A lookup texture as :func:`_lookup` reads it (see :func:`_prepare`)."""
+
+    planes: tuple[F32, ...]
+    chans: int  # channels of the looked-up values
+
+
+def _prepare(tex: F32) -> _Texture:
+    """A texture ready for :func:`_lookup`, bilinear, edge-replicating cv2.remap in float precision.
+
+    OpenCV 5 interpolates a 2-channel source in fixed point, with 1/32-texel steps: its channels
+    are remapped one by one. A 3-channel source is remapped as RGBA, whose vectorised path is ~2x
+    faster even with the conversion back. A texture of at most _PAD_MAX_TEXELS texels also gets
+    _PAD replicated rows below and columns to the right: the same values at every coordinate
+    (BORDER_REPLICATE reads those texels there anyway; checked bit for bit), but cv2.remap then
+    takes its in-range path on the last row and column (r = 0, n·ℓ = 1, S on the rim), ~30 %
+    faster on a toon or ARM lookup.
     """
-    if tex.ndim == 3 and tex.shape[2] == 2:
-        chans = [_remap(np.ascontiguousarray(tex[:, :, i]), mx, my) for i in range(2)]
-        return np.asarray(cv2.merge(chans), np.float32)
-    if tex.ndim == 3 and tex.shape[2] == 3:
-        rgba = cv2.cvtColor(tex, cv2.COLOR_RGB2RGBA)
-        out4 = cv2.remap(rgba, mx, _cv(my), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return np.asarray(cv2.cvtColor(out4, cv2.COLOR_RGBA2RGB), np.float32)
-    out = cv2.remap(tex, mx, _cv(my), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    return np.asarray(out, np.float32)
+    chans = 1 if tex.ndim == 2 else tex.shape[2]
+    if chans == 3:
+        planes = [np.asarray(cv2.cvtColor(tex, cv2.COLOR_RGB2RGBA), np.float32)]
+    elif chans == 2:
+        planes = [np.ascontiguousarray(tex[:, :, i]) for i in range(2)]
+    else:
+        planes = [tex]
+    if tex.shape[0] * tex.shape[1] <= _PAD_MAX_TEXELS:
+        planes = [
+            np.asarray(cv2.copyMakeBorder(p, 0, _PAD, 0, _PAD, cv2.BORDER_REPLICATE), np.float32)
+            for p in planes
+        ]
+    return _Texture(tuple(planes), chans)
+
+
+def _lookup(tex: _Texture, mx: np.ndarray, my: np.ndarray | None, dst: Any = None) -> F32:
+    """Bilinear lookup of a :func:`_prepare` d texture at texel coordinates (``mx``, ``my``), or
+    at the (H, W, 2) map ``mx`` when ``my`` is None; into ``dst`` when given (the right shape)."""
+    mode = cv2.INTER_LINEAR
+    border = cv2.BORDER_REPLICATE
+    if tex.chans == 2:
+        a, b = (cv2.remap(p, mx, _cv(my), mode, borderMode=border) for p in tex.planes)
+        return np.asarray(cv2.merge([a, b], dst=dst), np.float32)
+    if tex.chans == 3:
+        out4 = cv2.remap(tex.planes[0], mx, _cv(my), mode, borderMode=border)
+        return np.asarray(cv2.cvtColor(out4, cv2.COLOR_RGBA2RGB, dst=dst), np.float32)
+    return np.asarray(cv2.remap(tex.planes[0], mx, _cv(my), mode, dst=dst, borderMode=border))
 
 
 def _check_arm(arm: NDArray[np.generic]) -> F32:
@@ -455,6 +519,7 @@ def relief(
     curvedness_norm: float | Literal["auto"] = "auto",
     percentile: float = DEFAULT_PERCENTILE,
     full_resolution: bool = False,
+    with_descriptor: bool = False,
 ) -> Relief:
     """Relief value r = ARM(S) straight from the curvature: :func:`descriptor` and
     :func:`arm_lookup` fused (Apparent Relief §2), the operator's fast path.
@@ -466,11 +531,14 @@ def relief(
     interpolates the texture coordinates instead and looks up every pixel (crisp edges, about
     2x the copy unit more at 1080p). Same result as ``arm_lookup(descriptor(curv).s, arm)`` up to
     that interpolation; parameters as in :func:`descriptor` and :func:`arm_lookup`.
+    ``with_descriptor=True`` also returns S itself at full resolution, as two planes (the
+    channels of ``descriptor(curv).s``, bit for bit), from the same working-grid descriptor.
 
     Returns
     -------
     Relief
-        ``r``: (H, W) float32 in [0, 1] ((H, W, C) for a multi-channel ARM); ``norm``: L_norm.
+        ``r``: (H, W) float32 in [0, 1] ((H, W, C) for a multi-channel ARM); ``norm``: L_norm;
+        ``s1``, ``s2``: the (H, W) descriptor planes with ``with_descriptor``, else None.
     """
     tex = _check_arm(arm)
     s1, s2, norm, up = _grid_descriptor(curv, curvedness_norm, percentile)
@@ -480,10 +548,13 @@ def relief(
     my = cv2.addWeighted(s2, -ay, s2, 0.0, ay)
     if up is not None and full_resolution:
         mx, my = up(mx), up(my)
-    r = _remap(tex, mx, my)
+    r = _lookup(_prepare(tex), mx, my)
     if up is not None and not full_resolution:
         r = up(r)
-    return Relief(np.asarray(r, np.float32), norm)
+    planes: tuple[F32 | None, F32 | None] = (None, None)
+    if with_descriptor:
+        planes = (s1, s2) if up is None else (up(s1), up(s2))
+    return Relief(np.asarray(r, np.float32), norm, *planes)
 
 
 def arm_from_image(img: NDArray[np.generic]) -> F32:
@@ -762,14 +833,67 @@ def cel(r: NDArray[np.generic]) -> F32:
     return np.asarray(np.clip(_f32(r, "r", (2, 3)), 0.0, 1.0), np.float32)
 
 
-def _ndotl(ndotl: NDArray[np.generic], shape: tuple[int, ...]) -> F32:
-    nl = _f32(ndotl, "ndotl", (2,))
-    _check_same(nl, "ndotl", shape)
-    return np.clip(nl, np.float32(0.0), np.float32(1.0))
+def _strips(n_rows: int, fn: Callable[[int, int], None], rows: int = _STRIP_ROWS) -> None:
+    """``fn(r0, r1)`` on strips of ``rows`` rows covering ``[0, n_rows)``, on both cores
+    (:func:`ops.curvature.run_rows`; ``fn`` writes only its own rows). The styles work strip by
+    strip so their temporaries stay in the caches."""
+    run_rows(range(0, n_rows, rows), lambda r0: fn(r0, min(n_rows, r0 + rows)))
+
+
+def _lit(
+    ndotl: NDArray[np.generic] | None,
+    normal: NDArray[np.generic] | None,
+    light: NDArray[np.generic] | Sequence[float] | None,
+    shape: tuple[int, ...],
+    scale: float = 1.0,
+) -> Callable[[int, int], F32]:
+    """n·ℓ clamped to [0, 1], times ``scale``, on rows [r0, r1): a fresh (r1 − r0, W) array per
+    call, from an (H, W) ``ndotl``, or from the (H, W, 3) ``normal`` field and a directional
+    ``light`` (3,) by cv2.transform with the light as a 1x3 matrix (the arithmetic of
+    ``ops.shading.dot``, bit for bit). The clamp stays even for texture coordinates: cv2.remap
+    takes a much slower path for the few that would fall outside the texture."""
+    if ndotl is not None:
+        if normal is not None or light is not None:
+            raise ValueError("give either ndotl or normal and light, not both")
+        nl = _f32_rows(ndotl, "ndotl", (2,))
+        _check_same(nl, "ndotl", shape)
+
+        def rows(r0: int, r1: int) -> F32:
+            return np.clip(nl[r0:r1], np.float32(0.0), np.float32(1.0))
+
+    else:
+        if normal is None or light is None:
+            raise ValueError("n·ℓ is needed: give ndotl, or normal and light")
+        n = _f32_rows(normal, "normal", (3,))
+        if n.shape[2] != 3:
+            raise ValueError(f"normal must have shape (H, W, 3), got {n.shape}")
+        _check_same(n, "normal", shape)
+        vec = np.asarray(light, np.float32)
+        if vec.shape != (3,) or not np.isfinite(vec).all():
+            raise ValueError(f"light must be a finite (3,) direction, got {vec!r}")
+        m, width = vec.reshape(1, 3), n.shape[1]
+
+        def rows(r0: int, r1: int) -> F32:
+            v = np.asarray(cv2.transform(n[r0:r1], m), np.float32).reshape(r1 - r0, width)
+            return np.clip(v, np.float32(0.0), np.float32(1.0), out=v)
+
+    if scale == 1.0:
+        return rows
+
+    def scaled(r0: int, r1: int) -> F32:
+        v = rows(r0, r1)
+        return np.asarray(cv2.addWeighted(v, scale, v, 0.0, 0.0, dst=v), np.float32)
+
+    return scaled
 
 
 def counter_shading(
-    r: NDArray[np.generic], ndotl: NDArray[np.generic], threshold: float = 0.5
+    r: NDArray[np.generic],
+    ndotl: NDArray[np.generic] | None = None,
+    threshold: float = 0.5,
+    *,
+    normal: NDArray[np.generic] | None = None,
+    light: NDArray[np.generic] | Sequence[float] | None = None,
 ) -> F32:
     """Counter shading (Apparent Relief §2, Fig. 2b)::
 
@@ -780,19 +904,28 @@ def counter_shading(
     r : (H, W) relief value in [0, 1] (:func:`arm_lookup`), used as the contrast.
     ndotl : (H, W) n·ℓ, clamped to [0, 1] (back-facing light counts as 0).
     threshold : in [0, 1] (the paper's 0.5).
+    normal, light : instead of ``ndotl``, the (H, W, 3) normals and a directional light (3,),
+        unit length, camera space: n·ℓ is then computed in the same pass (no (H, W) n·ℓ
+        written), with the result of ``counter_shading(r, ops.shading.dot(normal, light))``.
 
     Returns
     -------
     (H, W) float32, exactly 0 or 1.
     """
-    rr = _f32(r, "r", (2,))
-    nl = _ndotl(ndotl, rr.shape)
+    rr = _f32_rows(r, "r", (2,))
+    lit = _lit(ndotl, normal, light, rr.shape)
     thr = _check_fraction("threshold", threshold)
-    i = cv2.addWeighted(nl, -2.0, nl, 0.0, 1.0)  # 1 − 2 n·ℓ
-    cv2.multiply(i, rr, dst=i)
-    cv2.add(i, nl, dst=i)
-    _, out = cv2.threshold(i, thr, 1.0, cv2.THRESH_BINARY)
-    return np.asarray(out, np.float32)
+    out = np.empty(rr.shape, np.float32)
+
+    def strip(r0: int, r1: int) -> None:
+        nl = lit(r0, r1)
+        i = cv2.addWeighted(nl, -2.0, nl, 0.0, 1.0)  # 1 − 2 n·ℓ
+        cv2.multiply(i, rr[r0:r1], dst=i)
+        cv2.add(i, nl, dst=i)
+        cv2.threshold(i, thr, 1.0, cv2.THRESH_BINARY, dst=out[r0:r1])
+
+    _strips(rr.shape[0], strip, 2 * _STRIP_ROWS)  # (H, W) temporaries only: taller strips
+    return out
 
 
 def default_toon(width: int = 256, height: int = 64) -> F32:
@@ -814,10 +947,25 @@ def default_toon(width: int = 256, height: int = 64) -> F32:
     return np.ascontiguousarray(np.clip(val[:, :, None] * tint, 0.0, 1.0), dtype=np.float32)
 
 
+_DEFAULT_TOON_SIZE = (64, 256)  # (h, w) of default_toon()
+
+
+@functools.cache
+def _default_toon_texture() -> _Texture:
+    """:func:`default_toon` prepared for the lookup, once (read-only arrays)."""
+    tex = _prepare(default_toon(_DEFAULT_TOON_SIZE[1], _DEFAULT_TOON_SIZE[0]))
+    for plane in tex.planes:
+        plane.setflags(write=False)
+    return tex
+
+
 def xtoon(
     r: NDArray[np.generic],
-    ndotl: NDArray[np.generic],
+    ndotl: NDArray[np.generic] | None = None,
     toon: NDArray[np.generic] | None = None,
+    *,
+    normal: NDArray[np.generic] | None = None,
+    light: NDArray[np.generic] | Sequence[float] | None = None,
 ) -> F32:
     """X-Toon shading with the relief as the detail axis (Apparent Relief §2, Fig. 2a; Barla,
     Thollot & Markosian, "X-Toon: an extended toon shader", NPAR 2006)::
@@ -830,20 +978,37 @@ def xtoon(
     ndotl : (H, W) n·ℓ, clamped to [0, 1].
     toon : (h, w) or (h, w, C <= 4) texture in [0, 1], tone left → right, r = 1 on the top row;
         default :func:`default_toon`.
+    normal, light : instead of ``ndotl``, the (H, W, 3) normals and a directional light (3,):
+        n·ℓ is computed in the same pass as the lookup, with the result of
+        ``xtoon(r, ops.shading.dot(normal, light), toon)``.
 
     Returns
     -------
     (H, W, C) float32 (or (H, W) for a one-channel texture), bilinear lookup.
+
+    Notes
+    -----
+    The texture coordinates and the lookup (one cv2.remap) are computed strip by strip on both
+    cores, so no full-size map is written.
     """
-    rr = _f32(r, "r", (2,))
-    nl = _ndotl(ndotl, rr.shape)
-    tex = _check_unit_image(default_toon() if toon is None else toon, "toon")
-    if tex.ndim == 3 and tex.shape[2] == 1:
-        tex = tex[:, :, 0]
-    h, w = tex.shape[:2]
-    mx = cv2.addWeighted(nl, float(w - 1), nl, 0.0, 0.0)
-    my = cv2.addWeighted(rr, -(h - 1.0), rr, 0.0, h - 1.0)
-    return _remap(tex, mx, my)
+    rr = _f32_rows(r, "r", (2,))
+    if toon is None:
+        tex, (h, w) = _default_toon_texture(), _DEFAULT_TOON_SIZE
+    else:
+        img = _check_unit_image(toon, "toon")
+        if img.ndim == 3 and img.shape[2] == 1:
+            img = img[:, :, 0]
+        tex, (h, w) = _prepare(img), img.shape[:2]
+    sx, sy = float(w - 1), float(h - 1)
+    columns = _lit(ndotl, normal, light, rr.shape, sx)  # x = n·ℓ · (w − 1)
+    out = np.empty(rr.shape if tex.chans == 1 else (*rr.shape, tex.chans), np.float32)
+
+    def strip(r0: int, r1: int) -> None:
+        my = cv2.addWeighted(rr[r0:r1], -sy, rr[r0:r1], 0.0, sy)
+        _lookup(tex, columns(r0, r1), my, dst=out[r0:r1])
+
+    _strips(rr.shape[0], strip)
+    return out
 
 
 def masked(r: NDArray[np.generic], base: NDArray[np.generic], effect: NDArray[np.generic]) -> F32:
