@@ -50,6 +50,7 @@ __all__ = [
     "lab_phi_to_rgb",
     "lab_to_rgb",
     "lightness",
+    "lightness_rows",
     "luminance",
     "resolve_white",
     "rgb_to_lab",
@@ -84,12 +85,24 @@ _LAB_TO_PHI = np.linalg.inv(_PHI_TO_LAB.astype(np.float64)).astype(np.float32)
 _C0 = 4.0 / 29.0  # f(0): φ = f − 4/29
 _KNEE_PHI = _DELTA - _C0  # φ at the knee t = δ³ (2/29)
 _STRIP_PIXELS = 1 << 17  # pixels per row strip
+_116 = np.float32(116.0)
 
 White = float | Literal["auto"]
+#: What a per-strip ``k`` of :func:`scale_lab` returns: (k, keep) or (k, keep, columns).
+KRows = tuple[np.ndarray, np.ndarray | None] | tuple[np.ndarray, np.ndarray | None, slice]
 
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 _IN_STRIP = threading.local()  # set in the pool's threads while they run strips
+
+
+def _forget_pool() -> None:  # in a forked child: the parent's threads are not there
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
 
 
 def row_strips(h: int, w: int, fn: Callable[[slice], None], step: int | None = None) -> None:
@@ -301,7 +314,7 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     (or view) to write into; the result is returned either way.
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(_check_white(white))[1:2]
+    kernel = lightness_rows(white)
     h, w = arr.shape[:2]
     if out is None:
         out = np.empty((h, w), np.float32)
@@ -313,9 +326,7 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
         y = res[r]
         if not y.flags.c_contiguous:  # work in a contiguous strip
             y = np.empty(y.shape, np.float32)
-        _write(_cv.transform(arr[r], m, dst=y), y)
-        _phi_inplace(y)
-        _cv.multiply(y, 116.0, dst=y)
+        kernel(arr[r], y)
         if not np.shares_memory(y, res):
             res[r] = y
 
@@ -323,9 +334,24 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     return res
 
 
+def lightness_rows(white: float = 1.0) -> Callable[[np.ndarray, np.ndarray], None]:
+    """The strip kernel of :func:`lightness` for ``white``: ``fn(rgb, out)`` writes L* of
+    ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
+    C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
+    which the dozen calls of :func:`lightness`'s checks per strip would add up."""
+    m = _to_t(_check_white(white))[1:2]
+
+    def fn(rgb: np.ndarray, out: np.ndarray) -> None:
+        _write(_cv.transform(rgb, m, dst=out), out)
+        _phi_inplace(out)
+        np.multiply(out, _116, out=out)  # (exact: OpenCV would multiply in double, slower)
+
+    return fn
+
+
 def scale_lab(
     rgb: np.ndarray,
-    k: np.ndarray | Callable[[slice], tuple[np.ndarray, np.ndarray | None]],
+    k: np.ndarray | Callable[[slice], KRows],
     white: float = 1.0,
     *,
     keep: np.ndarray | None = None,
@@ -341,10 +367,12 @@ def scale_lab(
     Parameters
     ----------
     rgb : (H, W, 3) float32 linear RGB
-    k : (H, W) float32, or a function of a row slice returning (k, keep) for those rows
+    k : (H, W) float32, or a function of a row slice returning (k, keep) or (k, keep, cols)
         Per-pixel factor (≥ 0 keeps the colour physical). A function is called once per strip
         (from several threads at once): it lets the caller form k (and keep) while the strip
-        is in cache; its keep (uint8 or None) replaces ``keep``.
+        is in cache; its keep (uint8 or None) replaces ``keep``. With ``cols`` (a slice of
+        columns), k and keep cover those columns only and the strip's other columns are
+        returned as ``rgb``, bit for bit (nothing there to change: not converted at all).
     white : float
         White level of the CIELAB coordinates (> 0).
     keep : (H, W) uint8 or None
@@ -361,25 +389,30 @@ def scale_lab(
         kk = _rows_of(k, (hh, ww), np.float32, "k")
         kp_all = None if keep is None else _rows_of(keep, (hh, ww), np.uint8, "keep")
 
-        def k_of(r: slice) -> tuple[np.ndarray, np.ndarray | None]:
+        def k_of(r: slice) -> KRows:
             return kk[r], None if kp_all is None else kp_all[r]
 
     m, m_inv = _to_t(w), _from_t(w)
     res = np.empty_like(arr) if out is None else out
 
     def strip(r: slice) -> None:
-        t = _cv.transform(arr[r], m)
+        got = k_of(r)
+        kr, kp = got[0], got[1]
+        c = got[2] if len(got) > 2 else slice(0, ww)
+        if c.start > 0:
+            res[r, : c.start] = arr[r, : c.start]
+        if c.stop < ww:
+            res[r, c.stop :] = arr[r, c.stop :]
+        if c.stop <= c.start:
+            return
+        src, dst = arr[r, c], res[r, c]
+        t = _cv.transform(src, m)
         _phi_inplace(_flat(t))
-        kr, kp = k_of(r)
         _cv.multiply(t, _cv.merge([kr, kr, kr]), dst=t)
         _unphi_inplace(_flat(t))
-        dst = res[r]
         _write(_cv.transform(t, m_inv, dst=dst), dst)
         if kp is not None and _cv.countNonZero(kp):
-            if dst.flags.c_contiguous:
-                _cv.copyTo(arr[r], kp, dst)
-            else:
-                np.copyto(dst, arr[r], where=kp.view(bool)[..., None])
+            _write(_cv.copyTo(src, kp, dst), dst)
 
     row_strips(hh, ww, strip)
     return res

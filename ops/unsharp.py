@@ -20,7 +20,9 @@ the enhanced colour is (U(L*), k a*, k b*) with k = U(L*)/L*, i.e. φ' = k φ: t
 atan2(b*, a*) and the saturation √(a*² + b*²)/L* are unchanged. U is clamped at 0 (no negative
 lightness); k = U / max(L*, 1e-3) (black stays black). Only L* is ever formed on the way in
 (:func:`ops.color.lightness`); on the way out :func:`ops.color.scale_lab` applies φ' = k φ strip
-by strip, with k (and the gain, Eq. 1) formed for each strip of rows while it is in cache.
+by strip, with k (and the gain, Eq. 1) formed for each strip of rows while it is in cache: L*_σ
+and √(1 + Var) are upsampled to the strip there, in the strip's columns that hold some surface
+(the others are returned as they are, not converted).
 
 The surface pyramid (``_surface_pyramid``), in short: level k holds cells of 2^k pixels that
 each keep the front-most surface of their block (depth steps are told from steep surfaces by
@@ -30,13 +32,20 @@ fine, each pixel mixing the two levels around its σ_px = σ / pixel_size, with 
 only interpolates between cells of the pixel's own surface. Only the bounding box of the
 surface is processed, and a level only where some pixel needs it. The full-resolution fields
 (depth guide, L*, the averages that make level 1) are formed in one pass over strips of rows.
+The domain transforms (OpenCV, without the GIL) run on a thread of their own, each as soon as
+its level is made, while the next levels are made and the upsamplings' re-weighted pixels are
+found (NumPy, which holds the GIL): the two kinds of work share the cores instead of taking
+turns.
 """
 
 from __future__ import annotations
 
 import functools
 import math
+import os
+import threading
 from collections.abc import Callable
+from concurrent.futures import Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -81,6 +90,7 @@ _BOX_MARGIN = 8
 _LEVEL_SIGMA = 2.218
 _LN2 = math.log(2.0)
 _L_EPS = 1.0e-3  # L* below which k = U/L is not formed (black)
+_ONE = np.float32(1.0)
 _STRIP_PIXELS = 1 << 17  # pixels per strip of rows in the passes over full-resolution fields
 
 Array = np.ndarray
@@ -206,28 +216,57 @@ class _Surface:
     centre: tuple[float, float]  # optical centre (column, row) in this (cropped) grid
 
 
-def _valid(depth: Array, pixel_size: Array, mask: Array) -> tuple[Array, tuple[float, float]]:
-    """uint8 0/1: mask > 0 and finite, positive depth and pixel size; and the (min, max) of the
-    pixel size there ((0, 0) where there is none). Only the bounding box of the mask is
-    tested, in strips of rows (each strip's depth and pixel size read once)."""
-    vm = mask.view(np.uint8) if mask.dtype == np.bool_ else _cv.compare(mask, 0.0, _cv.CMP_GT)
+def _valid(
+    depth: Array, pixel_size: Array, mask: Array, far: float | None = None
+) -> tuple[Array, tuple[float, float], tuple[slice, slice] | None, tuple[slice, slice] | None]:
+    """uint8 0/1: mask > 0 and finite, positive depth and pixel size; the (min, max) of the
+    pixel size there ((0, 0) where there is none); the bounding box of those pixels, and that
+    of those with a pixel size above ``far`` (None: none, or ``far`` None). Only the bounding
+    box of the mask is tested, in strips of rows over the shared pool (each strip's depth and
+    pixel size read once)."""
+    if mask.dtype == np.bool_:
+        vm = mask.view(np.uint8)  # 0/1
+    else:
+        vm = _cv.compare(mask, 0.0, _cv.CMP_GT)
+        _cv.min(vm, 1, dst=vm)
     valid = np.zeros(vm.shape, np.uint8)
     mb = _crop(vm)
     if mb is None:
-        return valid, (0.0, 0.0)
+        return valid, (0.0, 0.0), None, None
     d, ps, m, out = depth[mb], pixel_size[mb], vm[mb], valid[mb]
-    lo, hi = math.inf, -math.inf
-    step = max(1, _STRIP_PIXELS // max(d.shape[1], 1))
-    for r0 in range(0, d.shape[0], step):
-        r = slice(r0, r0 + step)
+    found: list[tuple[float, float]] = []  # per strip: the pixel size's range
+    rects: list[list[tuple[int, int, int, int]]] = [[], []]  # per strip: valid, far boxes
+
+    def strip(r: slice) -> None:
         v = _cv.bitwise_and(_cv.inRange(d[r], 1e-30, 3.0e38), _cv.inRange(ps[r], 1e-30, 3.0e38))
-        _cv.bitwise_and(v, m[r], dst=v)
-        _cv.min(v, 1, dst=v)
-        out[r] = v
-        if _cv.countNonZero(v):
-            a, b, _, _ = _cv.minMaxLoc(ps[r], mask=v)
-            lo, hi = min(lo, a), max(hi, b)
-    return valid, ((lo, hi) if lo <= hi else (0.0, 0.0))
+        v = _cv.bitwise_and(v, m[r], dst=out[r])  # (0/1: the mask is)
+        _write(v, out, r)
+        x, y, w, h = _cv.boundingRect(v)
+        if not (w and h):
+            return
+        a, b, _, _ = _cv.minMaxLoc(ps[r], mask=v)
+        found.append((a, b))  # (list.append is atomic)
+        rects[0].append((x, r.start + y, x + w, r.start + y + h))
+        if far is not None and b > far:
+            fv = _cv.bitwise_and(_cv.compare(ps[r], far, _cv.CMP_GT), v)
+            x, y, w, h = _cv.boundingRect(fv)
+            if w and h:
+                rects[1].append((x, r.start + y, x + w, r.start + y + h))
+
+    color.row_strips(d.shape[0], d.shape[1], strip)
+    if not found:
+        return valid, (0.0, 0.0), None, None
+    ys, xs = mb
+
+    def union(rs: list[tuple[int, int, int, int]]) -> tuple[slice, slice] | None:
+        if not rs:
+            return None
+        x0, y0 = min(q[0] for q in rs) + xs.start, min(q[1] for q in rs) + ys.start
+        x1, y1 = max(q[2] for q in rs) + xs.start, max(q[3] for q in rs) + ys.start
+        return slice(y0, y1), slice(x0, x1)
+
+    lo, hi = min(f[0] for f in found), max(f[1] for f in found)
+    return valid, (lo, hi), union(rects[0]), union(rects[1])
 
 
 def _write(res: Array, dst: Array, box: tuple[slice, slice] | slice) -> None:
@@ -309,6 +348,18 @@ def _surface(
         lps_from = (depth_sigma / f, -math.log(f))
         # not pixel_size = z / f: measure
         measure_lps = float(ratio.max()) > 1.001 * float(ratio.min())
+    # I = iz_scale · (z or ln z): OpenCV multiplies by a scalar in double precision (and
+    # rounds once), 5x slower than NumPy's float32 product, which is the same number when the
+    # factor is a float32 (as f = median(z / pixel_size) is when depth_sigma is 1)
+    exact32 = float(np.float32(iz_scale)) == iz_scale
+    iz_scale32 = np.float32(iz_scale)
+
+    def scale_iz(a: Array) -> None:
+        if exact32:
+            np.multiply(a, iz_scale32, out=a)
+        else:
+            _write(_cv.multiply(a, iz_scale, dst=a), a, slice(None))
+
     iz = np.empty((h, w), np.float32)
     lps = np.empty((h, w), np.float32) if measure_lps else None
     sig = np.empty((h, w), np.float32)
@@ -323,8 +374,6 @@ def _surface(
     sig1 = [cells() for _ in range(nsig)]
     lps1 = cells() if measure_lps else None
     nrm1 = None if normal is None else [cells() for _ in range(3)]
-    grad1 = None if normal is None else (cells(), cells())
-    uv1 = None if focal is None or not first else _view_grid(hc, wc, 1, centre, focal)
     surf = _Surface(
         valid,
         iz,
@@ -345,11 +394,12 @@ def _surface(
         w_r = np.empty((r.stop - r0, w), np.float32)  # the weight: 1 on the surface, 0 elsewhere
         iz_r = iz[r]
         if focal is None:
-            _write(_cv.multiply(_cv.copyTo(depth[r], v), iz_scale, dst=iz_r), iz, r)
+            iz_r.fill(0.0)  # 0 off the surface
+            _write(_cv.copyTo(depth[r], v, iz_r), iz, r)
         else:  # ln 1 = 0 off the surface
             w_r.fill(1.0)
             _write(_cv.log(_cv.copyTo(depth[r], v, w_r), dst=iz_r), iz, r)
-            _cv.multiply(iz_r, iz_scale, dst=iz_r)
+        scale_iz(iz_r)
         if lps is not None:
             w_r.fill(1.0)
             _write(_cv.log(_cv.copyTo(pixel_size[r], v, w_r), dst=lps[r]), lps, r)
@@ -361,7 +411,7 @@ def _surface(
         c = slice(r0 // 2, (r.stop + 1) // 2)
         cv_c = cov[c]
         _write(_area_half(w_r), cov, c)
-        inv = _cv.divide(1.0, _cv.max(cv_c, 1e-12))  # fields are 0 in empty cells: stay 0
+        inv = np.divide(_ONE, _cv.max(cv_c, 1e-12))  # fields are 0 in empty cells: stay 0
         sw = _cv.copyTo(s_r, v)  # 0 off the surface
         _write(_cv.multiply(_area_half(sw), inv, dst=sig1[0][c]), sig1[0], c)
         if squares:
@@ -376,10 +426,6 @@ def _surface(
             _cv.patchNaNs(n3, 0.0)
             for i, ch in enumerate(_cv.split(n3)):
                 _write(_cv.multiply(ch, inv, dst=nrm1[i][c]), nrm1[i], c)
-            if grad1 is not None:  # the guide's slopes at the cells (_guide_gradient)
-                uv = None if uv1 is None else (uv1[0][c], uv1[1][c])
-                gx, gy = _cell_slopes([a[c] for a in nrm1], cv_c, uv, surf)
-                grad1[0][c], grad1[1][c] = gx, gy
 
     color.row_strips(h, w, strip, step)
     if not first:
@@ -387,7 +433,10 @@ def _surface(
     if lps1 is None:
         a, b = lps_from
         lps1 = _cv.addWeighted(iz1, a, iz1, 0.0, b)
-    return surf, sig, _Level(1, cov, sig1, iz1, lps1, nrm1, grad1)
+    lv = _Level(1, cov, sig1, iz1, lps1, nrm1)
+    # the guide's slopes at the cells, after the pass (element-wise: fewer, larger calls)
+    lv.grad = _guide_gradient(lv, surf)
+    return surf, sig, lv
 
 
 @dataclass
@@ -436,6 +485,21 @@ def _finish_first_level(lv: _Level, surf: _Surface, sig: Array) -> None:
     _front_most_cells(lv, surf, sig)
 
 
+class _Gather:
+    """``a[rows, cols]`` of (H, W) or (H, W, C) arrays at fixed points, through the flat index
+    where ``a`` is C-contiguous (NumPy's fast path), by (row, column) elsewhere (a view with a
+    row stride is read in place, not copied)."""
+
+    def __init__(self, rows: Array, cols: Array, w: int) -> None:
+        self.rows, self.cols = rows, cols
+        self.flat = rows * w + cols
+
+    def __call__(self, a: Array) -> Array:
+        if a.flags.c_contiguous:  # (np.take: 3x faster than indexing for rows of channels)
+            return np.take(a.reshape(-1, *a.shape[2:]), self.flat, axis=0)
+        return a[self.rows, self.cols]
+
+
 def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
     """Make the level-1 cells that straddle a depth step hold the front-most surface only.
 
@@ -453,41 +517,46 @@ def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
     if pts is None:
         return
     pts = pts.reshape(-1, 2)
-    cx, cy = pts[:, 0].astype(np.int64), pts[:, 1].astype(np.int64)
+    cx, cy = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
     cell = cy * lv.cov.shape[1] + cx  # flat index of the cell in its level
     hf, wf = surf.iz.shape
     # (4, N): the cell's pixels (top-left, top-right, bottom-left, bottom-right), then cells
-    px = (2 * cx)[None, :] + np.array([0, 1, 0, 1])[:, None]
-    py = (2 * cy)[None, :] + np.array([0, 0, 1, 1])[:, None]
+    px = (2 * cx)[None, :] + np.array([0, 1, 0, 1], np.intp)[:, None]
+    py = (2 * cy)[None, :] + np.array([0, 0, 1, 1], np.intp)[:, None]
     inside = (px < wf) & (py < hf)
-    flat = np.minimum(py, hf - 1) * wf + np.minimum(px, wf - 1)
-    ok = inside & surf.valid.ravel()[flat].view(bool)
-    iz = surf.iz.ravel()[flat]
+    np.minimum(px, wf - 1, out=px)
+    np.minimum(py, hf - 1, out=py)
+    at = _Gather(py, px, wf)
+    ok = inside & at(surf.valid).view(bool)
+    iz = at(surf.iz)
     slope = np.float32(0.0)
     if lv.grad is not None:
         slope = (np.abs(lv.grad[0].ravel()[cell]) + np.abs(lv.grad[1].ravel()[cell]))[None, :]
     front = np.where(ok, iz, np.float32(_BIG)).min(axis=0, keepdims=True)
     # weight 1 within _JUMP/2 (+ the cell's slope) of the front, fading to 0 at _JUMP
     half = np.float32(0.5) * thr
-    keep = np.clip((front + thr + 2.0 * slope - iz) / half, 0.0, 1.0) * ok
+    keep = (front + thr + 2.0 * slope - iz) / half
+    keep = np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
+    keep *= ok
     n = _sum_taps(keep).astype(np.float32)
     wk = keep / np.maximum(n, np.float32(1e-6))[None, :]
     np.put(lv.cov, cell, n * np.float32(0.25))
-    vals = np.where(ok, sig.ravel()[flat], np.float32(0.0))  # the signal, 0 off the surface
+    vals = np.where(ok, at(sig), np.float32(0.0))  # the signal, 0 off the surface
     np.put(lv.sig[0], cell, _sum_taps(wk * vals))
     if len(lv.sig) > 1:  # and its square
         np.put(lv.sig[1], cell, _sum_taps(wk * (vals * vals)))
     iz_c = _sum_taps(wk * iz)
     np.put(lv.iz, cell, iz_c)
     if surf.lps is not None:
-        np.put(lv.lps, cell, _sum_taps(wk * surf.lps.ravel()[flat]))
+        np.put(lv.lps, cell, _sum_taps(wk * at(surf.lps)))
     else:
         a, b = surf.lps_from
         np.put(lv.lps, cell, a * iz_c + b)
     if lv.nrm is not None and surf.normal is not None:
-        nv = surf.normal.reshape(-1, 3)[flat]  # (4, N, 3)
-        np.nan_to_num(nv, copy=False)
-        nc = _sum_taps(wk[:, :, None] * nv)  # (N, 3)
+        nv = at(surf.normal)  # (4, N, 3)
+        np.copyto(nv, np.float32(0.0), where=np.isnan(nv))  # (normals off the surface: any)
+        nv *= wk[:, :, None]
+        nc = _sum_taps(nv)  # (N, 3)
         for i in range(3):
             np.put(lv.nrm[i], cell, nc[:, i])
         if lv.grad is not None:  # the re-averaged cells' slopes
@@ -501,8 +570,10 @@ def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
                 surf,
             )
             bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
-            np.put(lv.grad[0], cell, np.where(bad, 0.0, gx))
-            np.put(lv.grad[1], cell, np.where(bad, 0.0, gy))
+            gx[bad] = 0.0
+            gy[bad] = 0.0
+            np.put(lv.grad[0], cell, gx)
+            np.put(lv.grad[1], cell, gy)
     lv._valid = None
     # the blocks' flags after the change: only blocks touching a changed cell can differ (cell
     # validity is kept: each changed cell keeps at least its front-most pixel)
@@ -528,8 +599,9 @@ def _update_flags(lv: _Level, thr: np.float32, fl: Array, changed: Array) -> Arr
         return out
     pts = pts.reshape(-1, 2)
     bi, bj = pts[:, 1].astype(np.int64), pts[:, 0].astype(np.int64)
-    r0, r1 = np.clip(bi - 1, 0, h - 1) * w, np.clip(bi, 0, h - 1) * w
-    c0, c1 = np.clip(bj - 1, 0, w - 1), np.clip(bj, 0, w - 1)
+    # (np.clip is slow on small arrays)
+    r0, r1 = np.maximum(bi - 1, 0) * w, np.minimum(bi, h - 1) * w
+    c0, c1 = np.maximum(bj - 1, 0), np.minimum(bj, w - 1)
     cells = (r0 + c0, r0 + c1, r1 + c0, r1 + c1)  # tl, tr, bl, br
     cov = lv.cov.ravel()
     bad = (cov[cells[0]] <= 0) | (cov[cells[1]] <= 0) | (cov[cells[2]] <= 0) | (cov[cells[3]] <= 0)
@@ -660,10 +732,10 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     keep = _cv.resize(near, (wp, hp), interpolation=_cv.INTER_NEAREST)[:h, :w]
     np.subtract(keep, p[:h, :w], out=keep)
     np.divide(keep, half, out=keep)
-    np.clip(keep, 0.0, 1.0, out=keep)
+    np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
     sel = _cv.multiply(lv.cov, keep)
     cov = _area_half(sel)
-    inv = _cv.divide(1.0, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
+    inv = np.divide(_ONE, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
 
     def red(field: Array) -> Array:
         return _cv.multiply(_area_half(_cv.multiply(field, sel)), inv)
@@ -708,6 +780,29 @@ def _ramp(h: int, w: int) -> Array:
     ramp *= np.float32(0.5 * _KNEE)
     ramp.flags.writeable = False
     return ramp
+
+
+_SMOOTHER: ThreadPoolExecutor | None = None
+_SMOOTHER_LOCK = threading.Lock()
+
+
+def _smoother() -> ThreadPoolExecutor:
+    """The thread the pyramid's domain transforms run on, in the background of the rest of
+    its work (one, shared, created on first use; a forked child makes its own)."""
+    global _SMOOTHER
+    with _SMOOTHER_LOCK:
+        if _SMOOTHER is None:
+            _SMOOTHER = ThreadPoolExecutor(1, "depict-smooth")
+        return _SMOOTHER
+
+
+def _forget_smoother() -> None:  # in a forked child: the parent's thread is not there
+    global _SMOOTHER, _SMOOTHER_LOCK
+    _SMOOTHER, _SMOOTHER_LOCK = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_smoother)
 
 
 def _smooth_level(
@@ -759,38 +854,61 @@ def _block_flags(lv: _Level, thr: np.float32) -> Array:
     Entry (i, j) covers cells (i−1…i, j−1…j) (clamped at the borders). A block is flagged when
     one of its cells is empty, or when the four cells, each extrapolating the depth guide along
     its own plane (``grad``) to the block's centre, disagree by more than ``thr``: a step
-    between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1).
+    between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1). Large levels are
+    done in strips of block rows over the shared pool (OpenCV's element-wise operations run on
+    one thread each).
     """
+    h, w = lv.cov.shape
+    out = np.empty((h + 1, w + 1), np.uint8)
     rep = _cv.BORDER_REPLICATE
-    inv = _cv.copyMakeBorder(_cv.compare(lv.cov, 0.0, _cv.CMP_LE), 1, 1, 1, 1, rep)
-    bad = _cv.dilate(inv, _BLOCK, anchor=(0, 0), borderType=rep)[:-1, :-1]  # 2×2 maximum
-    # the four cells' predictions at the block centre, I + (±½, ±½) 2^k ∇I (on the padded grid)
-    iz = _cv.copyMakeBorder(lv.iz, 1, 1, 1, 1, rep)
-    if lv.grad is None:
-        tl, tr, bl, br = iz[:-1, :-1], iz[:-1, 1:], iz[1:, :-1], iz[1:, 1:]
+    d = float(2**lv.k)
+
+    def rows(r: slice) -> None:
+        # block rows r read cell rows r.start − 1 … r.stop − 1, clamped (replicated)
+        c = slice(max(r.start - 1, 0), min(r.stop, h))
+        pad = (int(r.start == 0), int(r.stop > h), 1, 1)
+        inv = _cv.copyMakeBorder(_cv.compare(lv.cov[c], 0.0, _cv.CMP_LE), *pad, rep)
+        bad = _cv.dilate(inv, _BLOCK, anchor=(0, 0), borderType=rep)[:-1, :-1]  # 2×2 maximum
+        # the four cells' predictions at the block centre, I + (±½, ±½) 2^k ∇I
+        iz = _cv.copyMakeBorder(lv.iz[c], *pad, rep)
+        if lv.grad is None:
+            tl, tr, bl, br = iz[:-1, :-1], iz[:-1, 1:], iz[1:, :-1], iz[1:, 1:]
+        else:
+            gx, gy = (_cv.copyMakeBorder(g[c], *pad, rep) for g in lv.grad)
+            right, left = _cv.scaleAdd(gx, 0.5 * d, iz), _cv.scaleAdd(gx, -0.5 * d, iz)
+            tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
+            tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
+            bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
+            br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
+        hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
+        lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
+        step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
+        _write(_cv.min(_cv.bitwise_or(bad, step, dst=bad), 1, dst=out[r]), out, r)
+
+    if (h + 1) * (w + 1) >= 2 * _STRIP_PIXELS:
+        color.row_strips(h + 1, w + 1, rows, max(1, _STRIP_PIXELS // 2 // (w + 1)))
     else:
-        d = float(2**lv.k)
-        gx, gy = (_cv.copyMakeBorder(g, 1, 1, 1, 1, rep) for g in lv.grad)
-        right, left = _cv.scaleAdd(gx, 0.5 * d, iz), _cv.scaleAdd(gx, -0.5 * d, iz)
-        tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
-        tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
-        bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
-        br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
-    hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
-    lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
-    step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
-    return _cv.min(_cv.bitwise_or(bad, step, dst=bad), 1, dst=bad)
+        rows(slice(0, h + 1))
+    return out
 
 
-def _upsample(
-    coarse: list[Array],
-    lv: _Level,
-    fine_iz: Array,
-    fine_valid: Array,
-    fine_k: int,
-    fallback: list[Array],
-) -> list[Array]:
-    """Edge-aware upsampling of the channels ``coarse`` (level ``lv``) to the grid of ``fine_iz``.
+def _sub_resize(a: Array, f: int, rows: slice, cols: slice) -> Array:
+    """Rows ``rows``, columns ``cols`` of the bilinear ×``f`` upsampling of ``a`` (as
+    ``cv2.resize(a, (w f, h f), INTER_LINEAR)``, bit for bit), resizing only the cells they
+    read: bilinear taps are local, and OpenCV's weights depend on the position relative to the
+    crop only through f · (first cell), an integer. A view (with a row stride) of a new array."""
+    hc, wc = a.shape[:2]
+    y0, y1 = max(rows.start // f - 1, 0), min((rows.stop - 1) // f + 2, hc)
+    x0, x1 = max(cols.start // f - 1, 0), min((cols.stop - 1) // f + 2, wc)
+    size = ((x1 - x0) * f, (y1 - y0) * f)
+    sub = _cv.resize(a[y0:y1, x0:x1], size, interpolation=_cv.INTER_LINEAR)
+    return sub[rows.start - y0 * f : rows.stop - y0 * f, cols.start - x0 * f : cols.stop - x0 * f]
+
+
+class _Upsampler:
+    """Edge-aware upsampling from level ``lv`` to the grid of ``fine_iz``, read by strips of
+    fine rows (:meth:`rows`), so that the caller can use each strip while it is in cache, from
+    several threads at once.
 
     Bilinear, except at the few fine pixels whose four bilinear taps are not all on one surface
     (a tap block spanning a depth step of more than _JUMP level pixels, or holding an empty
@@ -799,138 +917,217 @@ def _upsample(
     to a 4×4 tent where none of the four is compatible, and falling back to ``fallback`` (the
     pixel's own, less smoothed value) where no nearby cell lies on its surface. Nothing from
     another surface is interpolated in. ``fine_valid`` is uint8 0/1.
+
+    Construction finds the re-weighted pixels and their taps and weights (``_FixupTaps``): that
+    depends on the levels' geometry only, not on the channels, so it can run while the channels
+    are being smoothed. :meth:`bind` then gives the channels (level ``lv``) and computes the
+    re-weighted values, in one vectorised pass each (many small NumPy calls: in threads they
+    would only contend for the GIL); :meth:`rows` interpolates its rows and writes them in.
     """
-    hc, wc = lv.cov.shape
-    hf, wf = fine_iz.shape
-    f = 2 ** (lv.k - fine_k)  # fine pixels per coarse cell, per axis
-    size = (wc * f, hc * f)
-    thr = np.float32(_JUMP * 2**lv.k)
-    ups = [
-        np.ascontiguousarray(_cv.resize(c, size, interpolation=_cv.INTER_LINEAR)[:hf, :wf])
-        for c in coarse
-    ]
-    blocks = lv.flags[1] if lv.flags is not None and lv.flags[0] == thr else _block_flags(lv, thr)
-    half = f // 2
-    if f == 2:
-        # the fine pixels of the flagged blocks that hold some surface (block (i, j) holds
-        # cells i−1…i, j−1…j and fine pixels 2i−1…2i, 2j−1…2j), found on the coarse grid
-        some = _touching(lv.valid_u8)
-        bp = _cv.findNonZero(_cv.bitwise_and(blocks, some, dst=some))
-        if bp is None:
-            return ups
-        bp = bp.reshape(-1, 2).astype(np.int64)
-        xx = (2 * bp[:, 0] - 1)[:, None] + np.array([0, 1, 0, 1])[None, :]
-        yy = (2 * bp[:, 1] - 1)[:, None] + np.array([0, 0, 1, 1])[None, :]
-        ok = (xx >= 0) & (xx < wf) & (yy >= 0) & (yy < hf)
-        xx, yy = xx[ok], yy[ok]
-        idx = yy * wf + xx
-        on = fine_valid.ravel()[idx].view(bool)
-        xx, yy, idx = xx[on], yy[on], idx[on]
-    else:
-        flag = _cv.resize(blocks, ((wc + 1) * f, (hc + 1) * f), interpolation=_cv.INTER_NEAREST)
-        need = _cv.bitwise_and(flag[half : half + hf, half : half + wf], fine_valid)
-        # a fine pixel whose own guide departs from the interpolated one: a small object
-        # inside a cell (at f = 2 any such cell already differs from its neighbours)
-        izn = _cv.resize(lv.iz, size, interpolation=_cv.INTER_LINEAR)[:hf, :wf]
-        far = _cv.compare(_cv.absdiff(fine_iz, izn), float(thr), _cv.CMP_GT)
-        _cv.bitwise_and(far, fine_valid, dst=far)
-        _cv.bitwise_or(need, far, dst=need)
-        pts = _cv.findNonZero(need)
-        if pts is None:
-            return ups
-        pts = pts.reshape(-1, 2)
-        xx, yy = pts[:, 0], pts[:, 1]
-        idx = yy.astype(np.int64) * wf + xx
-    if idx.size == 0:
+
+    def __init__(
+        self,
+        lv: _Level,
+        fine_iz: Array,
+        fine_valid: Array,
+        fine_k: int,
+        fallback: list[Array],
+    ) -> None:
+        hc, wc = lv.cov.shape
+        hf, wf = self.shape = fine_iz.shape[:2]
+        f = self.f = 2 ** (lv.k - fine_k)  # fine pixels per coarse cell, per axis
+        self.fallback = fallback
+        self.coarse: list[Array] = []
+        self.in_order = False  # idx ascending
+        thr = np.float32(_JUMP * 2**lv.k)
+        blocks = (
+            lv.flags[1] if lv.flags is not None and lv.flags[0] == thr else _block_flags(lv, thr)
+        )
+        # flat fine indices of the re-weighted pixels (ascending where ``fine_k`` is 0)
+        self.idx: Array | None = None
+        self.taps: _FixupTaps | None = None  # their taps and weights (in the order of idx)
+        self.vals: list[Array] = []  # their values, per channel (once bound)
+        if f == 2:
+            # the fine pixels of the flagged blocks that hold some surface (block (i, j) holds
+            # cells i−1…i, j−1…j and fine pixels 2i−1…2i, 2j−1…2j), found on the coarse grid
+            some = _touching(lv.valid_u8)
+            bp = _cv.findNonZero(_cv.bitwise_and(blocks, some, dst=some))
+            if bp is None:
+                return
+            bp = bp.reshape(-1, 2).astype(np.int64)
+            xx = (2 * bp[:, 0] - 1)[:, None] + np.array([0, 1, 0, 1])[None, :]
+            yy = (2 * bp[:, 1] - 1)[:, None] + np.array([0, 0, 1, 1])[None, :]
+            ok = (xx >= 0) & (xx < wf) & (yy >= 0) & (yy < hf)
+            xx, yy = xx[ok], yy[ok]
+            idx = yy * wf + xx
+            on = _Gather(yy, xx, wf)(fine_valid).view(bool)
+            xx, yy, idx = xx[on], yy[on], idx[on]
+        else:
+            half = f // 2
+            flag = _cv.resize(blocks, ((wc + 1) * f, (hc + 1) * f), interpolation=_cv.INTER_NEAREST)
+            need = _cv.bitwise_and(flag[half : half + hf, half : half + wf], fine_valid)
+            # a fine pixel whose own guide departs from the interpolated one: a small object
+            # inside a cell (at f = 2 any such cell already differs from its neighbours)
+            izn = _cv.resize(lv.iz, (wc * f, hc * f), interpolation=_cv.INTER_LINEAR)[:hf, :wf]
+            far = _cv.compare(_cv.absdiff(fine_iz, izn), float(thr), _cv.CMP_GT)
+            _cv.bitwise_and(far, fine_valid, dst=far)
+            _cv.bitwise_or(need, far, dst=need)
+            pts = _cv.findNonZero(need)
+            if pts is None:
+                return
+            pts = pts.reshape(-1, 2)
+            xx, yy = pts[:, 0], pts[:, 1]
+            idx = yy.astype(np.int64) * wf + xx
+        if idx.size == 0:
+            return
+        self.in_order = fine_k == 0
+        if self.in_order:  # read by strips of rows (:meth:`rows`): sorted
+            order = np.argsort(idx, kind="stable")
+            idx, xx, yy = idx[order], xx[order], yy[order]
+        self.idx = idx
+        self.taps = _FixupTaps(xx, yy, f, lv, fine_iz.ravel()[idx], thr)
+
+    def bind(self, coarse: list[Array]) -> _Upsampler:
+        """Give the channels to upsample (level ``lv``, one per ``fallback``); returns self."""
+        self.coarse = coarse
+        self.vals = []
+        if self.taps is not None and self.idx is not None:
+            for arr, fb in zip(coarse, self.fallback, strict=True):
+                col = self.taps.apply(arr)
+                if self.taps.none is not None:
+                    col[self.taps.none] = fb.ravel()[self.idx[self.taps.none]]
+                self.vals.append(col)
+        return self
+
+    def rows(self, r: slice, cols: slice | None = None) -> list[Array]:
+        """The upsampled channels at fine rows ``r`` (new arrays), columns ``cols`` (None: all;
+        else they must hold every surface pixel of the rows)."""
+        hf, wf = self.shape
+        c = slice(0, wf) if cols is None else cols
+        ups = [_sub_resize(a, self.f, r, c) for a in self.coarse]
+        if self.idx is not None and r.start == 0 and r.stop == hf and cols is None:
+            ups = [np.ascontiguousarray(u) for u in ups]
+            for u, v in zip(ups, self.vals, strict=True):
+                u.ravel()[self.idx] = v
+        elif self.idx is not None:
+            assert self.in_order, "strips of rows are read from the image's upsampling only"
+            i0, i1 = np.searchsorted(self.idx, (r.start * wf, r.stop * wf))
+            if i1 > i0:  # (re-weighted pixels are on the surface: in the columns)
+                at_r, at_c = np.divmod(self.idx[i0:i1], wf)
+                at_r -= r.start
+                at_c -= c.start
+                for u, v in zip(ups, self.vals, strict=True):
+                    u[at_r, at_c] = v[i0:i1]
         return ups
-    vals = _fixup(xx, yy, f, lv, coarse, fine_iz.ravel()[idx], thr)
-    none = np.isnan(vals[:, 0])
-    for c, (u, fb) in enumerate(zip(ups, fallback, strict=True)):
-        col = vals[:, c]
-        if none.any():
-            col[none] = fb.ravel()[idx[none]]
-        u.ravel()[idx] = col
-    return ups
+
+    def full(self) -> list[Array]:
+        """All rows at once."""
+        return self.rows(slice(0, self.shape[0]))
 
 
-def _fixup(
-    xx: Array, yy: Array, f: int, lv: _Level, coarse: list[Array], iz_p: Array, thr: np.float32
-) -> Array:
-    """Surface-compatible interpolation at fine pixels (xx, yy); NaN rows where none is found.
+class _FixupTaps:
+    """Surface-compatible interpolation at fine pixels (xx, yy) of level ``lv``'s cells: the
+    taps and weights, to be applied to any channel of that level (:meth:`apply`); ``none``: the
+    points where no compatible tap is found (None: there are none).
 
     Taps: the 2×2 bilinear ones, then (where none of those is compatible) a 4×4 tent of radius 2
     cells. A tap is compatible when its plane (``lv.grad``), extrapolated to the pixel, meets the
-    pixel's depth guide within ``thr``; weight tent × (1 − (miss/thr)²).
+    pixel's depth guide ``iz_p`` within ``thr``; weight tent × (1 − (miss/thr)²), normalised.
+    All in float32 (the offsets from the taps are multiples of 1/(2f), exact).
     """
-    hc, wc = lv.cov.shape
-    valid_c = lv.valid.ravel()
-    izc = lv.iz.ravel()
-    d = np.float32(2**lv.k)
-    grad = None if lv.grad is None else (lv.grad[0].ravel(), lv.grad[1].ravel())
-    inv_f = np.float32(1.0 / f)
-    u = (xx.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
-    v = (yy.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
-    x0 = np.floor(u).astype(np.int32)
-    y0 = np.floor(v).astype(np.int32)
-    inv_thr = np.float32(1.0 / thr)
-    n = xx.size
-    out = np.full((len(coarse), n), np.nan, dtype=np.float32)
-    todo: Array | None = None  # None: all
-    zero, one = np.float32(0.0), np.float32(1.0)
-    # arrays are (taps, points): each tap's values are contiguous, sums over taps add rows
-    for radius, offs in ((1.0, (0, 1)), (2.0, (-1, 0, 1, 2))):
-        if todo is None:
-            ut, vt, it, xt, yt = u, v, iz_p, x0, y0
-        else:
-            if todo.size == 0:
+
+    def __init__(
+        self, xx: Array, yy: Array, f: int, lv: _Level, iz_p: Array, thr: np.float32
+    ) -> None:
+        hc, wc = lv.cov.shape
+        valid_c = lv.valid.ravel()
+        izc = lv.iz.ravel()
+        d = np.float32(2**lv.k)
+        grad = None if lv.grad is None else (lv.grad[0].ravel(), lv.grad[1].ravel())
+        inv_f = np.float32(1.0 / f)
+        u = (xx.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
+        v = (yy.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
+        x0 = np.floor(u).astype(np.intp)
+        y0 = np.floor(v).astype(np.intp)
+        inv_thr = np.float32(1.0 / thr)
+        self.n = xx.size
+        # per pass: (points it gives, (taps, points) flat cell indices, normalised weights)
+        self.passes: list[tuple[Array | slice, Array, Array]] = []
+        todo: Array | None = None  # None: all
+        zero, one = np.float32(0.0), np.float32(1.0)
+        # arrays are (taps, points): each tap's values are contiguous, sums over taps add rows
+        for radius, offs in ((1.0, (0, 1)), (2.0, (-1, 0, 1, 2))):
+            if todo is None:
+                ut, vt, it, xt, yt = u, v, iz_p, x0, y0
+            else:
+                ut, vt, it, xt, yt = u[todo], v[todo], iz_p[todo], x0[todo], y0[todo]
+            npt = ut.size
+            m = len(offs)
+            o = np.array(offs, np.intp)[:, None]
+            cx = xt[None, :] + o  # (m, N)
+            cy = yt[None, :] + o
+            dx = ut[None, :] - cx.astype(np.float32)
+            dy = vt[None, :] - cy.astype(np.float32)
+            if radius == 1.0:  # |dx| < 1 at the two taps: the tent 1 − |dx| is positive
+                tx = one - np.abs(dx)
+                ty = one - np.abs(dy)
+            else:
+                inv_r = np.float32(1.0 / radius)
+                tx = np.maximum(zero, one - np.abs(dx) * inv_r)
+                ty = np.maximum(zero, one - np.abs(dy) * inv_r)
+            tx[(cx < 0) | (cx >= wc)] = 0.0
+            ty[(cy < 0) | (cy >= hc)] = 0.0
+            # (m, m, N): rows of taps, columns of taps (np.clip is slow on small arrays)
+            rowi = np.minimum(np.maximum(cy, 0), hc - 1)
+            rowi *= wc
+            coli = np.minimum(np.maximum(cx, 0), wc - 1)
+            flat = rowi[:, None, :] + coli[None, :, :]
+            pred = izc[flat]
+            if grad is not None:  # the tap's plane extrapolated to the pixel
+                ddx, ddy = dx * d, dy * d  # (exact: d is a power of 2)
+                pred += grad[0][flat] * ddx[None, :, :] + grad[1][flat] * ddy[:, None, :]
+            # weight 1 − (miss / thr)², miss = |pred − I| (the sign goes with the square)
+            pred -= it[None, None, :]
+            pred *= inv_thr
+            np.square(pred, out=pred)
+            wts = np.subtract(one, pred, out=pred)
+            np.maximum(wts, zero, out=wts)
+            wts *= ty[:, None, :] * tx[None, :, :]
+            wts *= valid_c[flat]
+            wts = wts.reshape(m * m, npt)
+            flat = flat.reshape(m * m, npt)
+            sw = _sum_taps(wts)
+            found = sw > 1e-4
+            nfound = int(np.count_nonzero(found))
+            if nfound:
+                rows: Array | slice
+                if todo is None:  # all points (those not found get another pass, or none)
+                    rows = slice(None)
+                    with np.errstate(divide="ignore", invalid="ignore"):
+                        wts /= sw[None, :]
+                else:
+                    if nfound < npt:
+                        wts, flat, sw = wts[:, found], flat[:, found], sw[found]
+                    wts /= sw[None, :]
+                    rows = todo if nfound == npt else todo[found]
+                self.passes.append((rows, flat, wts))
+            todo = (
+                None
+                if nfound == npt
+                else (np.flatnonzero(~found) if todo is None else todo[~found])
+            )
+            if todo is None:
                 break
-            ut, vt, it, xt, yt = u[todo], v[todo], iz_p[todo], x0[todo], y0[todo]
-        npt = ut.size
-        m = len(offs)
-        o = np.array(offs, np.int32)[:, None]
-        cx = xt[None, :] + o  # (m, N)
-        cy = yt[None, :] + o
-        dx = ut[None, :] - cx
-        dy = vt[None, :] - cy
-        inv_r = np.float32(1.0 / radius)
-        tx = np.maximum(zero, one - np.abs(dx) * inv_r)
-        ty = np.maximum(zero, one - np.abs(dy) * inv_r)
-        tx[(cx < 0) | (cx >= wc)] = 0.0
-        ty[(cy < 0) | (cy >= hc)] = 0.0
-        # (m, m, N): rows of taps, columns of taps
-        flat = (np.clip(cy, 0, hc - 1) * np.int32(wc))[:, None, :] + np.clip(cx, 0, wc - 1)[
-            None, :, :
-        ]
-        pred = izc[flat]
-        if grad is not None:  # the tap's plane extrapolated to the pixel
-            # d (gx dx + gy dy) = gx (d dx) + gy (d dy) exactly: d is a power of 2
-            ddx, ddy = dx * d, dy * d
-            pred += grad[0][flat] * ddx[None, :, :] + grad[1][flat] * ddy[:, None, :]
-        miss = np.abs(pred - it[None, None, :])
-        miss *= inv_thr
-        wts = np.maximum(zero, one - miss * miss)
-        wts *= ty[:, None, :] * tx[None, :, :]
-        wts[~valid_c[flat]] = 0.0
-        wts = wts.reshape(m * m, npt)
-        flat = flat.reshape(m * m, npt)
-        sw = _sum_taps(wts)
-        found = sw > 1e-4
-        nfound = int(np.count_nonzero(found))
-        if nfound:
-            # normalised for every point (the few without a compatible tap are dropped after)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                wts /= sw[None, :]
-            every = nfound == npt
-            rows = (slice(None) if todo is None else todo) if every else None
-            if rows is None:
-                rows = np.flatnonzero(found) if todo is None else todo[found]
-            for c, arr in enumerate(coarse):
-                val = _sum_taps(wts * arr.ravel()[flat])
-                out[c, rows] = val if every else val[found]
-        if nfound == npt:
-            break
-        todo = np.flatnonzero(~found).astype(np.int32) if todo is None else todo[~found]
-    return out.T
+        self.none = todo  # (None: every point has a compatible tap)
+
+    def apply(self, arr: Array) -> Array:
+        """The interpolated values of ``arr`` (a channel of the level) at the points (garbage
+        where no compatible tap is found: see ``none``)."""
+        out = np.full(self.n, np.nan, dtype=np.float32)
+        a = arr.ravel()
+        for rows, flat, wts in self.passes:
+            out[rows] = _sum_taps(wts * np.take(a, flat))
+        return out
 
 
 def _sum_taps(a: Array) -> Array:
@@ -963,7 +1160,7 @@ def _alpha(lv: _Level, sigma: float, bx: tuple[slice, slice]) -> Array:
     q = _cv.addWeighted(lps, -2.0, lps, 0.0, 2.0 * (math.log(sigma / _LEVEL_SIGMA) - lv.k * _LN2))
     q = _cv.exp(q)
     a = _cv.addWeighted(q, 1.0 / 3.0, q, 0.0, -1.0 / 3.0, dst=q)
-    return np.clip(a, 0.0, 1.0, out=a)
+    return np.minimum(np.maximum(a, np.float32(0.0), out=a), np.float32(1.0), out=a)
 
 
 def _level_span(sigma: float, surf: _Surface, kmax: int) -> tuple[int, int]:
@@ -982,7 +1179,7 @@ def _surface_pyramid(
     sigma: float,
     var_sigma: float | None,
     normal_sigma: float | None,
-) -> tuple[Array, tuple[int, Array] | None] | None:
+) -> tuple[_Upsampler, tuple[int, Array] | None] | None:
     """Surface-following smoothing of ``lum`` (σ = ``sigma``) and, optionally, its local
     variance (σ = ``var_sigma``).
 
@@ -997,7 +1194,8 @@ def _surface_pyramid(
     ``first``: level 1 as ``_surface`` made it (from ``lum``, with its square when
     ``var_sigma`` is given; None: too small), finished here and then reduced.
 
-    Returns the smoothed ``lum`` at full resolution (the fade from ``lum`` itself for
+    Returns the smoothed ``lum`` at full resolution, as the upsampler of its finest level
+    (:meth:`_Upsampler.rows` gives it by strips of rows; the fade from ``lum`` itself for
     σ_px < s_1 ≈ 4.4 is the caller's, see ``_fade``) and, for the variance chain, (k, Var) at
     its finest level k (Var of L*, E[L²] − E[L]², upsampled bilinearly by the caller);
     None if the image is too small for one level.
@@ -1019,51 +1217,75 @@ def _surface_pyramid(
     k_lo, k_hi = min(m_lo, v_lo), max(m_hi, v_hi)
 
     assert first is not None and len(first.sig) == (1 if var_sigma is None else 2)
+    # per level, coarse to fine: the chains it is in, whether they run on from the level above,
+    # and the box to smooth: a level below the top of its chains only matters where
+    # σ_px < s_{k+1} (elsewhere the coarser level takes over, a_k = 1)
+    plan: dict[int, tuple[bool, bool, bool, bool, tuple[slice, slice] | None]] = {}
+    # the domain transforms (most of the time here, in OpenCV, without the GIL) run on a
+    # thread of their own, each as soon as its level is made, while this one makes the next
+    # levels and then finds the upsamplings' re-weighted pixels and taps
+    smoothed: dict[int, Future[list[Array]]] = {}
+
+    def schedule(lv: _Level) -> None:
+        k = lv.k
+        in_m, in_v = m_lo <= k <= m_hi, v_lo <= k <= v_hi
+        run_m, run_v = in_m and k < m_hi, in_v and k < v_hi
+        box = None
+        if (not in_m or run_m) and (not in_v or run_v):  # no chain starts here
+            used = [sg for sg, on in ((sigma, in_m), (var_sigma, in_v)) if on and sg is not None]
+            box = _need_box(lv, used)
+        plan[k] = (in_m, in_v, run_m, run_v, box)
+        if box is None or (box[0].stop > box[0].start and box[1].stop > box[1].start):
+            smoothed[k] = _smoother().submit(_smooth_level, lv, 2 if in_v else 1, normal_sigma, box)
+
     levels: dict[int, _Level] = {}
     lv = first
-    _finish_first_level(lv, surf, lum)
-    while True:
-        if lv.k >= k_lo:
-            levels[lv.k] = lv
-        if lv.k >= k_hi:
-            break
-        lv = _reduce_selective(lv, surf)
+    try:
+        _finish_first_level(lv, surf, lum)
+        while True:
+            if lv.k >= k_lo:
+                levels[lv.k] = lv
+                schedule(lv)
+            if lv.k >= k_hi:
+                break
+            lv = _reduce_selective(lv, surf)
+        ups_of: dict[int, _Upsampler] = {}
+        for k, (_, _, run_m, run_v, _) in plan.items():
+            if run_m or run_v:
+                lv = levels[k]
+                fallback = (lv.sig[:1] if run_m else []) + (lv.sig[:2] if run_v else [])
+                ups_of[k] = _Upsampler(levels[k + 1], lv.iz, lv.valid_u8, k, fallback)
+        full = _Upsampler(levels[m_lo], surf.iz, surf.valid, 0, [lum])
+    except BaseException:
+        for fut in smoothed.values():
+            fut.cancel()
+        wait(list(smoothed.values()))
+        raise
 
     main: list[Array] | None = None
     var: list[Array] | None = None
     for k in range(k_hi, k_lo - 1, -1):
+        in_m, in_v, run_m, run_v, box = plan[k]
         lv = levels[k]
-        in_m = m_lo <= k <= m_hi
-        in_v = v_lo <= k <= v_hi
-        # a level below the top of its chains only matters where σ_px < s_{k+1} (elsewhere the
-        # coarser level takes over, a_k = 1): smooth just the bounding box of those cells
-        starts = (in_m and main is None) or (in_v and var is None)
-        box = None
-        if not starts:
-            used = [sg for sg, on in ((sigma, in_m), (var_sigma, in_v)) if on and sg is not None]
-            box = _need_box(lv, used)
-        # upsample the running chains from level k + 1 in one go (shared tap search)
-        run_m = in_m and main is not None
-        run_v = in_v and var is not None
+        # upsample the running chains from level k + 1 in one go (shared taps)
         chans = (main if run_m and main is not None else []) + (
             var if run_v and var is not None else []
         )
-        fallback = (lv.sig[:1] if run_m else []) + (lv.sig[:2] if run_v else [])
-        ups = _upsample(chans, levels[k + 1], lv.iz, lv.valid_u8, k, fallback) if chans else []
+        ups = ups_of[k].bind(chans).full() if chans else []
         up_m, up_v = (ups[:1], ups[1:]) if run_m else ([], ups)
-        if box is not None and (box[0].stop == box[0].start or box[1].stop == box[1].start):
+        if k not in smoothed:
             # nothing needs this level: the coarser level carries on
             main = up_m if run_m else main
             var = up_v if run_v else var
             continue
-        sm = _smooth_level(lv, 2 if in_v else 1, normal_sigma, box)
+        sm = smoothed[k].result()
         if in_m:
             main = _blend(up_m, sm[:1], lv, sigma, box) if run_m else [sm[0]]
         if in_v:
             assert var_sigma is not None
             var = _blend(up_v, sm[:2], lv, var_sigma, box) if run_v else [sm[0].copy(), sm[1]]
     assert main is not None
-    full = _upsample(main, levels[m_lo], surf.iz, surf.valid, 0, [lum])[0]
+    full.bind(main)
     var_out = None
     if var is not None:
         v = _cv.subtract(var[1], _cv.multiply(var[0], var[0]))
@@ -1131,15 +1353,6 @@ def _fade(
     a0 = _cv.divide(c, _cv.max(pixel_size[box], 1e-30))
     _cv.multiply(a0, a0, dst=a0)
     return box, _cv.min(a0, 1.0, dst=a0)
-
-
-def _upsample_plain(a: Array, k: int, shape: tuple[int, int]) -> Array:
-    """Bilinear upsampling of a level-k array to the image grid (a view of rows with a stride
-    where the level's cells overhang the image)."""
-    f = 2**k
-    h, w = a.shape
-    big = _cv.resize(a, (w * f, h * f), interpolation=_cv.INTER_LINEAR)
-    return big[: shape[0], : shape[1]]
 
 
 def _normals(normal: Array, shape: tuple[int, int]) -> Array:
@@ -1230,9 +1443,8 @@ def surface_blur(
     depth_a = _plane("depth", depth, shape)
     ps = _plane("pixel_size", pixel_size, shape)
     nrm = None if normal is None else _normals(normal, shape)
-    valid, ps_range = _valid(depth_a, ps, _mask(mask, shape))
+    valid, ps_range, box, _ = _valid(depth_a, ps, _mask(mask, shape))
     out = sig.copy()
-    box = _crop(valid)
     if box is None:
         return out
     ys, xs = box
@@ -1252,7 +1464,7 @@ def surface_blur(
     res = _surface_pyramid(surf, sub, first, sigma, None, ns)
     if res is None:
         return out
-    full = res[0]
+    full = res[0].full()[0]
     fade = _fade(sigma, surf, ps[box])
     if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
         fb, a0 = fade
@@ -1347,8 +1559,10 @@ def unsharp_masking(
     if gain is not None and not _cv.checkRange(gain)[0]:
         raise ValueError("gain_map must be finite everywhere")
 
-    valid, ps_range = _valid(depth_a, ps, mask_a)
-    box = _crop(valid)
+    # σ_px < s_1 (pixel size above c_fade): U fades to L* itself (see _fade); the box of those
+    # pixels is found with the others
+    c_fade = sigma / (2.0 * _LEVEL_SIGMA)
+    valid, ps_range, box, fade_box = _valid(depth_a, ps, mask_a, c_fade * (1.0 - 1e-5))
     if box is None:
         return img.copy()
     wl = color.resolve_white(white, img, valid.view(bool))
@@ -1358,6 +1572,7 @@ def unsharp_masking(
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     ps = ps[box]
     img_box = img[box]
+    light = color.lightness_rows(wl)
     surf, lum, first = _surface(
         depth_a[box],
         ps,
@@ -1366,47 +1581,67 @@ def unsharp_masking(
         ds,
         centre,
         ps_range,
-        lambda r, out: _lightness(img_box[r], wl, out),
+        lambda r, out: light(img_box[r], out),
         adaptive,
     )
     res = _surface_pyramid(surf, lum, first, sigma, vsig if adaptive else None, ns)
     cov_a = None if mask_a.dtype == np.bool_ else mask_a[box]
     gain_a = None if gain is None else gain[box]
-    fade = None if res is None else _fade(sigma, surf, ps)
+    if res is None or fade_box is None:
+        fade_box = None
+    else:  # in the bounding box of the surface
+        fy, fx = fade_box
+        fade_box = (
+            slice(fy.start - ys.start, fy.stop - ys.start),
+            slice(fx.start - xs.start, fx.stop - xs.start),
+        )
     adapt = None
     if res is not None and res[1] is not None:
         kv, v = res[1]
         a = _cv.sqrt(_cv.addWeighted(v, 1e-4, v, 0.0, 1.0))  # √(1 + Var(L*/100))
-        adapt = _upsample_plain(a, kv, sub_shape)
-    smooth = lum if res is None else res[0]  # too small for any level: nothing to smooth with
+        adapt = (a, 2**kv)
+    up = None if res is None else res[0]  # None: too small for any level, nothing to smooth
+    lam32 = np.float32(lam)
 
-    def k_rows(r: slice) -> tuple[Array, Array]:
+    def k_rows(r: slice) -> color.KRows:
         """k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4, Eq. 1), and
-        where λ_adapt = 0 (kept bit for bit), for the rows r."""
+        where λ_adapt = 0 (kept bit for bit), for the rows r, in the columns that hold some
+        surface (the others are kept whole). L*_σ and √(1 + Var) are upsampled here, strip by
+        strip."""
+        x, _, n, _ = _cv.boundingRect(surf.valid[r])
+        c = slice(x, x + n)
+        if n == 0:
+            return np.empty((r.stop - r.start, 0), np.float32), None, c
+        rc = (r, c)
+        valid_r = surf.valid[rc]
         # λ g α: 0 off the surface
         if cov_a is None:
-            lam_r = _cv.multiply(surf.valid[r], lam, dtype=_cv.CV_32F)
+            lam_r = np.multiply(valid_r, lam32, dtype=np.float32)
         else:
-            lam_r = _cv.min(_cv.max(cov_a[r], 0.0), 1.0)
-            _cv.multiply(lam_r, surf.valid[r], dst=lam_r, scale=lam, dtype=_cv.CV_32F)
+            lam_r = _cv.min(_cv.max(cov_a[rc], 0.0), 1.0)
+            _cv.multiply(lam_r, valid_r, dst=lam_r, scale=lam, dtype=_cv.CV_32F)
         if gain_a is not None:
-            _cv.multiply(lam_r, gain_a[r], dst=lam_r)
-        if fade is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S)
-            (fy, fx), a0 = fade
+            _cv.multiply(lam_r, gain_a[rc], dst=lam_r)
+        if fade_box is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S), a0 = min(σ_px²/s_1², 1)
+            fy, fx = fade_box
             y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
-            if y0 < y1:
-                pb = (slice(y0 - r.start, y1 - r.start), fx)
-                part = lam_r[pb]
-                _write(_cv.multiply(part, a0[y0 - fy.start : y1 - fy.start], dst=part), lam_r, pb)
+            x0, x1 = max(c.start, fx.start), min(c.stop, fx.stop)
+            if y0 < y1 and x0 < x1:  # (elsewhere on the surface a0 = 1)
+                fb = (slice(y0 - r.start, y1 - r.start), slice(x0 - c.start, x1 - c.start))
+                a0 = _cv.divide(c_fade, _cv.max(ps[y0:y1, x0:x1], 1e-30))
+                _cv.multiply(a0, a0, dst=a0)
+                part = lam_r[fb]
+                _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
         keep_r = _cv.compare(lam_r, 0.0, _cv.CMP_EQ)
         if adapt is not None:  # √(1 + Var)
-            _cv.multiply(lam_r, adapt[r], dst=lam_r)
-        lum_r = lum[r]
-        new = _cv.subtract(lum_r, smooth[r])
-        _cv.multiply(lam_r, new, dst=new)
-        _cv.add(lum_r, new, dst=new)
-        _cv.max(new, 0.0, dst=new)
-        return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r
+            lam_r = _cv.multiply(lam_r, _sub_resize(adapt[0], adapt[1], r, c), dst=lam_r)
+        lum_r = lum[rc]
+        new = lum_r.copy() if up is None else up.rows(r, c)[0]  # L*_σ (a view: written in)
+        new = _cv.subtract(lum_r, new, dst=new)
+        new = _cv.multiply(lam_r, new, dst=new)
+        new = _cv.add(lum_r, new, dst=new)
+        new = _cv.max(new, 0.0, dst=new)
+        return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
 
     if sub_shape == shape:
         return color.scale_lab(img_box, k_rows, wl)
