@@ -19,7 +19,8 @@ import cv2
 import numpy as np
 
 from bench.common import HD, Report
-from ops.curvature import isotropic, principal_curvatures, run_rows
+from ops.curvature import isotropic, principal_curvatures
+from ops.parallel import run_strips
 from ops.scaling import scale_lobes
 from tests.analytic import two_spheres
 
@@ -127,12 +128,12 @@ def _curvature_floor(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) ->
     ones = np.ones((1, 3), np.float32)
     m8 = mask.view(np.uint8)
 
-    def strip(r0: int) -> None:
-        r = slice(r0, min(hgt, r0 + _FLOOR_ROWS))
+    def strip(r0: int, r1: int) -> None:
+        r = slice(r0, r1)
         cv2.transform(normal[r], ones, dst=out[r])
         cv2.add(out[r], depth[r], dst=out[r], mask=m8[r])
 
-    run_rows(range(0, hgt, _FLOOR_ROWS), strip)
+    run_strips(hgt, strip, _FLOOR_ROWS)
     return out
 
 
@@ -145,8 +146,8 @@ def _lobes_floor(
     beauty = np.empty((hgt, wid, 3), np.float32)
     sigmas = {n: np.empty((hgt, wid), np.float32) for n in names}
 
-    def strip(r0: int) -> None:
-        r = slice(r0, min(hgt, r0 + _FLOOR_ROWS))
+    def strip(r0: int, r1: int) -> None:
+        r = slice(r0, r1)
         acc = beauty[r]
         cv2.add(lobes[names[0]][r], lights[names[0]][r], dst=acc)
         for n in names[1:]:
@@ -155,7 +156,7 @@ def _lobes_floor(
         for n in names:
             np.copyto(sigmas[n][r], kappa[r])
 
-    run_rows(range(0, hgt, _FLOOR_ROWS), strip)
+    run_strips(hgt, strip, _FLOOR_ROWS)
     return beauty, sigmas
 
 

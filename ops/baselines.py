@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.curvature import DEFAULT_GAIN, DEFAULT_SCALE, isotropic, principal_curvatures
-from ops.filtering import run_strips
+from ops.parallel import run_strips
 from ops.shading import dot, lambert, normalize
 
 F32 = NDArray[np.float32]

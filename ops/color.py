@@ -33,14 +33,13 @@ CIE 15:2004 Colorimetry, §8.2.1 (CIELAB); IEC 61966-2-1 (sRGB primaries, D65).
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Literal
 
 import cv2
 import numpy as np
+
+from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -84,65 +83,19 @@ _PHI_TO_LAB = np.array(
 _LAB_TO_PHI = np.linalg.inv(_PHI_TO_LAB.astype(np.float64)).astype(np.float32)
 _C0 = 4.0 / 29.0  # f(0): φ = f − 4/29
 _KNEE_PHI = _DELTA - _C0  # φ at the knee t = δ³ (2/29)
-_STRIP_PIXELS = 1 << 17  # pixels per row strip
 _116 = np.float32(116.0)
 
 White = float | Literal["auto"]
 #: What a per-strip ``k`` of :func:`scale_lab` returns: (k, keep) or (k, keep, columns).
 KRows = tuple[np.ndarray, np.ndarray | None] | tuple[np.ndarray, np.ndarray | None, slice]
 
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-_IN_STRIP = threading.local()  # set in the pool's threads while they run strips
-
-
-def _forget_pool() -> None:  # in a forked child: the parent's threads are not there
-    global _POOL, _POOL_LOCK
-    _POOL, _POOL_LOCK = None, threading.Lock()
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_pool)
-
 
 def row_strips(h: int, w: int, fn: Callable[[slice], None], step: int | None = None) -> None:
-    """Call ``fn(rows)`` on strips of ``step`` rows (default: about 128k pixels of a ``w``-wide
-    image) covering ``h`` rows: the strip runner of these conversions, shared with
-    :mod:`ops.unsharp`.
-
-    Up to ``min(cv2.getNumThreads(), os.cpu_count())`` threads of a shared pool each work
-    through the strips in turn (``cv2.setNumThreads(1)``: sequential); ``fn`` must only write
-    its own rows. Called from inside a strip, it runs sequentially.
-    """
-    global _POOL
-    n = max(1, step if step is not None else _STRIP_PIXELS // max(w, 1))
-    starts = list(range(0, h, n))
-    workers = min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1)
-    if workers <= 1 or getattr(_IN_STRIP, "active", False):
-        for r in starts:
-            fn(slice(r, min(r + n, h)))
-        return
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(max(2, os.cpu_count() or 1), "depict-rows")
-        pool = _POOL
-    todo = iter(starts)
-    lock = threading.Lock()
-
-    def worker() -> None:
-        _IN_STRIP.active = True
-        try:
-            while True:
-                with lock:
-                    r = next(todo, None)
-                if r is None:
-                    return
-                fn(slice(r, min(r + n, h)))
-        finally:
-            _IN_STRIP.active = False
-
-    for fut in [pool.submit(worker) for _ in range(workers)]:
-        fut.result()
+    """``fn(rows)`` on strips of ``step`` rows (default: about
+    :data:`ops.parallel.STRIP_PIXELS` pixels of a ``w``-wide image) covering ``h`` rows, on
+    every core (:func:`ops.parallel.run_strips`); ``fn`` must only write its own rows."""
+    rows = step if step is not None else strip_rows(w)
+    run_strips(h, lambda a, b: fn(slice(a, b)), rows)
 
 
 def _phi_inplace(t: np.ndarray) -> None:

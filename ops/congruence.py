@@ -50,15 +50,13 @@ is processed, since everything is exactly 0 further away; OpenCV works on one ch
 from __future__ import annotations
 
 import functools
-import os
-import threading
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
 
@@ -171,30 +169,6 @@ _ROWS_GRAD = 136
 
 _ONES3 = np.ones((3, 3), np.uint8)
 
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-_POOL_PREFIX = "depict-congruence"
-
-
-def _parallel(n: int, step: int, fn: Callable[[int, int], None]) -> None:
-    """Call ``fn(a, b)`` on consecutive ranges of ``step`` covering ``[0, n)``, on parallel
-    threads (OpenCV's filters are single-threaded, and the strips stay in cache). Runs inline
-    when there is one range, one core, or when called from one of the pool's own threads."""
-    global _POOL
-    bounds = [(a, min(n, a + step)) for a in range(0, n, max(1, step))]
-    workers = min(len(bounds), cv2.getNumThreads(), os.cpu_count() or 1)
-    if workers <= 1 or threading.current_thread().name.startswith(_POOL_PREFIX):
-        for a, b in bounds:
-            fn(a, b)
-        return
-    with _POOL_LOCK:
-        if _POOL is None:
-            size = max(2, min(cv2.getNumThreads(), os.cpu_count() or 1))
-            _POOL = ThreadPoolExecutor(size, thread_name_prefix=_POOL_PREFIX)
-        pool = _POOL
-    for fut in [pool.submit(fn, a, b) for a, b in bounds]:
-        fut.result()
-
 
 def _covered_level(
     img: F32, dep: F32, mask: NDArray[np.generic] | None, f: int, size: tuple[int, int]
@@ -232,7 +206,7 @@ def _covered_level(
             for src, o in zip((lum, depc, covf), out, strict=True):
                 cv2.resize(src, (ws, o[rows].shape[0]), dst=o[rows], interpolation=cv2.INTER_AREA)
 
-    _parallel(hs, _ROWS_COVER if strips else hs, strip)
+    run_strips(hs, strip, _ROWS_COVER if strips else hs)
     return out[0], out[1], out[2]
 
 
@@ -286,7 +260,7 @@ def _tensor_products(
             else:
                 o[orows] = p
 
-    _parallel(h, max(1, _ROWS_GRAD // f) * f if strips else h, strip)
+    run_strips(h, strip, max(1, _ROWS_GRAD // f) * f if strips else h)
     return out
 
 
@@ -519,7 +493,7 @@ def congruence(
         for i in range(a, b):
             tens[i] = _f32(cv2.GaussianBlur(prods[i], (0, 0), s2))
 
-    _parallel(len(tens), 1, integrate)
+    run_strips(len(tens), integrate, 1)
     wsum = tens[6]
     invw = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 1e-4)
 

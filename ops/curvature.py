@@ -45,15 +45,13 @@ from __future__ import annotations
 
 import functools
 import math
-import os
-import threading
-from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
 import cv2
 import numpy as np
+
+from ops.parallel import run_strips
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -494,51 +492,16 @@ def principal_curvatures(
     halo = 3 + radius + nhalo
     outs = [np.empty((h_l, w_l), np.float32) for _ in range(4)]
 
-    def strip(r0: int) -> None:
-        r1 = min(h_l, r0 + _STRIP_ROWS)
+    def strip(r0: int, r1: int) -> None:
         a0, a1 = max(0, r0 - halo), min(h_l, r1 + halo)
         chans = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo))
         cov, depth_l = coverage(a0, a1)
         _hessian_rows(chans, cov, depth_l, prm, r0 - a0, r1 - a0, [o[r0:r1] for o in outs])
 
-    run_rows(range(0, h_l, _STRIP_ROWS), strip)
+    run_strips(h_l, strip, _STRIP_ROWS)
     trace, qx, qy, wgt = outs
     coarse = _Coarse(qx=qx, qy=qy, weight=wgt, trace=trace, size=(hgt, wid), sx=prm.sx, sy=prm.sy)
     return Curvature._lazy(coarse)
-
-
-_POOL: ThreadPoolExecutor | None = None
-_POOL_LOCK = threading.Lock()
-
-
-def run_rows(starts: range, fn: Callable[[int], None]) -> None:
-    """Call ``fn(start)`` for each of ``starts``, on a shared pool of up to
-    ``min(cv2.getNumThreads(), os.cpu_count())`` threads (cv2 and NumPy free the GIL); ``fn``
-    must only write its own rows. ``cv2.setNumThreads(1)`` makes it sequential."""
-    global _POOL
-    workers = min(len(starts), cv2.getNumThreads(), os.cpu_count() or 1)
-    if workers <= 1:
-        for s in starts:
-            fn(s)
-        return
-    with _POOL_LOCK:
-        if _POOL is None:
-            _POOL = ThreadPoolExecutor(max(2, os.cpu_count() or 1), "depict-rows")
-        pool = _POOL
-    # At most ``workers`` tasks in flight, each working through strips in turn.
-    todo = iter(starts)
-    lock = threading.Lock()
-
-    def worker() -> None:
-        while True:
-            with lock:
-                s = next(todo, None)
-            if s is None:
-                return
-            fn(s)
-
-    for fut in [pool.submit(worker) for _ in range(workers)]:
-        fut.result()
 
 
 def _working_normals(normal: np.ndarray, level: int, nchan: int) -> list[np.ndarray]:

@@ -32,14 +32,14 @@ Background pixels (mask false, depth not finite or ≤ 0) never contribute and s
 from __future__ import annotations
 
 import math
-import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
+
+from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
 
@@ -61,30 +61,6 @@ _DOWN_EXCLUDE = 2.0
 _STEP = 3.0
 # Rows per strip for the strip-parallel helpers.
 STRIP_ROWS = 32
-
-_POOL: ThreadPoolExecutor | None = None
-
-
-def _pool() -> ThreadPoolExecutor:
-    global _POOL
-    if _POOL is None:
-        _POOL = ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1)))
-    return _POOL
-
-
-def run_strips(n_rows: int, fn: Callable[[int, int], None], rows: int = STRIP_ROWS) -> None:
-    """Call ``fn(r0, r1)`` on consecutive row ranges covering ``[0, n_rows)``, in parallel.
-
-    Per-pixel NumPy work on strips of ~32 rows stays in the CPU caches and runs on all cores
-    (NumPy releases the GIL in its loops); ``fn`` must only write its own rows.
-    """
-    bounds = [(r, min(n_rows, r + rows)) for r in range(0, n_rows, rows)]
-    if len(bounds) <= 1:
-        for r0, r1 in bounds:
-            fn(r0, r1)
-        return
-    for fut in [_pool().submit(fn, r0, r1) for r0, r1 in bounds]:
-        fut.result()
 
 
 def _check_unit_range(value: float, name: str, lo: float, hi: float) -> float:
@@ -394,7 +370,7 @@ class DepthPyramid:
                     plane *= scale
             cv2.merge(planes, out[r0:r1])
 
-        run_strips(h_to, strip)
+        run_strips(h_to, strip, STRIP_ROWS)
         return out
 
     def _jumps(self, k: int) -> NDArray[np.bool_]:

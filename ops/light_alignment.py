@@ -67,7 +67,8 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
-from ops.filtering import F32, NormalPyramid, normalize_field, run_strips
+from ops.filtering import F32, NormalPyramid, normalize_field
+from ops.parallel import run_strips
 from ops.shading import Light, light_vectors
 
 Guide = Literal["diffuse", "specular", "transmission"]

@@ -65,7 +65,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.curvature import Curvature, run_rows
+from ops.curvature import Curvature
+from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
 
@@ -833,13 +834,6 @@ def cel(r: NDArray[np.generic]) -> F32:
     return np.asarray(np.clip(_f32(r, "r", (2, 3)), 0.0, 1.0), np.float32)
 
 
-def _strips(n_rows: int, fn: Callable[[int, int], None], rows: int = _STRIP_ROWS) -> None:
-    """``fn(r0, r1)`` on strips of ``rows`` rows covering ``[0, n_rows)``, on both cores
-    (:func:`ops.curvature.run_rows`; ``fn`` writes only its own rows). The styles work strip by
-    strip so their temporaries stay in the caches."""
-    run_rows(range(0, n_rows, rows), lambda r0: fn(r0, min(n_rows, r0 + rows)))
-
-
 def _lit(
     ndotl: NDArray[np.generic] | None,
     normal: NDArray[np.generic] | None,
@@ -924,7 +918,7 @@ def counter_shading(
         cv2.add(i, nl, dst=i)
         cv2.threshold(i, thr, 1.0, cv2.THRESH_BINARY, dst=out[r0:r1])
 
-    _strips(rr.shape[0], strip, 2 * _STRIP_ROWS)  # (H, W) temporaries only: taller strips
+    run_strips(rr.shape[0], strip, 2 * _STRIP_ROWS)  # (H, W) temporaries only: taller strips
     return out
 
 
@@ -1007,7 +1001,7 @@ def xtoon(
         my = cv2.addWeighted(rr[r0:r1], -sy, rr[r0:r1], 0.0, sy)
         _lookup(tex, columns(r0, r1), my, dst=out[r0:r1])
 
-    _strips(rr.shape[0], strip)
+    run_strips(rr.shape[0], strip, _STRIP_ROWS)
     return out
 
 

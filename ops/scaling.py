@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ops.curvature import run_rows
+from ops.parallel import run_strips
 
 #: Rec. 709 / sRGB luminance weights (linear RGB).
 REC709 = (0.2126, 0.7152, 0.0722)
@@ -317,12 +317,11 @@ def scale_lobes(
     beauty = np.empty((hgt, wid, 3), np.float32)
     sigmas = {n: np.empty((hgt, wid), np.float32) for n in names}
 
-    def strip(r0: int) -> None:
+    def strip(r0: int, r1: int) -> None:
         # Row strips keep the chain of per-pixel operations in cache and let strips run on
         # parallel threads (cv2 frees the GIL). Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E),
         # P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of _sigma_from over max(α, 1 - α) (one
         # multiplication less), E = e^{-γκ} shared by the lobes of one γ; exactly 1 where E = 1.
-        r1 = min(hgt, r0 + _STRIP_ROWS)
         rows = r1 - r0
         expk: dict[float, np.ndarray] = {}
         delta = np.empty((rows, wid), np.float32)
@@ -359,5 +358,5 @@ def scale_lobes(
             else:
                 cv2.accumulateProduct(lobe, s3f, acc)
 
-    run_rows(range(0, hgt, _STRIP_ROWS), strip)
+    run_strips(hgt, strip, _STRIP_ROWS)
     return beauty, sigmas

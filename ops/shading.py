@@ -31,7 +31,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from ops.filtering import run_strips
+from ops.parallel import run_strips
 
 Vec3 = tuple[float, float, float]
 Model = Literal["lambert", "blinn_phong", "phong", "ggx", "ashikhmin_shirley"]

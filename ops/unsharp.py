@@ -53,6 +53,7 @@ import cv2
 import numpy as np
 
 from ops import color
+from ops.parallel import STRIP_PIXELS
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -91,7 +92,6 @@ _LEVEL_SIGMA = 2.218
 _LN2 = math.log(2.0)
 _L_EPS = 1.0e-3  # L* below which k = U/L is not formed (black)
 _ONE = np.float32(1.0)
-_STRIP_PIXELS = 1 << 17  # pixels per strip of rows in the passes over full-resolution fields
 
 Array = np.ndarray
 
@@ -386,7 +386,7 @@ def _surface(
         depth_sigma,
         centre,
     )
-    step = max(2, (_STRIP_PIXELS // max(w, 1)) & ~1)  # even: strips hold whole cells
+    step = max(2, (STRIP_PIXELS // max(w, 1)) & ~1)  # even: strips hold whole cells
 
     def strip(r: slice) -> None:
         r0 = r.start
@@ -885,8 +885,8 @@ def _block_flags(lv: _Level, thr: np.float32) -> Array:
         step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
         _write(_cv.min(_cv.bitwise_or(bad, step, dst=bad), 1, dst=out[r]), out, r)
 
-    if (h + 1) * (w + 1) >= 2 * _STRIP_PIXELS:
-        color.row_strips(h + 1, w + 1, rows, max(1, _STRIP_PIXELS // 2 // (w + 1)))
+    if (h + 1) * (w + 1) >= 2 * STRIP_PIXELS:
+        color.row_strips(h + 1, w + 1, rows, max(1, STRIP_PIXELS // 2 // (w + 1)))
     else:
         rows(slice(0, h + 1))
     return out

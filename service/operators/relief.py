@@ -24,7 +24,7 @@ from pydantic import Field, field_validator, model_validator
 
 from gbuffer.frame import Frame
 from ops import relief as rl
-from ops.curvature import run_rows
+from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
 from service.operators.common import Auto, channels, layer_plane, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
@@ -139,14 +139,13 @@ def _over(src: np.ndarray, base: np.ndarray, covered: np.ndarray, dst: np.ndarra
     ~10x slower)."""
     grey = src.ndim == 2
 
-    def strip(r0: int) -> None:
-        r1 = min(dst.shape[0], r0 + _COMPOSE_ROWS)
+    def strip(r0: int, r1: int) -> None:
         if grey:
             cv2.cvtColor(src[r0:r1], cv2.COLOR_GRAY2RGB, dst=dst[r0:r1])
         uncovered = np.logical_not(covered[r0:r1]).view(np.uint8)
         cv2.copyTo(base[r0:r1], uncovered, dst[r0:r1])
 
-    run_rows(range(0, dst.shape[0], _COMPOSE_ROWS), strip)
+    run_strips(dst.shape[0], strip, _COMPOSE_ROWS)
 
 
 def _beauty(shade: Callable[[Block], np.ndarray], frame: Frame, crop: bool) -> np.ndarray:
@@ -179,15 +178,14 @@ def _beauty(shade: Callable[[Block], np.ndarray], frame: Frame, crop: bool) -> n
         styled = np.asarray(cv2.cvtColor(styled, cv2.COLOR_GRAY2RGB))
     covered_u8 = covered.view(np.uint8)
 
-    def strip(r0: int) -> None:  # the beauty, then the style on the covered pixels of the box
-        r1 = min(h, r0 + _COMPOSE_ROWS)
+    def strip(r0: int, r1: int) -> None:  # the beauty, then the style on the covered box
         np.copyto(out[r0:r1], base[r0:r1])
         a, b = max(r0, rows.start), min(r1, rows.stop)
         if a < b:
             box = slice(a - rows.start, b - rows.start)
             cv2.copyTo(styled[box], covered_u8[a:b, cols], out[a:b, cols])
 
-    run_rows(range(0, h, _COMPOSE_ROWS), strip)
+    run_strips(h, strip, _COMPOSE_ROWS)
     return out
 
 

@@ -1,0 +1,86 @@
+"""Row strips on every core: the one thread pool the operators share.
+
+Per-pixel work cut into strips of rows stays in the CPU caches, and OpenCV and NumPy release the
+GIL inside their loops, so strips run in parallel on threads. :func:`run_strips` is the only
+strip runner in ``ops/``:
+
+* at most ``min(cv2.getNumThreads(), os.cpu_count())`` strips run at once
+  (``cv2.setNumThreads(1)`` makes everything sequential), each worker taking the next strip when
+  it is done (strips of unequal cost balance themselves);
+* called from inside a strip it runs sequentially, so nested strip work cannot deadlock the pool;
+* a forked child (Dask or multiprocessing workers) starts a pool of its own.
+
+``fn(a, b)`` must only write rows ``a`` to ``b`` of its outputs.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+
+import cv2
+
+#: Pixels per strip that keep a few float32 planes of it in the caches (:func:`strip_rows`).
+STRIP_PIXELS = 1 << 17
+
+_POOL: ThreadPoolExecutor | None = None
+_POOL_LOCK = threading.Lock()
+_IN_STRIP = threading.local()
+
+
+def _forget_pool() -> None:  # in a forked child: the parent's threads are not there
+    global _POOL, _POOL_LOCK
+    _POOL, _POOL_LOCK = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pool)
+
+
+def workers() -> int:
+    """How many strips may run at once."""
+    return max(1, min(cv2.getNumThreads(), os.cpu_count() or 1))
+
+
+def strip_rows(width: int, pixels: int = STRIP_PIXELS) -> int:
+    """Rows per strip of an image ``width`` pixels wide holding about ``pixels`` pixels."""
+    return max(1, pixels // max(width, 1))
+
+
+def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
+    """Call ``fn(a, b)`` on consecutive ranges ``[a, b)`` of ``rows`` covering ``[0, n)``.
+
+    Parallel on the shared pool; sequential with one range or one worker, or when called from
+    inside a strip (see the module docstring).
+    """
+    global _POOL
+    step = max(1, int(rows))
+    starts = range(0, n, step)
+    count = min(len(starts), workers())
+    if count <= 1 or getattr(_IN_STRIP, "active", False):
+        for a in starts:
+            fn(a, min(n, a + step))
+        return
+    with _POOL_LOCK:
+        if _POOL is None:
+            _POOL = ThreadPoolExecutor(max(2, os.cpu_count() or 1), "depict-strips")
+        pool = _POOL
+    todo = iter(starts)
+    lock = threading.Lock()
+
+    def worker() -> None:
+        _IN_STRIP.active = True
+        try:
+            while True:
+                with lock:
+                    a = next(todo, None)
+                if a is None:
+                    return
+                fn(a, min(n, a + step))
+        finally:
+            _IN_STRIP.active = False
+
+    for fut in [pool.submit(worker) for _ in range(count)]:
+        fut.result()
