@@ -9,6 +9,8 @@ Routes (the contract is ``openapi/openapi.json``, regenerated with ``python -m s
 ``POST /v1/render``         multipart ``mesh`` (OBJ/PLY/STL/GLB/GLTF) + ``scene`` (JSON: width,
                             height, camera, azimuth, elevation, lights) -> canonical EXR
 ``POST /v1/score``          multipart ``file`` (EXR) + options -> JSON congruence score
+``POST /v1/compare``        multipart ``file`` (EXR or mesh) + ``options`` -> JSON comparison
+``POST /v1/relief/pick``    multipart ``file`` + ``x``, ``y`` -> the Apparent Relief descriptor
 ``GET /v1/operators``       every operator with its parameter JSON schema
 ``GET /healthz``            alive (never needs the key, answers while the workers are saturated)
 ``GET /readyz``             ready: the worker pool is up and an OSMesa context could be created
@@ -18,6 +20,7 @@ Routes (the contract is ``openapi/openapi.json``, regenerated with ``python -m s
 Errors are ``application/problem+json`` (:mod:`service.problems`). Every answer carries
 ``X-Request-ID`` (the client's, when it sent a valid one) and one JSON log line is written per
 request. Pixel work runs in :class:`service.jobs.JobPool` worker processes, never on the event loop.
+The analysis routes live in :mod:`service.api_analysis`.
 """
 
 from __future__ import annotations
