@@ -21,6 +21,7 @@ from service.cli_common import (
     pipeline_spec,
     read_options,
 )
+from service.client import DepictError
 
 EXIT_USAGE = 2
 
@@ -35,8 +36,22 @@ def read_frame(args: argparse.Namespace, path: str) -> Any:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    if getattr(args, "server", None):
-        return run_remote(args)
+    if args.server:
+        from service.client import Client
+
+        with Client.from_env(args.server) as client:
+            client.render(
+                args.mesh,
+                args.output,
+                width=args.width,
+                height=args.height,
+                camera=args.camera,
+                azimuth=args.azimuth,
+                elevation=args.elevation,
+                lights=args.light,
+            )
+        print(f"wrote {args.output} ({args.width}x{args.height})")
+        return 0
     from gbuffer import write
     from gbuffer.camera import Camera
     from gbuffer.render import auto_camera, load_mesh, render
@@ -115,11 +130,27 @@ def cmd_ops(args: argparse.Namespace) -> int:
 
 
 def cmd_enhance(args: argparse.Namespace) -> int:
-    if getattr(args, "server", None):
-        return run_remote(args)
     import gbuffer
     from service import pipeline
 
+    if args.server:
+        from service.client import Client
+
+        read = read_options(args)
+        with Client.from_env(args.server) as client:
+            client.enhance(
+                args.input,
+                args.output,
+                pipeline=pipeline_spec(args, default=None),  # None: the server's default
+                preset=read["preset"],
+                camera=read["camera"],
+                mapping=read["mapping"],
+                normal_space=read["normal_space"],
+                debug_layers=args.debug_layers,
+                output_layer=args.output_layer,
+            )
+        print(f"wrote {args.output}")
+        return 0
     spec = pipeline_spec(args, default=pipeline.DEFAULT_PIPELINE)
     frame = read_frame(args, args.input)
     out = pipeline.finish(
@@ -130,18 +161,7 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     return 0
 
 
-# -- service: remote mode, serve, batch (service/client.py, service/api.py, service/batch.py) --
-
-
-def run_remote(args: argparse.Namespace) -> int:
-    """Route ``args.command`` through the HTTP client; server errors exit like local ones."""
-    from service import client
-
-    remote = {"enhance": client.remote_enhance, "render": client.remote_render}
-    try:
-        return remote[args.command](args)
-    except client.DepictError as exc:
-        raise UsageError(str(exc)) from None
+# -- service: serve, batch (service/api.py, service/batch.py) --
 
 
 def cmd_serve(args: argparse.Namespace) -> int:
@@ -271,7 +291,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args))
-    except ValueError as exc:  # FrameError, PipelineError, UsageError, and ops/' bad values
+    except (ValueError, DepictError) as exc:  # bad input, or a server that refused or is down
+        # ValueError: FrameError, PipelineError, UsageError, and ops/' bad values
         print(f"depict: error: {exc}", file=sys.stderr)
         return EXIT_USAGE
     except FileNotFoundError as exc:

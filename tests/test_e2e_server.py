@@ -202,16 +202,43 @@ def test_python_client_and_score_match_local(server: Server, files: dict[str, Pa
     assert err.value.status == 0 and "cannot reach" in str(err.value)
 
 
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["enhance", "{bad}", "-o", "{out}"],
+        ["score", "{bad}"],
+        ["compare", "{bad}", "--directions", "1"],
+        ["relief-pick", "{bad}", "1", "1"],
+    ],
+    ids=["enhance", "score", "compare", "relief-pick"],
+)
 def test_remote_error_exits_like_local(
-    server: Server, tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
+    server: Server,
+    tmp_path: Path,
+    remote_env: None,
+    capsys: pytest.CaptureFixture[str],
+    command: list[str],
 ) -> None:
     bad = tmp_path / "bad.exr"
     bad.write_bytes(b"not an exr at all")
-    code = cli(["enhance", str(bad), "-o", str(tmp_path / "o.exr"), "--server", server.url])
-    assert code == 2
+    out = tmp_path / "o.exr"
+    args = [a.format(bad=bad, out=out) for a in command]
+    assert cli([*args, "--server", server.url]) == 2
     err = capsys.readouterr().err
     assert err.startswith("depict: error: server answered 400") and "bad.exr" in err
-    assert not (tmp_path / "o.exr").exists()
+    assert err.count("\n") == 1  # one line, no traceback
+    assert not out.exists()
+
+
+def test_unreachable_server_is_one_line(
+    tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    url = f"http://127.0.0.1:{free_port()}"
+    frame = tmp_path / "x.exr"
+    frame.write_bytes(b"anything: it never leaves")
+    assert cli(["score", str(frame), "--server", url]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("depict: error: cannot reach") and err.count("\n") == 1
 
 
 def _cli_json(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
