@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ops.jit import kernel
 from ops.parallel import run_strips
 
 #: Rec. 709 / sRGB luminance weights (linear RGB).
@@ -30,6 +31,7 @@ REC709 = (0.2126, 0.7152, 0.0722)
 _LUMA = np.array([REC709], dtype=np.float32)  # (1, 3) for cv2.transform
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
+_ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
 
 
 def _check_alpha(alpha: float, name: str = "alpha") -> float:
@@ -247,6 +249,8 @@ def scale_lobes(
     remainder: np.ndarray | None = None,
     *,
     mask: np.ndarray | None = None,
+    beauty: np.ndarray | None = None,
+    with_sigmas: bool = True,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Radiance Scaling as a post-process on renderer lobes (RS §5.3, Eq. 4)::
 
@@ -272,6 +276,11 @@ def scale_lobes(
         What the beauty holds besides the lobes (emission, environment): added unchanged.
     mask : (H, W) bool or float, optional
         Covered pixels, for the "auto" white levels.
+    beauty : (H, W, 3) float32, optional
+        Instead of ``remainder``: the beauty the lobes are part of, so the result is
+        ``beauty + Σ_j (σ̄_j - 1) · lobe_j`` (the same sum, without forming the remainder).
+    with_sigmas : bool
+        Also return the σ of each lobe (else an empty dict, and one pass less to memory).
 
     Returns
     -------
@@ -312,51 +321,95 @@ def scale_lobes(
         n: white_level(luminance(light_arr[n]), mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
-    luma = {n: _LUMA * np.float32(1.0 / levels[n]) for n in names}
-    rem = None if remainder is None else rgb(remainder, "remainder")
-    beauty = np.empty((hgt, wid, 3), np.float32)
-    sigmas = {n: np.empty((hgt, wid), np.float32) for n in names}
+    if remainder is not None and beauty is not None:
+        raise ValueError("give the remainder or the beauty the lobes are part of, not both")
+    base = None
+    mode = _ACC_LOBES
+    if remainder is not None:
+        base, mode = rgb(remainder, "remainder"), _ACC_REMAINDER
+    elif beauty is not None:
+        base, mode = rgb(beauty, "beauty"), _ACC_BEAUTY
+    out = np.empty((hgt, wid, 3), np.float32)
+    nl = len(names)
+    sig = np.empty((nl, hgt, wid) if with_sigmas else (nl, 0, 0), np.float32)
+    sigmas = {n: sig[i] for i, n in enumerate(names)} if with_sigmas else {}
+    distinct = sorted(set(gammas.values()))
+    which = np.array([distinct.index(gammas[n]) for n in names], np.intp)
+    # Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E): P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of
+    # _sigma_from over max(α, 1 - α), so σ is exactly 1 where E = e^{-γκ} is 1; δ̄ = the light's
+    # luminance over its white level (as reflectance_delta).
+    coef = np.array(
+        [[*(_LUMA[0] / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
+        np.float32,
+    ).reshape(nl, 5)
+    lobe_t = tuple(lobe_arr[n] for n in names)
+    light_t = tuple(light_arr[n] for n in names)
+    none = np.empty((0, 0, 3), np.float32)
 
     def strip(r0: int, r1: int) -> None:
-        # Row strips keep the chain of per-pixel operations in cache and let strips run on
-        # parallel threads (cv2 frees the GIL). Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E),
-        # P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of _sigma_from over max(α, 1 - α) (one
-        # multiplication less), E = e^{-γκ} shared by the lobes of one γ; exactly 1 where E = 1.
-        rows = r1 - r0
-        expk: dict[float, np.ndarray] = {}
-        delta = np.empty((rows, wid), np.float32)
-        p1 = np.empty((rows, wid), np.float32)
-        s3 = np.empty((rows, wid, 3), np.float32)
-        s3f = s3.reshape(rows, wid * 3)
-        acc = beauty[r0:r1].reshape(rows, wid * 3)
-        if rem is not None:
-            np.copyto(acc, rem[r0:r1].reshape(rows, wid * 3))
-        elif not names:
-            acc.fill(0.0)
-        for i, n in enumerate(names):
-            cv2.transform(light_arr[n][r0:r1], luma[n], dst=delta)  # as reflectance_delta
-            # δ̄ clipped to [0, 1]; a NaN light is NaN in its lobe too, so NaN is not patched.
-            _clip01(delta, patch_nan=False)
-            g, a = gammas[n], alphas[n]
-            if g not in expk:
-                expk[g] = _exp_term(kap[r0:r1], g)
-            e = expk[g]
-            s = sigmas[n][r0:r1]
-            np.subtract(np.float32(1.0), delta, out=p1)
-            if a > 0.5:  # P' = 1 - δ̄, Q' = δ̄ (1 - α) / α (both <= 1, as P and Q)
-                np.multiply(delta, np.float32((1.0 - a) / a), out=delta)
-            elif a < 0.5:  # over 1 - α instead: P' = (1 - δ̄) α / (1 - α), Q' = δ̄
-                np.multiply(p1, np.float32(a / (1.0 - a)), out=p1)
-            cv2.multiply(p1, e, dst=s)
-            cv2.add(s, delta, dst=s)  # P'E + Q'
-            cv2.accumulateProduct(delta, e, p1)  # P' + Q'E
-            cv2.divide(s, p1, dst=s)
-            cv2.merge((s, s, s), dst=s3)
-            lobe = lobe_arr[n][r0:r1].reshape(rows, wid * 3)
-            if i == 0 and rem is None:
-                cv2.multiply(lobe, s3f, dst=acc)
-            else:
-                cv2.accumulateProduct(lobe, s3f, acc)
+        r = slice(r0, r1)
+        expk = tuple(_exp_term(kap[r], g) for g in distinct)  # E shared by the lobes of one γ
+        _scale_rows(
+            tuple(x[r] for x in lobe_t),
+            tuple(x[r] for x in light_t),
+            expk,
+            coef,
+            which,
+            none if base is None else base[r],
+            mode,
+            out[r],
+            sig,
+            r0,
+        )
 
+    if not names:
+        out[...] = 0.0 if base is None else base
+        return out, sigmas
     run_strips(hgt, strip, _STRIP_ROWS)
-    return beauty, sigmas
+    return out, sigmas
+
+
+def _pq_factors(alpha: float) -> tuple[float, float]:
+    """(P'/(1 - δ), Q'/δ) of :func:`scale_lobes`: α(1 - δ) and (1 - α)δ over max(α, 1 - α)."""
+    if alpha > 0.5:
+        return 1.0, (1.0 - alpha) / alpha
+    if alpha < 0.5:
+        return alpha / (1.0 - alpha), 1.0
+    return 1.0, 1.0
+
+
+@kernel
+def _scale_rows(lobes, lights, expk, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
+    """Rows of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with ``mode``
+    _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY; σ_k of lobe k
+    from E = ``expk[which[k]]`` and δ̄ = clip(coef[k, :3] · light_k, 0, 1), P' = coef[k, 3](1 - δ̄),
+    Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when it has rows. RGB rows
+    are indexed flat (3j + c) so that LLVM vectorises the loop."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    keep = sig.shape[1] > 0
+    less = one if mode == _ACC_BEAUTY else zero
+    wid = out.shape[1]
+    scratch = np.empty(wid, np.float32)  # σ of the row when it is not kept (no branch inside)
+    for i in range(out.shape[0]):
+        acc = out[i].reshape(3 * wid)
+        if mode == _ACC_LOBES:
+            acc[:] = zero
+        else:
+            acc[:] = base[i].reshape(3 * wid)
+        for k in range(len(lobes)):
+            lobe, light = lobes[k][i].reshape(3 * wid), lights[k][i].reshape(3 * wid)
+            e = expk[which[k]][i]
+            srow = sig[k, r0 + i] if keep else scratch
+            w0, w1, w2, pf, qf = coef[k, 0], coef[k, 1], coef[k, 2], coef[k, 3], coef[k, 4]
+            for j in range(wid):
+                d = w0 * light[3 * j] + w1 * light[3 * j + 1] + w2 * light[3 * j + 2]
+                d = d if d > zero else zero
+                d = d if d < one else one
+                p = pf * (one - d)
+                q = qf * d
+                s = (p * e[j] + q) / (p + q * e[j])
+                srow[j] = s
+                s -= less
+                acc[3 * j] += s * lobe[3 * j]
+                acc[3 * j + 1] += s * lobe[3 * j + 1]
+                acc[3 * j + 2] += s * lobe[3 * j + 2]

@@ -128,8 +128,6 @@ def _scale_renderer_lobes(
         for lobe in LOBES:
             if lobe in frame.buffers and lobe not in lobes:
                 remainder = remainder + frame.buffers[lobe]
-    elif "beauty" in frame.buffers:
-        remainder = frame.buffers["beauty"] - sum(lobes.values())
     return scale_lobes(
         lobes,
         lights,
@@ -139,6 +137,8 @@ def _scale_renderer_lobes(
         white,
         remainder,
         mask=mask,
+        beauty=frame.buffers.get("beauty") if remainder is None else None,
+        with_sigmas=ctx.debug_layers,
     )
 
 
@@ -157,7 +157,15 @@ def _scale_beauty(
         light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
         counted &= has_albedo
     white = _white(ctx, p, "beauty", light, counted)
-    return scale_lobes({"beauty": beauty}, {"beauty": light}, kappa, p.alpha, p.gamma, white)
+    return scale_lobes(
+        {"beauty": beauty},
+        {"beauty": light},
+        kappa,
+        p.alpha,
+        p.gamma,
+        white,
+        with_sigmas=ctx.debug_layers,
+    )
 
 
 def _camera_to_world(frame: Frame) -> np.ndarray | None:

@@ -1,0 +1,39 @@
+"""Compiled per-pixel kernels: the one set of Numba options every kernel in ``ops/`` uses.
+
+A chain of NumPy/cv2 calls reads and writes a whole plane per operation; a kernel compiled with
+:func:`kernel` does the chain in one pass over each row, with the row in registers and L1, and
+vectorised by LLVM. Kernels are serial and release the GIL: they run on the row strips of
+:func:`ops.parallel.run_strips`, which gives them every core and keeps them safe to call from
+several threads (a Numba ``parallel=True`` kernel would not be, with the default threading layer).
+
+Options:
+
+* ``error_model="numpy"``: a float division by zero gives inf/NaN as in NumPy instead of a
+  branch that raises (and stops vectorisation);
+* ``fastmath`` with contraction (fused multiply-add) and no signed zeros only: NaN and inf keep
+  their meaning, and divisions stay exact (no reciprocal approximation);
+* ``cache=True``: compiled code is kept beside the module (or in Numba's cache directory when
+  that is read-only), so only the first process to use a kernel compiles it.
+
+Constants inside kernels must be ``np.float32``: a Python float literal promotes the arithmetic
+to float64. Transcendental functions are not vectorised by Numba here (no SVML); kernels take
+their results (cv2.exp, cv2.phase, ...) as inputs computed on the strip.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any, TypeVar, cast
+
+import numba
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+#: LLVM fast-math flags of every kernel (see the module docstring).
+FASTMATH = frozenset({"contract", "nsz"})
+
+
+def kernel(fn: F) -> F:
+    """Compile ``fn`` as a serial, GIL-free, cached Numba kernel with the options above."""
+    jit = numba.njit(nogil=True, cache=True, fastmath=set(FASTMATH), error_model="numpy")
+    return cast(F, jit(fn))
