@@ -51,6 +51,7 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ops.jit import kernel
 from ops.parallel import run_strips
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
@@ -238,14 +239,6 @@ def _mask_u8(mask: np.ndarray) -> np.ndarray:
     return _cv.compare(np.ascontiguousarray(mask, dtype=np.float32), 0.5, cv2.CMP_GT)
 
 
-def _valid_u8(depth: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
-    """255 where the pixel is covered (finite positive depth, mask > 0.5), else 0."""
-    valid = cv2.inRange(depth, 1e-30, _FLT_MAX)
-    if mask is not None:
-        cv2.bitwise_and(valid, _mask_u8(mask), dst=valid)
-    return valid
-
-
 def _downsample(img: np.ndarray, level: int, size: tuple[int, int]) -> np.ndarray:
     """Box average over 2^level x 2^level blocks (``size`` = (w, h) of the result).
 
@@ -282,20 +275,53 @@ def _jump_band(depth_l: np.ndarray, cov: np.ndarray, depth_jump: float, radius: 
     d_max > d_min``): cheap, and on most frames rare. Among them :func:`_mark_occlusions` keeps
     the two sides of the jumps that the surfaces do not explain.
     """
-    hi = np.zeros_like(depth_l)
-    cv2.copyTo(depth_l, cov, hi)  # covered depth, 0 elsewhere (below any covered depth)
-    lo = np.full_like(depth_l, np.inf)
-    cv2.copyTo(depth_l, cov, lo)  # covered depth, +inf elsewhere
-    dmax = _cv.dilate(hi, None)  # the default border is ignored by both
-    dmin = _cv.erode(lo, None)
-    np.multiply(dmax, np.float32(math.exp(-depth_jump)), out=dmax)
-    jump = cv2.compare(dmax, dmin, cv2.CMP_GT)
-    if cv2.countNonZero(jump):
+    hi = np.empty_like(depth_l)
+    lo = np.empty_like(depth_l)
+    jump: np.ndarray = np.empty(depth_l.shape, np.uint8)
+    if _jump_candidates(depth_l, cov, np.float32(math.exp(-depth_jump)), hi, lo, jump):
         _mark_occlusions(jump, cov, hi, lo, depth_jump)
     if radius > 0 and cv2.countNonZero(jump):
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         jump = cv2.dilate(jump, k)
     return jump
+
+
+@kernel
+def _jump_candidates(depth_l, cov, e, hi, lo, jump):  # type: ignore[no-untyped-def]
+    """Candidates of :func:`_jump_band` into ``jump`` (uint8 255 where ``e``·max > min of the
+    covered depth over the 3x3 neighbourhood, pixels outside the image ignored), the covered
+    depth into ``hi`` (0 elsewhere, below any covered depth) and ``lo`` (+inf elsewhere);
+    returns how many candidates there are."""
+    zero, big = np.float32(0.0), np.float32(np.inf)
+    full, empty = np.uint8(255), np.uint8(0)
+    n, wid = depth_l.shape
+    for i in range(n):
+        d, c, h, lw = depth_l[i], cov[i], hi[i], lo[i]
+        for j in range(wid):
+            h[j] = d[j] if c[j] != 0 else zero
+            lw[j] = d[j] if c[j] != 0 else big
+    vmax = np.empty(wid, np.float32)
+    vmin = np.empty(wid, np.float32)
+    count = 0
+    for i in range(n):
+        ha, hb, hc = hi[max(i - 1, 0)], hi[i], hi[min(i + 1, n - 1)]
+        la, lb, lc = lo[max(i - 1, 0)], lo[i], lo[min(i + 1, n - 1)]
+        for j in range(wid):
+            vmax[j] = max(max(ha[j], hb[j]), hc[j])
+            vmin[j] = min(min(la[j], lb[j]), lc[j])
+        out = jump[i]
+        for j in range(1, wid - 1):
+            dmax = max(max(vmax[j - 1], vmax[j]), vmax[j + 1])
+            dmin = min(min(vmin[j - 1], vmin[j]), vmin[j + 1])
+            out[j] = full if e * dmax > dmin else empty
+        for j in (0, wid - 1):
+            jl, jr = max(j - 1, 0), min(j + 1, wid - 1)
+            dmax = max(max(vmax[jl], vmax[j]), vmax[jr])
+            dmin = min(min(vmin[jl], vmin[j]), vmin[jr])
+            out[j] = full if e * dmax > dmin else empty
+        for j in range(wid):
+            count += out[j] != 0
+    return count
 
 
 def _mark_occlusions(
@@ -452,24 +478,34 @@ def principal_curvatures(
     # σ in working pixels, less the smoothing of the box downsampling and the central difference.
     var = sigma_px * sigma_px - box_var - k * k / 3.0
     sigma_l = math.sqrt(var) / k if var > 0.0 else 0.0
-    nchan = 2 if f == 0.0 else 3  # n_z is only needed for the foreshortening
     if not exact:  # working-grid inputs for the whole frame at once
         whole_n = _downsample(normal, level, (w_l, h_l))
         whole_c = _working_coverage(depth, mask, level, (w_l, h_l))
 
-    def normals(a0: int, a1: int) -> list[np.ndarray]:
-        """Planes (new arrays) of the working-grid normals of working rows a0..a1."""
-        if not exact:
-            return [cv2.extractChannel(whole_n[a0:a1], c) for c in range(nchan)]
-        return _working_normals(normal[a0 * k : a1 * k], level, nchan)
+    def normals(a0: int, a1: int) -> np.ndarray:
+        """(3, rows, w_l) planes of the working-grid normals of working rows a0..a1."""
+        planes = np.empty((3, a1 - a0, w_l), np.float32)
+        if exact:
+            _block_normals(normal[a0 * k : a1 * k], k, planes)
+        else:
+            cv2.split(whole_n[a0:a1], list(planes))
+        return planes
 
     def coverage(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray]:
         """Working-grid coverage and depth of working rows a0..a1."""
         if not exact:
             return whole_c[0][a0:a1], whole_c[1][a0:a1]
         rows = slice(a0 * k, a1 * k)  # box blocks never straddle strips
-        m = None if mask is None else mask[rows]
-        return _working_coverage(depth[rows], m, level, (w_l, a1 - a0))
+        if mask is None:
+            m8 = _NO_MASK
+        elif mask.dtype == np.bool_:  # True is a non-zero byte, all _block_coverage asks
+            m8 = np.ascontiguousarray(mask[rows]).view(np.uint8)
+        else:
+            m8 = _mask_u8(mask[rows])
+        cov = np.empty((a1 - a0, w_l), np.uint8)
+        depth_l = np.empty((a1 - a0, w_l), np.float32)
+        _block_coverage(depth[rows], m8, k, cov, depth_l)
+        return cov, depth_l
 
     radius = max(1, round(1.5 * sigma_l))
     ks = 2 * math.ceil(2.5 * sigma_l) + 1 if sigma_l > 0.0 else 1
@@ -481,7 +517,6 @@ def principal_curvatures(
         depth_jump=depth_jump,
         sx=0.5 * img_h * w_l / wid,  # [-1, 0, 1] spans 2 working pixels
         sy=0.5 * img_h * h_l / hgt,
-        nscale=float(k) if exact else 1.0,
     )
     # Row strips (with a halo covering every neighbourhood the chain uses) keep the working
     # set in cache and run on parallel threads; the result is the same as one whole pass.
@@ -494,9 +529,9 @@ def principal_curvatures(
 
     def strip(r0: int, r1: int) -> None:
         a0, a1 = max(0, r0 - halo), min(h_l, r1 + halo)
-        chans = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo))
+        planes = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo))
         cov, depth_l = coverage(a0, a1)
-        _hessian_rows(chans, cov, depth_l, prm, r0 - a0, r1 - a0, [o[r0:r1] for o in outs])
+        _hessian_rows(planes, cov, depth_l, prm, r0 - a0, r1 - a0, [o[r0:r1] for o in outs])
 
     run_strips(h_l, strip, _STRIP_ROWS)
     trace, qx, qy, wgt = outs
@@ -504,71 +539,119 @@ def principal_curvatures(
     return Curvature._lazy(coarse)
 
 
-def _working_normals(normal: np.ndarray, level: int, nchan: int) -> list[np.ndarray]:
-    """The first ``nchan`` channels of the normals box-averaged over 2^level blocks, as planes;
-    the image's height and width are multiples of 2^level.
-
-    Each halving sums pairs of rows and averages pairs of columns (two streaming passes, cheaper
-    than one bilinear 2x2 halving on data that comes from memory, and, unlike a bilinear
-    horizontal halving, never mixing in the next row), so the planes are 2^level times the box
-    average; :func:`principal_curvatures` divides that factor out. A non-finite normal makes
-    its block non-finite and nothing else, as with a plain box average.
-    """
-    if level == 0:
-        return [cv2.extractChannel(normal, c) for c in range(nchan)]
-    img = normal
-    for _ in range(level - 1):
-        pairs = _halve(img)
-        img = np.empty((pairs.shape[0], pairs.shape[1], 3), np.float32)
-        cv2.mixChannels([pairs], [img], [0, 0, 1, 1, 2, 2])
-    pairs = _halve(img)
-    return [cv2.extractChannel(pairs, c) for c in range(nchan)]
-
-
-def _halve(img: np.ndarray) -> np.ndarray:
-    """Sums of row pairs, then means of column pairs of an (h, w, 3) image with even h and w,
-    as (h/2, w/2, 6): channels 0-2 are the block values (3-5 straddle two blocks)."""
-    rows = cv2.add(img[0::2], img[1::2])
-    # (rows[x] + rows[x+1]) / 2 for every x; on even x, the mean of the pair.
-    pairs = cv2.filter2D(rows, -1, _PAIR_MEAN, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)
-    return pairs.reshape(rows.shape[0], rows.shape[1] // 2, 6)
-
-
-_PAIR_MEAN = np.array([[0.5, 0.5]], np.float32)
-
-
 def _working_coverage(
     depth: np.ndarray, mask: np.ndarray | None, level: int, size: tuple[int, int]
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Coverage (uint8 255 where the whole 2^level block is covered) and depth sampled once per
-    block (nearest: a jump stays a jump)."""
-    if level == 0:
-        return _valid_u8(depth, mask), depth
-    k = 2**level
-    # Non-finite depth (inf/NaN) propagates through the box average; the mask's 255 only
+    """Coverage (uint8 255 where the whole block is covered) and depth sampled once per block
+    (nearest: a jump stays a jump), for a frame whose size 2^level does not divide (``size`` =
+    (w, h) of the working grid; :func:`_block_coverage` does the exact case)."""
+    # Non-finite depth (inf/NaN) propagates through the area average; the mask's 255 only
     # survives when the whole block is 255.
-    exact = depth.shape[0] % k == 0 and depth.shape[1] % k == 0
-    if exact:
-        dbox = depth
-        for _ in range(level):  # exact 2x2 averages (INTER_AREA's fast path)
-            dbox = cv2.resize(dbox, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA)
-        # Top-left sample of each block: every k-th row, read as k-channel pixels, channel 0.
-        rows = depth[::k]
-        depth_l = cv2.extractChannel(rows.reshape(rows.shape[0], rows.shape[1] // k, k), 0)
-    else:
-        dbox = cv2.resize(depth, size, interpolation=cv2.INTER_AREA)
-        depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
+    dbox = cv2.resize(depth, size, interpolation=cv2.INTER_AREA)
+    depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
     cov = cv2.inRange(dbox, 1e-30, _FLT_MAX)
     if mask is not None:
-        m = _mask_u8(mask)
-        if level == 1 and exact:
-            # The whole 2x2 block is 255: both rows, then both bytes of each uint16 pair.
-            both = cv2.bitwise_and(m[0::2], m[1::2]).view(np.uint16)
-            cv2.bitwise_and(cov, _cv.compare(both, 0xFFFF, cv2.CMP_EQ), dst=cov)
-        else:
-            m = _downsample(m, level, size)
-            cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
+        m = _downsample(_mask_u8(mask), level, size)
+        cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
     return cov, depth_l
+
+
+_NO_MASK = np.empty((0, 0), np.uint8)
+
+
+@kernel
+def _block_normals(normal, k, planes):  # type: ignore[no-untyped-def]
+    """``planes[c]`` = the box average of channel c of ``normal`` (rows, W, 3) over k x k blocks,
+    for every block of the rows (``planes``: (3, rows / k, W / k)). A non-finite normal makes its
+    block non-finite and nothing else, as with a plain box average."""
+    wid = normal.shape[1]
+    inv = np.float32(1.0 / (k * k))
+    acc = np.empty(3 * wid, np.float32)
+    for i in range(planes.shape[1]):
+        px, py, pz = planes[0, i], planes[1, i], planes[2, i]
+        if k == 2:  # both rows at once, without the row sum
+            ra = normal[2 * i].reshape(3 * wid)
+            rb = normal[2 * i + 1].reshape(3 * wid)
+            for j in range(wid // 2):
+                px[j] = (ra[6 * j] + ra[6 * j + 3] + rb[6 * j] + rb[6 * j + 3]) * inv
+                py[j] = (ra[6 * j + 1] + ra[6 * j + 4] + rb[6 * j + 1] + rb[6 * j + 4]) * inv
+                pz[j] = (ra[6 * j + 2] + ra[6 * j + 5] + rb[6 * j + 2] + rb[6 * j + 5]) * inv
+            continue
+        acc[:] = normal[i * k].reshape(3 * wid)
+        for dy in range(1, k):
+            row = normal[i * k + dy].reshape(3 * wid)
+            for x in range(3 * wid):
+                acc[x] += row[x]
+        if k == 1:
+            for j in range(wid):
+                px[j] = acc[3 * j]
+                py[j] = acc[3 * j + 1]
+                pz[j] = acc[3 * j + 2]
+        else:
+            for j in range(wid // k):
+                sx = sy = sz = np.float32(0.0)
+                for dx in range(k):
+                    o = 3 * (j * k + dx)
+                    sx += acc[o]
+                    sy += acc[o + 1]
+                    sz += acc[o + 2]
+                px[j] = sx * inv
+                py[j] = sy * inv
+                pz[j] = sz * inv
+
+
+@kernel
+def _block_coverage(depth, m8, k, cov, depth_l):  # type: ignore[no-untyped-def]
+    """Per k x k block of ``depth`` (rows, W): ``cov`` 255 where the block's mean depth lies in
+    (1e-30, FLT_MAX) (every sample finite, the block in front of the camera) and, when ``m8``
+    (uint8, like ``depth``) has rows, all its mask bytes are non-zero, else 0; ``depth_l`` the
+    block's top-left depth (nearest sampling: a jump stays a jump)."""
+    wid = depth.shape[1]
+    wl = wid // k
+    inv = np.float32(1.0 / (k * k))
+    lo, hi = np.float32(1e-30), np.float32(_FLT_MAX)
+    has_mask = m8.shape[0] > 0
+    full, empty = np.uint8(255), np.uint8(0)
+    acc = np.empty(wid, np.float32)
+    mrow = np.empty(wid, np.uint8)
+    ones = np.full(wid, full, np.uint8)
+    for i in range(cov.shape[0]):
+        top = depth[i * k]
+        out, dl = cov[i], depth_l[i]
+        if k == 2:  # both rows at once, without the row sums
+            bot = depth[2 * i + 1]
+            ma = m8[2 * i] if has_mask else ones
+            mb = m8[2 * i + 1] if has_mask else ones
+            for j in range(wl):
+                d = (top[2 * j] + top[2 * j + 1] + bot[2 * j] + bot[2 * j + 1]) * inv
+                m = ma[2 * j] & ma[2 * j + 1] & mb[2 * j] & mb[2 * j + 1]
+                ok = (d >= lo) & (d <= hi) & (m != 0)
+                out[j] = full if ok else empty
+                dl[j] = top[2 * j]
+            continue
+        acc[:] = top
+        for dy in range(1, k):
+            row = depth[i * k + dy]
+            for x in range(wid):
+                acc[x] += row[x]
+        if has_mask:
+            mrow[:] = m8[i * k]
+            for dy in range(1, k):
+                mr = m8[i * k + dy]
+                for x in range(wid):
+                    mrow[x] &= mr[x]
+        else:
+            mrow[:] = full
+        for j in range(wl):
+            d = np.float32(0.0)
+            m = full
+            for dx in range(k):
+                d += acc[j * k + dx]
+                m &= mrow[j * k + dx]
+            d *= inv
+            ok = (d >= lo) & (d <= hi) & (m != 0)
+            out[j] = full if ok else empty
+            dl[j] = top[j * k]
 
 
 @dataclass(frozen=True)
@@ -580,11 +663,10 @@ class _Params:
     depth_jump: float
     sx: float  # derivative scales (per unit image height, sign of camera y included below)
     sy: float
-    nscale: float  # the working-grid normals are this many times the box average
 
 
 def _hessian_rows(
-    chans: list[np.ndarray],
+    planes: np.ndarray,
     cov: np.ndarray,
     depth_l: np.ndarray,
     prm: _Params,
@@ -594,8 +676,8 @@ def _hessian_rows(
 ) -> None:
     """(trace, q_x, q_y, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
     see :func:`principal_curvatures`); the block (``cov``, ``depth_l``) holds the neighbourhoods
-    those rows need, the planes of the normals (n_x, n_y[, n_z]; overwritten) only its rows
-    b0..b1 (below).
+    those rows need, the planes of the normals ((3, rows, w): n_x, n_y, n_z; overwritten) only
+    its rows b0..b1 (below).
 
     Each step runs only on the rows the next one needs: the jump band on the whole block, the
     smoothing on ``o0 - 1 - g .. o1 + 1 + g`` (g: the kernel's half size; the rows it gets wrong
@@ -608,54 +690,192 @@ def _hessian_rows(
     g = max(ks // 2, 2)
     q0, q1 = max(0, o0 - 1), min(n, o1 + 1)
     b0, b1 = max(0, q0 - g), min(n, q1 + g)
-    wmap = np.multiply(covp[b0:b1], np.float32(1.0 / 255.0), dtype=np.float32)
+    assert planes.shape[1] == b1 - b0
+    covp = covp[b0:b1]
+    nch = 3 if prm.f > 0.0 else 2  # n_z is only needed for the foreshortening
+    weighted = np.empty((nch + 1, *covp.shape), np.float32)  # n_x·w, n_y·w[, n_z·w], w
+    _weigh_normals(planes, covp, nch, weighted)
 
-    # Normalised convolution of the normals with the weight map: G*(n·w) / G*w.
-    assert chans[0].shape[0] == b1 - b0
-    for i, ch in enumerate(chans):
-        cv2.multiply(ch, wmap, dst=ch, scale=1.0 / prm.nscale)  # exact: a power of 2
-        cv2.patchNaNs(ch, 0.0)  # after: non-finite normals where w = 0 give 0
-        if sigma > 0.0:
-            chans[i] = cv2.GaussianBlur(ch, (ks, ks), sigma)
-    wsm = cv2.GaussianBlur(wmap, (ks, ks), sigma) if sigma > 0.0 else wmap
-
-    # q = n_xy / n_z^f of the smoothed normal n = N / W, on rows q0..q1.
-    rq = slice(q0 - b0, q1 - b0)
-    inv = _cv.max(wsm[rq], 1e-6)
-    np.divide(np.float32(1.0), inv, out=inv)
-    if prm.f > 0.0:
-        nzs = _cv.max(cv2.multiply(chans[2][rq], inv), _NZ_MIN)
-        cv2.multiply(inv, cv2.pow(nzs, -prm.f), dst=inv)
-    qx = cv2.multiply(chans[0][rq], inv)
-    qy = cv2.multiply(chans[1][rq], inv)
-
-    # Trace of H = ∇q per unit image height on rows o0..o1; rows grow downward
-    # (∂/∂y = -∂/∂row). The rest of H is derived from q when needed (_Coarse).
-    s0, s1 = o0 - q0, o1 - q0  # output rows within q0..q1
-    trace, qx_out, qy_out, wgt = out
-    a = _deriv_x(qx[s0:s1], prm.sx)
-    c = _deriv_y(qy, s0, s1, -prm.sy)
-    cv2.add(a, c, dst=trace)
-    np.copyto(qx_out, qx[s0:s1])
-    np.copyto(qy_out, qy[s0:s1])
-
+    # Normalised convolution of the normals with the weight map, G*(n·w) / G*w, on rows q0..q1.
+    qa, qb = q0 - b0, q1 - b0
+    if sigma > 0.0:
+        smooth = np.empty((nch + 1, qb - qa, covp.shape[1]), np.float32)
+        _gaussian_rows(weighted, _gaussian_kernel(ks, sigma), qa, smooth)
+    else:
+        smooth = np.ascontiguousarray(weighted[:, qa:qb])
     # Weight: 0 on the border pixels of the coverage (whose derivative stencil reaches outside
     # it; this also keeps an interpolated weight off the background), rising to 1 over about
     # 1.65 σ inside: a smoothstep of the smoothed coverage W (smoothed over >= 1 px) between the
     # values W takes 1 px and 1 + 1.65σ px inside a straight edge, Φ(1/σ) and Φ(1/σ + 1.65).
-    ro = slice(o0 - b0, o1 - b0)
     sigma_w = sigma
+    wsw = smooth[nch]
     if sigma < 1.0:
         sigma_w = 1.0
-        wsm = cv2.GaussianBlur(wmap, (5, 5), 1.0)
+        w5 = np.empty((1, qb - qa, covp.shape[1]), np.float32)
+        _gaussian_rows(weighted[nch:], _gaussian_kernel(5, 1.0), qa, w5)
+        wsw = w5[0]
     w0, w1 = _phi(1.0 / sigma_w), _phi(1.0 / sigma_w + 1.65)
-    t = cv2.addWeighted(wsm[ro], 1.0 / (w1 - w0), wsm[ro], 0.0, -w0 / (w1 - w0))
-    np.clip(t, np.float32(0.0), np.float32(1.0), out=t)
-    u = cv2.addWeighted(t, -2.0, t, 0.0, 3.0)  # 3 - 2t
-    cv2.multiply(t, t, dst=t)
-    cv2.multiply(t, u, dst=t)  # smoothstep t²(3 - 2t)
-    inner = _cv.erode(covp[q0:q1], None, borderType=cv2.BORDER_REPLICATE)[s0:s1]
-    _cv.multiply(t, inner, dst=wgt, scale=1.0 / 255.0, dtype=cv2.CV_32F)
+    _trace_rows(
+        smooth,
+        nch,
+        wsw,
+        covp[qa:qb],
+        np.float32(prm.f),
+        (o0 - q0, o1 - q0),
+        np.array([w0, 1.0 / (w1 - w0), prm.sx, prm.sy], np.float32),
+        *out,
+    )
+
+
+@functools.lru_cache(maxsize=32)
+def _gaussian_kernel(ksize: int, sigma: float) -> np.ndarray:
+    """cv2.GaussianBlur's 1-D kernel (``cv2.getGaussianKernel``), float32."""
+    return np.ascontiguousarray(cv2.getGaussianKernel(ksize, sigma, cv2.CV_32F)[:, 0])
+
+
+@kernel
+def _weigh_normals(planes, covp, nch, weighted):  # type: ignore[no-untyped-def]
+    """w = ``covp`` / 255 (covp: 0 or 255) into ``weighted[nch]`` and the first ``nch`` planes
+    times w into ``weighted[:nch]``, non-finite products (a non-finite normal) set to 0."""
+    zero, one, big = np.float32(0.0), np.float32(1.0), np.float32(np.inf)
+    for i in range(covp.shape[0]):
+        cr, wr = covp[i], weighted[nch, i]
+        for j in range(wr.shape[0]):
+            wr[j] = one if cr[j] != 0 else zero
+        for c in range(nch):
+            pr, out = planes[c, i], weighted[c, i]
+            for j in range(wr.shape[0]):
+                v = pr[j] * wr[j]
+                out[j] = v if abs(v) < big else zero
+
+
+@kernel
+def _reflect101(i, n):  # type: ignore[no-untyped-def]
+    """Index ``i`` reflected into 0..n-1 without repeating the edge (cv2's BORDER_REFLECT_101)."""
+    if n == 1:
+        return 0
+    while i < 0 or i >= n:
+        i = -i if i < 0 else 2 * n - 2 - i
+    return i
+
+
+@kernel
+def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
+    """``dst[c, i]`` = row ``a + i`` of the separable convolution of plane ``src[c]`` with
+    ``kern`` ⊗ ``kern`` (odd length), edges reflected as cv2's default BORDER_REFLECT_101: what
+    cv2.GaussianBlur gives on those rows, up to rounding.
+
+    Taps go four at a time, summed in registers (a row accumulated tap by tap in memory runs
+    five times slower); the kernel is padded with zero taps to a multiple of four."""
+    nc, n, wid = src.shape
+    g = kern.shape[0] // 2
+    nt = (kern.shape[0] + 3) // 4 * 4
+    kp = np.zeros(nt, np.float32)
+    kp[: kern.shape[0]] = kern
+    col = np.zeros(wid + nt + g, np.float32)  # a row of the vertical pass, reflected, 0 after
+    mid = col[g : g + wid]  # (slices, not offsets: an index of unknown sign does not vectorise)
+    idx = np.empty(nt, np.int64)
+    for c in range(nc):
+        for i in range(dst.shape[1]):
+            for t in range(nt):
+                idx[t] = _reflect101(a + i + min(t, 2 * g) - g, n)
+            for t in range(0, nt, 4):
+                r0, r1, r2, r3 = (
+                    src[c, idx[t]],
+                    src[c, idx[t + 1]],
+                    src[c, idx[t + 2]],
+                    src[c, idx[t + 3]],
+                )
+                k0, k1, k2, k3 = kp[t], kp[t + 1], kp[t + 2], kp[t + 3]
+                if t == 0:
+                    for x in range(wid):
+                        mid[x] = k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+                else:
+                    for x in range(wid):
+                        mid[x] += k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+            for t in range(1, g + 1):
+                col[g - t] = mid[_reflect101(-t, wid)]
+                col[g + wid - 1 + t] = mid[_reflect101(wid - 1 + t, wid)]
+            out = dst[c, i]
+            for t in range(0, nt, 4):
+                s0, s1, s2, s3 = (
+                    col[t : t + wid],
+                    col[t + 1 : t + 1 + wid],
+                    col[t + 2 : t + 2 + wid],
+                    col[t + 3 : t + 3 + wid],
+                )
+                k0, k1, k2, k3 = kp[t], kp[t + 1], kp[t + 2], kp[t + 3]
+                if t == 0:
+                    for x in range(wid):
+                        out[x] = k0 * s0[x] + k1 * s1[x] + k2 * s2[x] + k3 * s3[x]
+                else:
+                    for x in range(wid):
+                        out[x] += k0 * s0[x] + k1 * s1[x] + k2 * s2[x] + k3 * s3[x]
+
+
+@kernel
+def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wgt):  # type: ignore[no-untyped-def]
+    """The end of :func:`_hessian_rows` in one pass. From the smoothed planes N_x, N_y[, N_z] and
+    W = ``smooth[nch]`` (the rows of q): q = (N_x, N_y) / W, times (N_z / W)^-f clamped to
+    >= 0.01 when ``nch`` is 3; on q's rows ``rows[0]..rows[1]``, the trace of H = ∇q,
+    ``coef[2]``·∂q_x/∂col - ``coef[3]``·∂q_y/∂row (central differences, one-sided and doubled on
+    the first and last column and on the first and last row of q), q itself, and the weight
+    t²(3 - 2t)·[3x3 of ``covp`` all covered], t = clip((``wsw`` - coef[0])·coef[1], 0, 1)."""
+    zero, one, two, three = np.float32(0.0), np.float32(1.0), np.float32(2.0), np.float32(3.0)
+    oa, ob = rows
+    w0, wscale, sx, sy = coef[0], coef[1], coef[2], coef[3]
+    nq, wid = smooth.shape[1], smooth.shape[2]
+    qx = np.empty((nq, wid), np.float32)
+    qy = np.empty((nq, wid), np.float32)
+    vmin = np.empty(wid, np.uint8)  # 3x1, then 3x3 minima of the coverage
+    hmin = np.empty(wid, np.uint8)
+    for r in range(nq):
+        nx, ny, nz, wr = smooth[0, r], smooth[1, r], smooth[nch - 1, r], smooth[nch, r]
+        ox, oy = qx[r], qy[r]
+        if nch == 3:
+            for j in range(wid):
+                inv = one / max(wr[j], np.float32(1e-6))
+                inv *= max(nz[j] * inv, np.float32(1e-2)) ** (-f)
+                ox[j] = nx[j] * inv
+                oy[j] = ny[j] * inv
+        else:
+            for j in range(wid):
+                inv = one / max(wr[j], np.float32(1e-6))
+                ox[j] = nx[j] * inv
+                oy[j] = ny[j] * inv
+    for i in range(ob - oa):
+        r = oa + i  # the row in q
+        tr, px, py, wg = trace[i], qx_out[i], qy_out[i], wgt[i]
+        cx = qx[r]
+        up = qy[r - 1] if r > 0 else qy[r]
+        dn = qy[r + 1] if r + 1 < nq else qy[r]
+        ys = sy if 0 < r < nq - 1 else two * sy
+        if nq < 2:
+            ys = zero
+        for j in range(1, wid - 1):
+            tr[j] = sx * (cx[j + 1] - cx[j - 1]) - ys * (dn[j] - up[j])
+        if wid >= 2:
+            tr[0] = two * sx * (cx[1] - cx[0]) - ys * (dn[0] - up[0])
+            tr[wid - 1] = two * sx * (cx[wid - 1] - cx[wid - 2]) - ys * (dn[wid - 1] - up[wid - 1])
+        else:
+            tr[0] = zero
+        px[:] = cx
+        py[:] = qy[r]
+        # 3x3 erosion of the coverage (replicated at the edges of q's rows and of the image).
+        ca = covp[max(r - 1, 0)]
+        cb = covp[r]
+        cc = covp[min(r + 1, nq - 1)]
+        for j in range(wid):
+            vmin[j] = min(min(ca[j], cb[j]), cc[j])
+        hmin[0] = min(vmin[0], vmin[min(1, wid - 1)])
+        hmin[wid - 1] = min(vmin[wid - 1], vmin[max(wid - 2, 0)])
+        for j in range(1, wid - 1):
+            hmin[j] = min(min(vmin[j - 1], vmin[j]), vmin[j + 1])
+        ww = wsw[r]
+        for j in range(wid):
+            t = (ww[j] - w0) * wscale
+            t = min(max(t, zero), one)
+            wg[j] = t * t * (three - two * t) if hmin[j] != 0 else zero
 
 
 def _phi(x: float) -> float:
