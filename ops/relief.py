@@ -66,7 +66,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.curvature import Curvature
-from ops.parallel import run_strips
+from ops.jit import kernel
+from ops.parallel import run_strips, strip_rows
 
 F32 = NDArray[np.float32]
 
@@ -230,13 +231,16 @@ def curvedness(curv: Curvature) -> F32:
     return np.asarray(cv2.multiply(mag, curv.weight, scale=_SQRT1_2), np.float32)
 
 
-def _auto_norm(mag: np.ndarray, weight: np.ndarray, percentile: float) -> float:
+def _auto_norm(k1: np.ndarray, k2: np.ndarray, weight: np.ndarray, percentile: float) -> float:
     """The ``percentile`` of the curvedness ``|K| · weight / √2`` over covered pixels (weight >
-    0.5), on a regular subsample of at most ~_PERCENTILE_SAMPLES pixels, floored at
-    AUTO_NORM_FLOOR."""
-    step = max(1, math.ceil(math.sqrt(mag.size / _PERCENTILE_SAMPLES)))
+    0.5), on a regular subsample of at most ~_PERCENTILE_SAMPLES pixels (|K| computed there
+    only), floored at AUTO_NORM_FLOOR."""
+    step = max(1, math.ceil(math.sqrt(k1.size / _PERCENTILE_SAMPLES)))
     sub_w = weight[::step, ::step]
-    sel = (mag[::step, ::step] * sub_w)[sub_w > 0.5] * np.float32(_SQRT1_2)
+    mag = cv2.magnitude(
+        np.ascontiguousarray(k1[::step, ::step]), np.ascontiguousarray(k2[::step, ::step])
+    )
+    sel = (mag * sub_w)[sub_w > 0.5] * np.float32(_SQRT1_2)
     if sel.size == 0 or np.isnan(sel).any():
         return AUTO_NORM_FLOOR
     value = _percentile(sel, percentile)
@@ -256,11 +260,46 @@ def _percentile(a: np.ndarray, percentile: float) -> float:
     return float(above - diff * (1 - t)) if t >= 0.5 else float(below + diff * t)
 
 
+@kernel
+def _descriptor_rows(k1, k2, wgt, c, ax, ay, s1, s2, mx, my):  # type: ignore[no-untyped-def]
+    """Rows of :func:`_grid_descriptor`: ``S = K · g``, ``g = w·c / max(|K|·w·c, 1)`` =
+    min(weight / (√2 L_norm), 1 / |K|) with ``c = 1 / (√2 L_norm)`` (S = 0 where K = 0: g is
+    finite there), into ``s1``, ``s2``; when ``mx`` has rows, also the ARM texel coordinates
+    ``x = ax·S1 + ax``, ``y = ay − ay·S2`` into ``mx``, ``my`` (else into a scratch row: no
+    branch in the loop)."""
+    one = np.float32(1.0)
+    keep = mx.shape[0] > 0
+    wid = s1.shape[1]
+    scratch_x = np.empty(wid, np.float32)
+    scratch_y = np.empty(wid, np.float32)
+    for i in range(s1.shape[0]):
+        a, b, w = k1[i], k2[i], wgt[i]
+        o1, o2 = s1[i], s2[i]
+        px = mx[i] if keep else scratch_x
+        py = my[i] if keep else scratch_y
+        for j in range(wid):
+            wc = w[j] * c
+            t = np.sqrt(a[j] * a[j] + b[j] * b[j]) * wc
+            t = t if t > one else one
+            g = wc / t
+            u = a[j] * g
+            v = b[j] * g
+            o1[j] = u
+            o2[j] = v
+            px[j] = u * ax + ax
+            py[j] = ay - v * ay
+
+
 def _grid_descriptor(
-    curv: Curvature, curvedness_norm: float | str, percentile: float
-) -> tuple[F32, F32, float, Callable[[np.ndarray], np.ndarray] | None]:
-    """(S1, S2) on the curvature's working grid, the L_norm used, and the bilinear upsampling
-    from that grid to full resolution (None when the curvature is at full resolution)."""
+    curv: Curvature,
+    curvedness_norm: float | str,
+    percentile: float,
+    texture: tuple[int, int] | None = None,
+) -> tuple[F32, F32, float, Callable[[np.ndarray], np.ndarray] | None, F32 | None, F32 | None]:
+    """(S1, S2) on the curvature's working grid, the L_norm used, the bilinear upsampling from
+    that grid to full resolution (None when the curvature is at full resolution) and, for a
+    ``texture`` of (h, w) texels, the texel coordinates (x, y) of S there (else None, None); one
+    pass of :func:`_descriptor_rows` in row strips on both cores."""
     p = float(percentile)
     if not 0.0 < p <= 100.0:
         raise ValueError(f"percentile={percentile!r} is outside the allowed range (0, 100]")
@@ -277,24 +316,35 @@ def _grid_descriptor(
     if coarse is not None:
         k1, k2, wgt = coarse.k1, coarse.k2, coarse.weight
     else:
-        k1 = np.ascontiguousarray(curv.k1, dtype=np.float32)
-        k2 = np.ascontiguousarray(curv.k2, dtype=np.float32)
-        wgt = np.ascontiguousarray(curv.weight, dtype=np.float32)
-    mag = cv2.magnitude(k1, k2)
+        k1, k2, wgt = curv.k1, curv.k2, curv.weight
+    k1 = np.ascontiguousarray(k1, dtype=np.float32)
+    k2 = np.ascontiguousarray(k2, dtype=np.float32)
+    wgt = np.ascontiguousarray(wgt, dtype=np.float32)
     if isinstance(curvedness_norm, str):
-        norm = _auto_norm(mag, wgt, p)
-    # gain = min(weight / (√2 L_norm), 1 / |K|); 1 / 0 = inf, and K = 0 there, so S = 0.
-    # Written as g = w·c / max(|K|·w·c, 1), c = 1/(√2 L_norm), with array operands only (cv2
-    # takes a (1, 1) or (4, 1) array with a scalar operand for a scalar itself).
-    c = _SQRT1_2 / norm
-    wc = cv2.addWeighted(wgt, c, wgt, 0.0, 0.0)
-    t = cv2.multiply(mag, wc)
-    np.maximum(t, np.float32(1.0), out=t)
-    gain = cv2.divide(wc, t)
-    s1 = np.asarray(cv2.multiply(k1, gain), np.float32)
-    s2 = np.asarray(cv2.multiply(k2, gain), np.float32)
+        norm = _auto_norm(k1, k2, wgt, p)
+    c = np.float32(_SQRT1_2 / norm)
+    hgt, wid = k1.shape
+    s1 = np.empty((hgt, wid), np.float32)
+    s2 = np.empty((hgt, wid), np.float32)
+    if texture is None:
+        ax = ay = np.float32(0.0)
+        mx = my = np.empty((0, wid), np.float32)
+    else:
+        ax, ay = np.float32(0.5 * (texture[1] - 1)), np.float32(0.5 * (texture[0] - 1))
+        mx = np.empty((hgt, wid), np.float32)
+        my = np.empty((hgt, wid), np.float32)
+
+    def strip(r0: int, r1: int) -> None:
+        m = slice(r0, r1) if texture is not None else slice(0, 0)
+        _descriptor_rows(
+            k1[r0:r1], k2[r0:r1], wgt[r0:r1], c, ax, ay, s1[r0:r1], s2[r0:r1], mx[m], my[m]
+        )
+
+    run_strips(hgt, strip, strip_rows(wid))
     up = None if coarse is None else coarse.upsample
-    return s1, s2, norm, up
+    if texture is None:
+        return s1, s2, norm, up, None, None
+    return s1, s2, norm, up, mx, my
 
 
 def descriptor(
@@ -335,7 +385,7 @@ def descriptor(
     When the curvature was computed on a coarser working grid, S is computed there and
     interpolated bilinearly (S is linear in κ below the rim, so this matches interpolating κ).
     """
-    s1, s2, norm, up = _grid_descriptor(curv, curvedness_norm, percentile)
+    s1, s2, norm, up, _, _ = _grid_descriptor(curv, curvedness_norm, percentile)
     if up is not None:
         s1, s2 = up(s1), up(s2)
     return Descriptor(np.asarray(cv2.merge([s1, s2]), np.float32), norm)
@@ -542,11 +592,8 @@ def relief(
         ``s1``, ``s2``: the (H, W) descriptor planes with ``with_descriptor``, else None.
     """
     tex = _check_arm(arm)
-    s1, s2, norm, up = _grid_descriptor(curv, curvedness_norm, percentile)
-    h, w = tex.shape[:2]
-    ax, ay = 0.5 * (w - 1), 0.5 * (h - 1)
-    mx = cv2.addWeighted(s1, ax, s1, 0.0, ax)
-    my = cv2.addWeighted(s2, -ay, s2, 0.0, ay)
+    s1, s2, norm, up, mx, my = _grid_descriptor(curv, curvedness_norm, percentile, tex.shape[:2])
+    assert mx is not None and my is not None
     if up is not None and full_resolution:
         mx, my = up(mx), up(my)
     r = _lookup(_prepare(tex), mx, my)
@@ -834,51 +881,99 @@ def cel(r: NDArray[np.generic]) -> F32:
     return np.asarray(np.clip(_f32(r, "r", (2, 3)), 0.0, 1.0), np.float32)
 
 
+@kernel
+def _ndotl_row(nrm, nl, light, from_normal, i, out):  # type: ignore[no-untyped-def]
+    """Row ``i`` of n·ℓ clamped to [0, 1] into ``out`` (W,): ``light · n`` from the (rows, 3W)
+    normals ``nrm`` (RGB rows indexed flat, so that LLVM vectorises the loop) with
+    ``from_normal``, else the (rows, W) ``nl``. NaN counts as 0."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    if from_normal:
+        lx, ly, lz = light[0], light[1], light[2]
+        row = nrm[i]
+        for j in range(out.shape[0]):
+            d = lx * row[3 * j] + ly * row[3 * j + 1] + lz * row[3 * j + 2]
+            d = d if d > zero else zero
+            out[j] = d if d < one else one
+    else:
+        given = nl[i]
+        for j in range(out.shape[0]):
+            d = given[j]
+            d = d if d > zero else zero
+            out[j] = d if d < one else one
+
+
+@kernel
+def _counter_rows(r, nrm, nl, light, from_normal, thr, out):  # type: ignore[no-untyped-def]
+    """Rows of :func:`counter_shading`: ``I = n·ℓ + r (1 − 2 n·ℓ)``, 1 where I > ``thr`` else 0,
+    n·ℓ from :func:`_ndotl_row` (a row in L1)."""
+    zero, one, two = np.float32(0.0), np.float32(1.0), np.float32(2.0)
+    wid = out.shape[1]
+    d = np.empty(wid, np.float32)
+    for i in range(out.shape[0]):
+        _ndotl_row(nrm, nl, light, from_normal, i, d)
+        rr, oo = r[i], out[i]
+        for j in range(wid):
+            v = d[j] + rr[j] * (one - two * d[j])
+            oo[j] = one if v > thr else zero
+
+
+@kernel
+def _toon_coords(r, nrm, nl, light, from_normal, sx, sy, mx, my):  # type: ignore[no-untyped-def]
+    """Rows of :func:`xtoon`'s texel coordinates: ``mx = n·ℓ · sx`` (n·ℓ from
+    :func:`_ndotl_row`), ``my = sy − sy · r`` with r clamped to [0, 1] (NaN counts as 0): the
+    texels the edge-replicating lookup reads outside anyway, on cv2.remap's fast in-range path."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for i in range(mx.shape[0]):
+        px, py, rr = mx[i], my[i], r[i]
+        _ndotl_row(nrm, nl, light, from_normal, i, px)
+        for j in range(px.shape[0]):
+            px[j] = px[j] * sx
+            v = rr[j]
+            v = v if v > zero else zero
+            v = v if v < one else one
+            py[j] = sy - sy * v
+
+
+_NO_ROWS = np.empty((0, 0), np.float32)  # the operand a kernel does not read
+
+
 def _lit(
     ndotl: NDArray[np.generic] | None,
     normal: NDArray[np.generic] | None,
     light: NDArray[np.generic] | Sequence[float] | None,
     shape: tuple[int, ...],
-    scale: float = 1.0,
-) -> Callable[[int, int], F32]:
-    """n·ℓ clamped to [0, 1], times ``scale``, on rows [r0, r1): a fresh (r1 − r0, W) array per
-    call, from an (H, W) ``ndotl``, or from the (H, W, 3) ``normal`` field and a directional
-    ``light`` (3,) by cv2.transform with the light as a 1x3 matrix (the arithmetic of
-    ``ops.shading.dot``, bit for bit). The clamp stays even for texture coordinates: cv2.remap
-    takes a much slower path for the few that would fall outside the texture."""
+) -> Callable[[int, int], tuple[F32, F32, F32, bool]]:
+    """The n·ℓ operands of :func:`_ndotl_row` on rows [r0, r1): ``(normal rows (rows, 3W),
+    n·ℓ rows (rows, W), light (3,), from_normal)``, views of an (H, W) ``ndotl`` or of the
+    (H, W, 3) ``normal`` field (rows may be strided: a crop is read in place) with a
+    directional ``light`` (3,)."""
     if ndotl is not None:
         if normal is not None or light is not None:
             raise ValueError("give either ndotl or normal and light, not both")
         nl = _f32_rows(ndotl, "ndotl", (2,))
         _check_same(nl, "ndotl", shape)
+        none = np.zeros(3, np.float32)
 
-        def rows(r0: int, r1: int) -> F32:
-            return np.clip(nl[r0:r1], np.float32(0.0), np.float32(1.0))
+        def given(r0: int, r1: int) -> tuple[F32, F32, F32, bool]:
+            return _NO_ROWS, nl[r0:r1], none, False
 
-    else:
-        if normal is None or light is None:
-            raise ValueError("n·ℓ is needed: give ndotl, or normal and light")
-        n = _f32_rows(normal, "normal", (3,))
-        if n.shape[2] != 3:
-            raise ValueError(f"normal must have shape (H, W, 3), got {n.shape}")
-        _check_same(n, "normal", shape)
-        vec = np.asarray(light, np.float32)
-        if vec.shape != (3,) or not np.isfinite(vec).all():
-            raise ValueError(f"light must be a finite (3,) direction, got {vec!r}")
-        m, width = vec.reshape(1, 3), n.shape[1]
+        return given
+    if normal is None or light is None:
+        raise ValueError("n·ℓ is needed: give ndotl, or normal and light")
+    n = _f32_rows(normal, "normal", (3,))
+    if n.shape[2] != 3:
+        raise ValueError(f"normal must have shape (H, W, 3), got {n.shape}")
+    _check_same(n, "normal", shape)
+    vec = np.asarray(light, np.float32)
+    if vec.shape != (3,) or not np.isfinite(vec).all():
+        raise ValueError(f"light must be a finite (3,) direction, got {vec!r}")
+    vec = np.ascontiguousarray(vec)
+    width = n.shape[1]
 
-        def rows(r0: int, r1: int) -> F32:
-            v = np.asarray(cv2.transform(n[r0:r1], m), np.float32).reshape(r1 - r0, width)
-            return np.clip(v, np.float32(0.0), np.float32(1.0), out=v)
+    def rows(r0: int, r1: int) -> tuple[F32, F32, F32, bool]:
+        return n[r0:r1].reshape(r1 - r0, 3 * width), _NO_ROWS, vec, True
 
-    if scale == 1.0:
-        return rows
-
-    def scaled(r0: int, r1: int) -> F32:
-        v = rows(r0, r1)
-        return np.asarray(cv2.addWeighted(v, scale, v, 0.0, 0.0, dst=v), np.float32)
-
-    return scaled
+    return rows
 
 
 def counter_shading(
@@ -900,25 +995,29 @@ def counter_shading(
     threshold : in [0, 1] (the paper's 0.5).
     normal, light : instead of ``ndotl``, the (H, W, 3) normals and a directional light (3,),
         unit length, camera space: n·ℓ is then computed in the same pass (no (H, W) n·ℓ
-        written), with the result of ``counter_shading(r, ops.shading.dot(normal, light))``.
+        written), with the result of ``counter_shading(r, ops.shading.dot(normal, light))`` up
+        to float rounding (a pixel whose I is within rounding of the threshold may differ).
 
     Returns
     -------
     (H, W) float32, exactly 0 or 1.
+
+    Notes
+    -----
+    One compiled pass (:func:`ops.jit.kernel`) per row strip, on both cores: n·ℓ, I and the
+    threshold per row, the row in L1; (H, W) r and (H, W, 3) normals read once, the result
+    written once.
     """
     rr = _f32_rows(r, "r", (2,))
     lit = _lit(ndotl, normal, light, rr.shape)
     thr = _check_fraction("threshold", threshold)
     out = np.empty(rr.shape, np.float32)
+    t = np.float32(thr)
 
     def strip(r0: int, r1: int) -> None:
-        nl = lit(r0, r1)
-        i = cv2.addWeighted(nl, -2.0, nl, 0.0, 1.0)  # 1 − 2 n·ℓ
-        cv2.multiply(i, rr[r0:r1], dst=i)
-        cv2.add(i, nl, dst=i)
-        cv2.threshold(i, thr, 1.0, cv2.THRESH_BINARY, dst=out[r0:r1])
+        _counter_rows(rr[r0:r1], *lit(r0, r1), t, out[r0:r1])
 
-    run_strips(rr.shape[0], strip, 2 * _STRIP_ROWS)  # (H, W) temporaries only: taller strips
+    run_strips(rr.shape[0], strip, strip_rows(rr.shape[1]))
     return out
 
 
@@ -974,7 +1073,7 @@ def xtoon(
         default :func:`default_toon`.
     normal, light : instead of ``ndotl``, the (H, W, 3) normals and a directional light (3,):
         n·ℓ is computed in the same pass as the lookup, with the result of
-        ``xtoon(r, ops.shading.dot(normal, light), toon)``.
+        ``xtoon(r, ops.shading.dot(normal, light), toon)`` up to float rounding.
 
     Returns
     -------
@@ -982,8 +1081,10 @@ def xtoon(
 
     Notes
     -----
-    The texture coordinates and the lookup (one cv2.remap) are computed strip by strip on both
-    cores, so no full-size map is written.
+    Strip by strip on both cores, so no full-size map is written: the texture coordinates in one
+    compiled pass (:func:`ops.jit.kernel`: n·ℓ, x and y per row, r clamped to [0, 1]), then the
+    bilinear lookup (one cv2.remap of the RGBA texture: its SIMD gathers beat a compiled scalar
+    lookup, which LLVM does not vectorise here).
     """
     rr = _f32_rows(r, "r", (2,))
     if toon is None:
@@ -993,13 +1094,15 @@ def xtoon(
         if img.ndim == 3 and img.shape[2] == 1:
             img = img[:, :, 0]
         tex, (h, w) = _prepare(img), img.shape[:2]
-    sx, sy = float(w - 1), float(h - 1)
-    columns = _lit(ndotl, normal, light, rr.shape, sx)  # x = n·ℓ · (w − 1)
+    sx, sy = np.float32(w - 1), np.float32(h - 1)
+    lit = _lit(ndotl, normal, light, rr.shape)
     out = np.empty(rr.shape if tex.chans == 1 else (*rr.shape, tex.chans), np.float32)
 
     def strip(r0: int, r1: int) -> None:
-        my = cv2.addWeighted(rr[r0:r1], -sy, rr[r0:r1], 0.0, sy)
-        _lookup(tex, columns(r0, r1), my, dst=out[r0:r1])
+        mx = np.empty((r1 - r0, rr.shape[1]), np.float32)
+        my = np.empty_like(mx)
+        _toon_coords(rr[r0:r1], *lit(r0, r1), sx, sy, mx, my)
+        _lookup(tex, mx, my, dst=out[r0:r1])
 
     run_strips(rr.shape[0], strip, _STRIP_ROWS)
     return out
