@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.jit import kernel
 from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
@@ -93,6 +94,26 @@ def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
     if mask is not None:
         out *= mask[..., None]
     return out
+
+
+@kernel
+def _gather_unit(idx, w, planes, out):  # type: ignore[no-untyped-def]
+    """out[n, c] = Σ_t w[t, n] planes[c][idx[t, n]] (the weighted samples of
+    :meth:`DepthPyramid.up_sparse`), then each group of 3 channels renormalised as by
+    :func:`normalize_field` (0 where |v|² ≤ 1e-20)."""
+    n_ch = out.shape[1]
+    for n in range(out.shape[0]):
+        for c in range(n_ch):
+            plane = planes[c]
+            acc = np.float32(0.0)
+            for t in range(idx.shape[0]):
+                acc += w[t, n] * plane[idx[t, n]]
+            out[n, c] = acc
+        for c0 in range(0, n_ch - 2, 3):
+            x, y, z = out[n, c0], out[n, c0 + 1], out[n, c0 + 2]
+            n2 = x * x + y * y + z * z
+            inv = np.float32(1.0) / np.sqrt(n2) if n2 > np.float32(1e-20) else np.float32(0.0)
+            out[n, c0], out[n, c0 + 1], out[n, c0 + 2] = x * inv, y * inv, z * inv
 
 
 #: Log depth of background pixels at level 0 is at least this (a finite sentinel, so that
@@ -474,10 +495,8 @@ class DepthPyramid:
             return empty, empty, np.zeros((0, n_ch), np.float32)
         idx, w = self._jb_weights(k, f, ys, xs, self.logd[k_to][ys, xs])
         acc = np.empty((ys.size, n_ch), np.float32)
-        for c, plane in enumerate(planes_k):
-            acc[:, c] = (w * np.asarray(plane, np.float32).reshape(-1)[idx]).sum(axis=0)
-        for c0 in range(0, n_ch - 2, 3):
-            acc[:, c0 : c0 + 3] = normalize_field(acc[:, c0 : c0 + 3])
+        flat = tuple(np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k)
+        _gather_unit(idx, np.ascontiguousarray(w, np.float32), flat, acc)
         return ys, xs, acc
 
     def up_rows(
@@ -496,8 +515,25 @@ class DepthPyramid:
         ``sparse`` (:meth:`up_sparse`) overwritten. The bilinear results are not renormalised
         (bilinear shortens unit vectors slightly, and to 0 … 1 next to background): callers
         renormalise. ``cols``: only these columns. Returns one (r1 − r0, x1 − x0) plane per
-        channel (views into the buffers).
+        channel (views into the buffers); :meth:`up_rows_wide` gives the uncropped rows.
         """
+        x0, x1 = (0, self.shape(k_to)[1]) if cols is None else cols
+        planes, c = self.up_rows_wide(planes_k, k, rows, buf, sparse, k_to, (x0, x1))
+        return [plane[:, c : c + x1 - x0] for plane in planes]
+
+    def up_rows_wide(
+        self,
+        planes_k: Sequence[np.ndarray],
+        k: int,
+        rows: tuple[int, int],
+        buf: Callable[[str, tuple[int, ...]], F32],
+        sparse: tuple[np.ndarray, np.ndarray, np.ndarray],
+        k_to: int = 0,
+        cols: tuple[int, int] | None = None,
+    ) -> tuple[list[F32], int]:
+        """:meth:`up_rows` with the columns left uncropped: returns C-contiguous planes of
+        rows ``rows`` that hold columns ``cols`` from column offset ``c`` on, and ``c``
+        (column x0 + j of the window is column c + j of each plane)."""
         r0, r1 = rows
         x0, x1 = (0, self.shape(k_to)[1]) if cols is None else cols
         f = 1 << (k - k_to)
@@ -508,7 +544,7 @@ class DepthPyramid:
         t1 = min(w_k, math.floor((x1 - 0.5) / f - 0.5) + 2)
         size = ((t1 - t0) * f, (s1 - s0) * f)
         a, b = r0 - s0 * f, r1 - s0 * f
-        c, d = x0 - t0 * f, x1 - t0 * f
+        c = x0 - t0 * f
         n_ch, n = len(planes_k), s1 - s0
         planes: list[F32]
         stack: F32 | None = None
@@ -521,26 +557,26 @@ class DepthPyramid:
                 src[ch * n : (ch + 1) * n] = plane[s0:s1, t0:t1]
             dst = buf(f"up:{k}", (n_ch * size[1], size[0]))
             cv2.resize(src, (size[0], n_ch * size[1]), dst, interpolation=cv2.INTER_LINEAR)
-            stack = dst.reshape(n_ch, size[1], size[0])[:, a:b, c:d]
+            stack = dst.reshape(n_ch, size[1], size[0])[:, a:b]
             planes = list(stack)
         else:
             planes = []
             for ch, plane in enumerate(planes_k):
                 dst = buf(f"up:{k}:{ch}", (size[1], size[0]))
                 cv2.resize(plane[s0:s1, t0:t1], size, dst, interpolation=cv2.INTER_LINEAR)
-                planes.append(dst[a:b, c:d])
+                planes.append(dst[a:b])
         ys, xs, vals = sparse
         i0, i1 = np.searchsorted(ys, [r0, r1])
         if i1 > i0:
             yy, xx, vv = ys[i0:i1] - r0, xs[i0:i1] - x0, vals[i0:i1]
             inside = (xx >= 0) & (xx < x1 - x0)
-            yy, xx, vv = yy[inside], xx[inside], vv[inside]
+            yy, xx, vv = yy[inside], xx[inside] + c, vv[inside]
             if stack is not None:
                 stack[:, yy, xx] = vv.T
             else:
                 for ch, plane in enumerate(planes):
                     plane[yy, xx] = vv[:, ch]
-        return planes
+        return planes, c
 
     def _jb_weights(
         self, k: int, f: int, ys: np.ndarray, xs: np.ndarray, logd: np.ndarray

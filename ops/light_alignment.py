@@ -46,10 +46,14 @@ its fine field lives on (coarse scales are smooth) and the light is carried to f
 the pyramid's edge-aware upsampling; only the scales of the full-resolution field n_1 run at
 full resolution. Every level runs the same way (:class:`_Stage`): row strips (restricted to the
 columns that hold surfaces) on all cores, where the coarser fields and lights are upsampled
-(all planes of a level in one resize) into reused structure-of-arrays scratch buffers and Eq. 1
-is one pass-lean chain of cv2 / NumPy calls (:func:`_rotate`); background pixels get the
-original light back by a masked copy, not by blending. Given a plain list of (H, W, 3) fields,
-every scale runs at full resolution (the reference path).
+(all planes of a level in one resize) into reused scratch buffers, and each scale of Eq. 1 is
+one compiled pass over the strip's rows (:func:`_eq1_rows`, an :func:`ops.jit.kernel`: guides,
+renormalisation of upsampled vectors and the rotation per pixel in registers, reading n_1 and
+the view interleaved as they are); at full resolution :func:`_write_rows` writes the
+interleaved output, the original light on background pixels. The angles are vectorised
+polynomials (atan2 and sin / cos, errors ~1e-7 rad, below float32 rounding of the inputs'
+dot products). Given a plain list of (H, W, 3) fields, every scale runs at full resolution
+(the reference path).
 
 Rounding: √(1 − (a_i·z)²) amplifies the last bits of nearly parallel fields, and λ1 has no limit
 where ℓ̄ → 0 (the light along the frame's z, e.g. at a highlight's centre), so a few pixels of a
@@ -68,6 +72,7 @@ import cv2
 import numpy as np
 
 from ops.filtering import F32, NormalPyramid, normalize_field
+from ops.jit import kernel
 from ops.parallel import run_strips
 from ops.shading import Light, light_vectors
 
@@ -76,7 +81,6 @@ GUIDES: tuple[str, ...] = ("diffuse", "specular", "transmission")
 DEFAULT_GAMMA = 3.0
 
 SoA = tuple[F32, F32, F32]
-_TWO_OVER_PI = 2.0 / math.pi
 
 
 def w_gamma(lam: np.ndarray | float, gamma: float = DEFAULT_GAMMA) -> np.ndarray:
@@ -156,26 +160,16 @@ class _Work:
             return
         self.shape = shape
         self._views.clear()
-        self.zeros = self._view("#zeros", np.float32, 0.0)
-        self.tiny = self._view("#tiny", np.float32, 1e-12)
-        self.small = self._view("#small", np.float32, 1e-6)
-        self.ones = self._view("#ones", np.float32, 1.0)
-        self.boolean = self._view("#bool", np.bool_, None)
-
-    def _view(self, name: str, dtype: type, fill: float | None) -> np.ndarray:
-        """A view of buffer ``name``; ``fill``: a constant, written once (never overwritten)."""
-        n = self.shape[0] * self.shape[1]
-        flat = self._flat.get(name)
-        if flat is None or flat.size < n:
-            flat = self._flat[name] = np.empty(max(n, 1), dtype)
-            if fill is not None:
-                flat.fill(fill)
-        return flat[:n].reshape(self.shape)
 
     def __call__(self, name: str) -> F32:
+        """A (rows, w) view of buffer ``name`` (C-contiguous)."""
         view = self._views.get(name)
         if view is None:
-            view = self._views[name] = self._view(name, np.float32, None)
+            n = self.shape[0] * self.shape[1]
+            flat = self._flat.get(name)
+            if flat is None or flat.size < n:
+                flat = self._flat[name] = np.empty(max(n, 1), np.float32)
+            view = self._views[name] = flat[:n].reshape(self.shape)
         return view
 
     def vec(self, name: str) -> SoA:
@@ -199,131 +193,296 @@ class _Work:
         return work
 
 
-def _dot(a: SoA, b: SoA, out: F32, tmp: F32 | None = None) -> F32:
-    """out = a·b per pixel (``cv2.accumulateProduct`` fuses the multiply-adds)."""
-    np.multiply(a[0], b[0], out=out)
-    cv2.accumulateProduct(a[1], b[1], out)
-    cv2.accumulateProduct(a[2], b[2], out)
-    return out
+# -- compiled kernels (ops.jit): Eq. 1 per pixel, one pass over each strip row --------------------
+
+_DIFFUSE, _SPECULAR, _TRANSMISSION = 0, 1, 2
+_GUIDE_CODE = {"diffuse": _DIFFUSE, "specular": _SPECULAR, "transmission": _TRANSMISSION}
+
+_F0, _F1, _F2 = np.float32(0.0), np.float32(1.0), np.float32(2.0)
+_TINY = np.float32(1e-12)
+_SMALL = np.float32(1e-6)
+_PI_F = np.float32(math.pi)
+_HALF_PI_F = np.float32(math.pi / 2.0)
+_TWO_OVER_PI_F = np.float32(2.0 / math.pi)
+# atan(t) ≈ t P(t²) on [0, 1]: minimax, error 4e-8 rad (1.3e-7 evaluated in float32)
+_AT0 = np.float32(0.9999993356019542)
+_AT1 = np.float32(-0.33329860818634105)
+_AT2 = np.float32(0.19946565712599593)
+_AT3 = np.float32(-0.13908628858035077)
+_AT4 = np.float32(0.09642193828012686)
+_AT5 = np.float32(-0.05591226181184129)
+_AT6 = np.float32(0.021862903744628806)
+_AT7 = np.float32(-0.004054550244039307)
+# sin(u) ≈ u S(u²), cos(u) ≈ C(u²) on [−π/2, π/2]: minimax, errors 3e-9 and 2e-10
+_S0 = np.float32(0.9999999765894195)
+_S1 = np.float32(-0.16666647634345014)
+_S2 = np.float32(0.008332899818385985)
+_S3 = np.float32(-0.00019800897458455147)
+_S4 = np.float32(2.5904878875604442e-06)
+_C0 = np.float32(0.9999999997806464)
+_C1 = np.float32(-0.4999999935846119)
+_C2 = np.float32(0.04166663625765576)
+_C3 = np.float32(-0.001388836139486635)
+_C4 = np.float32(2.4760161070974673e-05)
+_C5 = np.float32(-2.6051490159550994e-07)
 
 
-def _normalize_soa(v: SoA, ws: _Work) -> SoA:
-    """v / |v| in place, zero vectors (background) stay 0; the same rounding as every field
-    of the reference path (the frame's z = a_{i+1} enters √(1 − (a_i·z)²), which amplifies
-    the last bits of nearly parallel fields)."""
-    n2 = _dot(v, v, ws("n2"))
-    np.maximum(n2, ws.tiny, out=n2)
-    cv2.sqrt(n2, n2)
-    np.divide(_ONE, n2, out=n2)
-    for comp in v:
-        comp *= n2
-    return v
+@kernel
+def _atan2_upper(y, x):  # type: ignore[no-untyped-def]
+    """atan2(y, x) ∈ [0, π] for y ≥ 0 (0 at the origin), vectorisable: octant reduction by
+    selects and the minimax polynomial of atan on [0, 1]."""
+    ax = abs(x)
+    big = y > ax
+    hi = y if big else ax
+    lo = ax if big else y
+    hi = hi if hi > _TINY else _TINY
+    t = lo / hi
+    z = t * t
+    p = _AT6 + z * _AT7
+    p = _AT5 + z * p
+    p = _AT4 + z * p
+    p = _AT3 + z * p
+    p = _AT2 + z * p
+    p = _AT1 + z * p
+    p = _AT0 + z * p
+    r = t * p
+    r = _HALF_PI_F - r if big else r
+    return _PI_F - r if x < _F0 else r
 
 
-def _normalize_fast(v: SoA, ws: _Work) -> SoA:
-    """v / |v| in place, |v| by two ``cv2.magnitude`` calls; zero vectors stay 0. For the
-    lights, whose rounding is not amplified."""
-    norm = ws("norm")
-    cv2.magnitude(v[0], v[1], norm)
-    cv2.magnitude(norm, v[2], norm)
-    np.maximum(norm, ws.tiny, out=norm)
-    for comp in v:
-        cv2.divide(comp, norm, comp)
-    return v
+@kernel
+def _sincos(theta):  # type: ignore[no-untyped-def]
+    """(sin θ, cos θ) for θ ∈ [0, π] (minimax polynomials on [0, π/2], by sin(π − θ) = sin θ,
+    cos(π − θ) = −cos θ)."""
+    big = theta > _HALF_PI_F
+    u = _PI_F - theta if big else theta
+    z = u * u
+    s = _S3 + z * _S4
+    s = _S2 + z * s
+    s = _S1 + z * s
+    s = _S0 + z * s
+    s = u * s
+    c = _C4 + z * _C5
+    c = _C3 + z * c
+    c = _C2 + z * c
+    c = _C1 + z * c
+    c = _C0 + z * c
+    return s, (-c if big else c)
 
 
-def _pos(x: F32) -> F32:
-    """max(x, 0) in place (``cv2.threshold``: ~5x faster than ``np.maximum`` with a scalar)."""
-    cv2.threshold(x, 0.0, 0.0, cv2.THRESH_TOZERO, x)
-    return x
+@kernel
+def _reflect_px(nx, ny, nz, vx, vy, vz):  # type: ignore[no-untyped-def]
+    """r = 2 (n·v) n − v (:func:`ops.shading.reflect`)."""
+    two = _F2 * (nx * vx + ny * vy + nz * vz)
+    return two * nx - vx, two * ny - vy, two * nz - vz
 
 
-_ONE = np.float32(1.0)
+@kernel
+def _refract_px(nx, ny, nz, vx, vy, vz, eta):  # type: ignore[no-untyped-def]
+    """t = −η v + (η cos_i − √k) n, cos_i = n·v, k = 1 − η² (1 − cos_i²), 0 where k < 0
+    (:func:`ops.shading.refract`)."""
+    cos_i = nx * vx + ny * vy + nz * vz
+    k = _F1 - eta * eta * (_F1 - cos_i * cos_i)
+    ok = k >= _F0
+    m = eta * cos_i - np.sqrt(k if ok else _F0)
+    tx = m * nx - eta * vx
+    ty = m * ny - eta * vy
+    tz = m * nz - eta * vz
+    return (tx if ok else _F0), (ty if ok else _F0), (tz if ok else _F0)
 
 
-def _rotate(a: SoA, b: SoA, light: SoA, sigma: float, egam: float, out: SoA, ws: _Work) -> SoA:
-    """One scale of Eq. 1 (Mestres et al. 2021, §4-5) on structure-of-arrays fields.
+@kernel
+def _inv_norm(x, y, z, tiny2):  # type: ignore[no-untyped-def]
+    """1/√max(|v|², ``tiny2``): 0 vectors (background) stay 0."""
+    n2 = x * x + y * y + z * z
+    return _F1 / np.sqrt(n2 if n2 > tiny2 else tiny2)
 
-    a = a_i (fine), b = a_{i+1} (coarse, the frame's z), light = ℓ_{i+1} (unit vectors); writes
-    ℓ_i (unit) into ``out`` (which must not alias the inputs). Every pixel is rotated: callers
-    put the original light back on background pixels.
+
+_FIELD_TINY2 = np.float32(1e-12)  # |n| ≥ 1e-6 for upsampled fields
+_LIGHT_TINY2 = np.float32(1e-24)  # |ℓ| ≥ 1e-12 for upsampled lights
+
+
+@kernel
+def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):  # type: ignore[no-untyped-def]
+    """One scale of Eq. 1 (§4-6) on rows of structure-of-arrays planes.
+
+    ``na``, ``nb``, ``view``, ``light``: tuples of three C-contiguous (rows, ·) planes, read
+    from columns ``offs`` = (oa, ob, ov, ol) on, except that ``na`` / ``view`` are taken from
+    the interleaved flat rows (rows, 3 W) ``flat_a`` / ``flat_v`` when those have rows (read
+    from pixel oa / ov on, split per row in L1); ``out``: three (rows, w) planes; ``guide``:
+    _DIFFUSE, _SPECULAR or _TRANSMISSION; ``par`` = (η = 1/ior, σ, e^{−γ}); ``norm`` =
+    (norm_b, norm_l). Per row, a first pass makes the guides a_i, a_{i+1} (§6) of the fields
+    (a_{i+1} renormalised if norm_b) into row buffers, a second applies Eq. 1 (the light
+    renormalised first if norm_l) and writes unit ℓ_i.
 
     With c = a·z, the side test p = |ā| (ℓ·x) = a·ℓ − c (z·ℓ), |ā| = √(1 − c²) = λ2 and
     q = |ā| |ℓ·y| = √(|ā|² (1 − (z·ℓ)²) − p²): λ1 = (2/π) atan2(|p|, q); g = a where p > 0
     (at p = 0, λ1 = 0 and θ = 0), else the tangent t = (z − c a)/|ā|; Ω = ∠(ℓ, g) and the
-    rotation is the slerp ℓ_i ∝ sin(Ω − θ) ℓ + sin θ g with θ = σ W_γ(λ1 λ2) Ω.
+    rotation is the slerp ℓ_i ∝ sin(Ω − θ) ℓ + sin θ g with θ = σ W_γ(λ1 λ2) Ω. Every pixel
+    is rotated: callers put the original light back on background pixels.
     """
-    t = ws("t1")
-    c = _dot(a, b, ws("c"))  # a·z
-    al = _dot(a, light, ws("al"))  # a·ℓ
-    bl = _dot(b, light, ws("bl"))  # z·ℓ
-    p = ws("p")  # |ā| (ℓ·x): the side test
-    np.multiply(c, bl, out=p)
-    np.subtract(al, p, out=p)
-    s = ws("s")  # |ā|² = 1 − (a·z)²
-    np.multiply(c, c, out=s)
-    np.subtract(_ONE, s, out=s)
-    _pos(s)
-    q = ws("q")  # |ā| |ℓ·y| = sqrt(|ā|² (1 − (z·ℓ)²) − p²)
-    np.multiply(bl, bl, out=q)
-    np.subtract(_ONE, q, out=q)
-    q *= s
-    np.multiply(p, p, out=t)
-    q -= t
-    cv2.sqrt(_pos(q), q)
-    cv2.sqrt(s, s)  # λ2 = |ā|
-    np.abs(p, out=t)
-    lam = ws("lam")  # λ1 π/2 = atan2(|ℓ·x|, |ℓ·y|), then λ = λ1 λ2
-    cv2.phase(q, t, lam)
-    cv2.multiply(lam, s, lam, scale=_TWO_OVER_PI)
-    k = ws("k")  # σ W_γ(λ) = σ λ / (e^{−γ} + λ (1 − e^{−γ}))
-    cv2.addWeighted(lam, 1.0 - egam, lam, 0.0, egam, t)
-    cv2.divide(lam, t, k, scale=sigma)
-    lit, isd = ws("lit"), ws("isd")  # 1 on the lit side (ℓ̄·x > 0), else 0
-    cv2.threshold(p, 0.0, 1.0, cv2.THRESH_BINARY, lit)
-    np.maximum(s, ws.tiny, out=isd)  # 1/|ā| on the other side, 0 on the lit side
-    np.subtract(_ONE, lit, out=t)
-    np.divide(t, isd, out=isd)
-    gl = ws("gl")  # g·ℓ: a·ℓ (lit) or t·ℓ = (z·ℓ − c a·ℓ)/|ā|
-    np.multiply(c, al, out=gl)
-    np.subtract(bl, gl, out=gl)
-    gl *= isd
-    cv2.accumulateProduct(al, lit, gl)
-    np.clip(gl, -1.0, 1.0, out=gl)
-    sin_o = ws("sin_o")  # sin Ω
-    np.multiply(gl, gl, out=sin_o)
-    np.subtract(_ONE, sin_o, out=sin_o)
-    cv2.sqrt(_pos(sin_o), sin_o)
-    theta = ws("theta")  # θ = σ W_γ Ω
-    cv2.phase(gl, sin_o, theta)
-    theta *= k
-    cos_t, sin_t = ws("cos"), ws("sin")
-    cv2.polarToCart(ws.ones, theta, cos_t, sin_t)
-    # sin(Ω − θ) = sin Ω cos θ − cos Ω sin θ, with sin Ω ≥ 1e-6 (where ℓ and g coincide)
-    np.maximum(sin_o, ws.small, out=sin_o)
-    coef_a = cos_t
-    coef_a *= sin_o
-    np.multiply(gl, sin_t, out=t)
-    coef_a -= t
-    # g = h a + isd z, h = 1 (lit) or −c/|ā| (other side)
-    ca = ws("ca")
-    np.multiply(c, isd, out=ca)
-    np.subtract(lit, ca, out=ca)
-    ca *= sin_t
-    cb = isd
-    cb *= sin_t
-    for o, lc, acomp, bcomp in zip(out, light, a, b, strict=True):
-        np.multiply(coef_a, lc, out=o)
-        cv2.accumulateProduct(ca, acomp, o)
-        cv2.accumulateProduct(cb, bcomp, o)
-    return _normalize_fast(out, ws)
+    oa, ob, ov, ol = offs
+    eta, sigma, egam = par
+    norm_b, norm_l = norm
+    wd = out[0].shape[1]
+    ga = np.empty((3, wd), np.float32)
+    gb = np.empty((3, wd), np.float32)
+    fa = np.empty((3, wd), np.float32)
+    fv = np.empty((3, wd), np.float32)
+    use_fa = flat_a.shape[0] > 0
+    use_fv = flat_v.shape[0] > 0 and guide != _DIFFUSE
+    for i in range(out[0].shape[0]):
+        # rows sliced at their offsets: indices from 0 (an index ``o + j`` is not provably
+        # non-negative, so its wraparound check stops vectorisation)
+        if use_fa:
+            src = flat_a[i][3 * oa :]
+            for j in range(wd):
+                fa[0, j], fa[1, j], fa[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
+            ax_r, ay_r, az_r = fa[0], fa[1], fa[2]
+        else:
+            ax_r, ay_r, az_r = na[0][i][oa:], na[1][i][oa:], na[2][i][oa:]
+        if use_fv:
+            src = flat_v[i][3 * ov :]
+            for j in range(wd):
+                fv[0, j], fv[1, j], fv[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
+            vx_r, vy_r, vz_r = fv[0], fv[1], fv[2]
+        else:
+            vx_r, vy_r, vz_r = view[0][i][ov:], view[1][i][ov:], view[2][i][ov:]
+        bx_r, by_r, bz_r = nb[0][i][ob:], nb[1][i][ob:], nb[2][i][ob:]
+        gax, gay, gaz = ga[0], ga[1], ga[2]
+        gbx, gby, gbz = gb[0], gb[1], gb[2]
+        if guide == _DIFFUSE:
+            for j in range(wd):
+                bx, by, bz = bx_r[j], by_r[j], bz_r[j]
+                inv = _inv_norm(bx, by, bz, _FIELD_TINY2) if norm_b else _F1
+                gax[j], gay[j], gaz[j] = ax_r[j], ay_r[j], az_r[j]
+                gbx[j], gby[j], gbz[j] = bx * inv, by * inv, bz * inv
+        elif guide == _SPECULAR:
+            for j in range(wd):
+                vx, vy, vz = vx_r[j], vy_r[j], vz_r[j]
+                bx, by, bz = bx_r[j], by_r[j], bz_r[j]
+                inv = _inv_norm(bx, by, bz, _FIELD_TINY2) if norm_b else _F1
+                rx, ry, rz = _reflect_px(ax_r[j], ay_r[j], az_r[j], vx, vy, vz)
+                gax[j], gay[j], gaz[j] = rx, ry, rz
+                rx, ry, rz = _reflect_px(bx * inv, by * inv, bz * inv, vx, vy, vz)
+                gbx[j], gby[j], gbz[j] = rx, ry, rz
+        else:
+            for j in range(wd):
+                vx, vy, vz = vx_r[j], vy_r[j], vz_r[j]
+                bx, by, bz = bx_r[j], by_r[j], bz_r[j]
+                inv = _inv_norm(bx, by, bz, _FIELD_TINY2) if norm_b else _F1
+                ax, ay, az = ax_r[j], ay_r[j], az_r[j]
+                rx, ry, rz = _refract_px(ax, ay, az, vx, vy, vz, eta)
+                gax[j], gay[j], gaz[j] = rx, ry, rz
+                rx, ry, rz = _refract_px(bx * inv, by * inv, bz * inv, vx, vy, vz, eta)
+                gbx[j], gby[j], gbz[j] = rx, ry, rz
+        lx_r, ly_r, lz_r = light[0][i][ol:], light[1][i][ol:], light[2][i][ol:]
+        ox_r, oy_r, oz_r = out[0][i], out[1][i], out[2][i]
+        for j in range(wd):
+            ax, ay, az = gax[j], gay[j], gaz[j]
+            bx, by, bz = gbx[j], gby[j], gbz[j]
+            lx, ly, lz = lx_r[j], ly_r[j], lz_r[j]
+            inv = _inv_norm(lx, ly, lz, _LIGHT_TINY2) if norm_l else _F1
+            lx, ly, lz = lx * inv, ly * inv, lz * inv
+            c = ax * bx + ay * by + az * bz  # a·z
+            al = ax * lx + ay * ly + az * lz  # a·ℓ
+            bl = bx * lx + by * ly + bz * lz  # z·ℓ
+            p = al - c * bl  # |ā| (ℓ·x): the side test
+            s = _F1 - c * c  # |ā|² = 1 − (a·z)²
+            s = s if s > _F0 else _F0
+            q = s * (_F1 - bl * bl) - p * p  # (|ā| |ℓ·y|)²
+            q = np.sqrt(q if q > _F0 else _F0)
+            lam2 = np.sqrt(s)  # λ2 = |ā|
+            lam = _atan2_upper(abs(p), q) * _TWO_OVER_PI_F * lam2  # λ = λ1 λ2
+            k = sigma * lam / (egam + lam * (_F1 - egam))  # σ W_γ(λ)
+            lit = p > _F0  # ℓ̄·x > 0: g = a; else the tangent t = (z − c a)/|ā|
+            isd = _F0 if lit else _F1 / (lam2 if lam2 > _TINY else _TINY)
+            gl = al if lit else isd * (bl - c * al)  # g·ℓ = cos Ω
+            gl = gl if gl < _F1 else _F1
+            gl = gl if gl > -_F1 else -_F1
+            sin_o = _F1 - gl * gl
+            sin_o = np.sqrt(sin_o if sin_o > _F0 else _F0)
+            theta = _atan2_upper(sin_o, gl) * k  # θ = σ W_γ Ω
+            sin_t, cos_t = _sincos(theta)
+            sin_o = sin_o if sin_o > _SMALL else _SMALL
+            # ℓ_i ∝ sin(Ω − θ) ℓ + sin θ g,  g = h a + isd z,  h = 1 (lit) or −c/|ā|
+            coef_l = cos_t * sin_o - gl * sin_t
+            coef_a = ((_F1 if lit else _F0) - c * isd) * sin_t
+            coef_b = isd * sin_t
+            ox = coef_l * lx + coef_a * ax + coef_b * bx
+            oy = coef_l * ly + coef_a * ay + coef_b * by
+            oz = coef_l * lz + coef_a * az + coef_b * bz
+            norm = np.sqrt(ox * ox + oy * oy + oz * oz)
+            inv = _F1 / (norm if norm > _TINY else _TINY)
+            ox_r[j], oy_r[j], oz_r[j] = ox * inv, oy * inv, oz * inv
+
+
+@kernel
+def _guide_rows(n, view, guide, eta, out):  # type: ignore[no-untyped-def]
+    """The guide a_i (§6) of a unit field ``n`` on planes (the formulas of :func:`_eq1_rows`)."""
+    wd = out[0].shape[1]
+    for i in range(out[0].shape[0]):
+        nx_r, ny_r, nz_r = n[0][i], n[1][i], n[2][i]
+        vx_r, vy_r, vz_r = view[0][i], view[1][i], view[2][i]
+        ox_r, oy_r, oz_r = out[0][i], out[1][i], out[2][i]
+        for j in range(wd):
+            nx, ny, nz, vx, vy, vz = nx_r[j], ny_r[j], nz_r[j], vx_r[j], vy_r[j], vz_r[j]
+            if guide == _SPECULAR:
+                rx, ry, rz = _reflect_px(nx, ny, nz, vx, vy, vz)
+            elif guide == _TRANSMISSION:
+                rx, ry, rz = _refract_px(nx, ny, nz, vx, vy, vz, eta)
+            else:
+                rx, ry, rz = nx, ny, nz
+            ox_r[j], oy_r[j], oz_r[j] = rx, ry, rz
+
+
+@kernel
+def _write_rows(light, ol, norm_l, mask, orig, out, x0, wd):  # type: ignore[no-untyped-def]
+    """Level-0 output rows (interleaved, flat (rows, 3 W)): the aligned ``light`` planes (read
+    from column ``ol`` on, renormalised if ``norm_l``) on the covered pixels (``mask`` 1, not 0)
+    of columns x0 … x0 + wd, the original light ``orig`` (flat rows) everywhere else."""
+    for i in range(out.shape[0]):
+        o_r, g_r = out[i], orig[i]
+        for t in range(3 * x0):
+            o_r[t] = g_r[t]
+        o_w, g_w, m_w = o_r[3 * x0 :], g_r[3 * x0 :], mask[i][x0:]
+        lx_r, ly_r, lz_r = light[0][i][ol:], light[1][i][ol:], light[2][i][ol:]
+        for j in range(wd):
+            lx, ly, lz = lx_r[j], ly_r[j], lz_r[j]
+            inv = _inv_norm(lx, ly, lz, _LIGHT_TINY2) if norm_l else _F1
+            # the coverage is 0 or 1: an exact choice by arithmetic (a select between loaded
+            # values does not vectorise here)
+            m = m_w[j]
+            inv *= m
+            keep = _F1 - m
+            o_w[3 * j] = lx * inv + g_w[3 * j] * keep
+            o_w[3 * j + 1] = ly * inv + g_w[3 * j + 1] * keep
+            o_w[3 * j + 2] = lz * inv + g_w[3 * j + 2] * keep
+        o_t, g_t = o_r[3 * (x0 + wd) :], g_r[3 * (x0 + wd) :]
+        for t in range(o_t.shape[0]):
+            o_t[t] = g_t[t]
+
+
+@kernel
+def _store_rows(light, ol, norm_l, mask, out, x0, wd):  # type: ignore[no-untyped-def]
+    """Coarse-level state rows: ``out`` planes (columns x0 … x0 + wd) = the aligned ``light``
+    (from column ``ol`` on, renormalised if ``norm_l``) × the coverage ``mask`` (full rows)."""
+    for i in range(out[0].shape[0]):
+        lx_r, ly_r, lz_r = light[0][i][ol:], light[1][i][ol:], light[2][i][ol:]
+        ox_r, oy_r, oz_r = out[0][i][x0:], out[1][i][x0:], out[2][i][x0:]
+        m_r = mask[i][x0:]
+        for j in range(wd):
+            lx, ly, lz = lx_r[j], ly_r[j], lz_r[j]
+            inv = _inv_norm(lx, ly, lz, _LIGHT_TINY2) if norm_l else _F1
+            m = m_r[j] * inv
+            ox_r[j], oy_r[j], oz_r[j] = lx * m, ly * m, lz * m
 
 
 def _guide_soa(guide: str, n: SoA, view: SoA | None, ior: float, out: SoA, ws: _Work) -> SoA:
-    """a_i for a guide (§6) on structure-of-arrays strips: n_i (diffuse), the reflected view
+    """a_i for a guide (§6) on structure-of-arrays planes: n_i (diffuse), the reflected view
     vector (specular) or the refracted view vector (transmission) — the formulas of
-    :func:`ops.shading.reflect` / :func:`ops.shading.refract` (the tests hold them equal),
-    written into scratch buffers instead of new (H, W, 3) arrays.
+    :func:`ops.shading.reflect` / :func:`ops.shading.refract` (the tests hold them equal), by
+    the per-pixel functions :func:`_eq1_rows` uses.
 
     specular: r = 2 (n·v) n − v;  transmission: t = −η v + (η cos_i − √k) n, η = 1/ior,
     cos_i = n·v, k = 1 − η² (1 − cos_i²), t = 0 where k < 0.
@@ -331,31 +490,7 @@ def _guide_soa(guide: str, n: SoA, view: SoA | None, ior: float, out: SoA, ws: _
     if guide == "diffuse":
         return n
     assert view is not None
-    t1 = ws("g1")
-    cos_i = _dot(n, view, ws("g0"), t1)
-    if guide == "specular":
-        for o, nc, vc in zip(out, n, view, strict=True):
-            cv2.multiply(cos_i, nc, o, scale=2.0)  # (n·v) n × 2: exact, as 2 (n·v) × n
-            o -= vc
-        return out
-    eta = np.float32(1.0 / ior)
-    k = ws("g2")
-    np.multiply(cos_i, cos_i, out=k)
-    np.subtract(np.float32(1.0), k, out=k)
-    k *= np.float32(-eta * eta)
-    k += np.float32(1.0)
-    ok = ws("g3")
-    np.greater_equal(k, ws.zeros, out=ws.boolean)
-    np.copyto(ok, ws.boolean)
-    np.maximum(k, ws.zeros, out=k)
-    cv2.sqrt(k, k)
-    cos_i *= eta
-    cos_i -= k  # η cos_i − √k
-    for o, nc, vc in zip(out, n, view, strict=True):
-        np.multiply(cos_i, nc, out=o)
-        np.multiply(vc, eta, out=t1)
-        o -= t1
-        o *= ok
+    _guide_rows(n, view, _GUIDE_CODE[guide], np.float32(1.0 / ior), out)
     return out
 
 
@@ -483,13 +618,27 @@ def _copy_in(vec: SoA, arr: np.ndarray) -> SoA:
     return vec
 
 
-def _window(v: SoA, win: Win) -> SoA:
-    r0, r1, x0, x1 = win
-    return (v[0][r0:r1, x0:x1], v[1][r0:r1, x0:x1], v[2][r0:r1, x0:x1])
+def _rows(v: SoA, r0: int, r1: int) -> SoA:
+    """Rows r0:r1 of planes (C-contiguous views: the kernels take a column offset)."""
+    return (v[0][r0:r1], v[1][r0:r1], v[2][r0:r1])
 
 
 Win = tuple[int, int, int, int]  # rows r0:r1, columns x0:x1 (at the stage's level)
 State = tuple[int, SoA]  # a component's light aligned so far: (level, planes, 0 on background)
+# a strip's input to the kernels: planes, the window's first column in them, renormalise?, and
+# the interleaved rows (rows, 3 W) the kernel reads instead of the planes (or None)
+Src = tuple[SoA, int, bool, F32 | None]
+_NO_PLANES: SoA = (np.zeros((1, 1), np.float32),) * 3
+_NO_FLAT: F32 = np.zeros((0, 3), np.float32)
+
+
+def _flat_rows(arr: np.ndarray, r0: int, r1: int) -> F32 | None:
+    """Rows r0:r1 of an (H, W, 3) float32 array as flat (rows, 3 W) rows, or None when it is
+    not C-contiguous float32 (then it is split into planes)."""
+    if arr.dtype != np.float32 or not arr.flags.c_contiguous:
+        return None
+    return np.asarray(arr[r0:r1].reshape(r1 - r0, 3 * arr.shape[1]), np.float32)
+
 
 # Rows per strip, and at least this many pixels per strip (coarse levels are narrow): each call
 # then works long enough for the two threads to overlap rather than wait on each other.
@@ -530,11 +679,9 @@ class _Inputs:
         self.fields = fields
         if pyr is not None:
             self.masks = pyr.geometry.mask
-            self.back8 = pyr.geometry.mask_u8(background=True)
         else:
             assert mask is not None
             self.masks = [mask]
-            self.back8 = np.asarray(mask <= 0).view(np.uint8)
         self._views: dict[int, SoA] = {}
         self._lights: dict[int, SoA] = {}
         self.rows: F32 | None = None
@@ -555,7 +702,21 @@ class _Inputs:
             hk, wk = self.pyr.geometry.shape(k)
             src = max((lv for lv in self._views if lv < k), default=0)
             base = self.view if src == 0 else cv2.merge(list(self._views[src]))
-            small = cv2.resize(base, (wk, hk), interpolation=cv2.INTER_AREA)
+            f = 1 << (k - src)
+            if base.shape[:2] == (hk * f, wk * f) and base.flags.c_contiguous:
+                # an exact f×f block average: row strips on all cores give the same result
+                small = np.empty((hk, wk, 3), np.float32)
+
+                def strip(a: int, b: int) -> None:
+                    cv2.resize(
+                        base[a * f : b * f], (wk, b - a), small[a:b], interpolation=cv2.INTER_AREA
+                    )
+
+                run_strips(hk, strip, rows=max(1, _strip_rows(base.shape[1]) // f))
+            else:
+                small = np.asarray(
+                    cv2.resize(base, (wk, hk), interpolation=cv2.INTER_AREA), np.float32
+                )
             got = self._views[k] = _soa(normalize_field(small))
         return got
 
@@ -620,60 +781,72 @@ class _Stage:
             self.sources.append((lvl, [n for n, _ in items], planes, sparse))
         self.with_view = inp.needs_view(active)
 
-    # -- inputs of a strip ------------------------------------------------------------------
+    # -- inputs of a strip: (planes, first column of the window in them, renormalise?) ------
 
-    def upsample(self, win: Win, ws: _Work) -> dict[str, SoA]:
+    def upsample(self, win: Win, ws: _Work) -> dict[str, Src]:
+        """The fields and lights of coarser levels on the window, bilinear + edge-aware, not
+        yet renormalised (the kernels do it: bilinear shortens unit vectors, to 0 … 1 next to
+        background)."""
         r0, r1, x0, x1 = win
-        ups: dict[str, SoA] = {}
+        ups: dict[str, Src] = {}
         if not self.sources:
             return ups
         assert self.inp.pyr is not None
         geo = self.inp.pyr.geometry
         for lvl, names, planes_k, sparse in self.sources:
-            planes = geo.up_rows(
+            planes, c = geo.up_rows_wide(
                 planes_k, lvl, (r0, r1), ws.arr, sparse, k_to=self.k, cols=(x0, x1)
             )
             for i, name in enumerate(names):
-                vec = (planes[3 * i], planes[3 * i + 1], planes[3 * i + 2])
-                # bilinear shortens unit vectors (to 0 … 1 next to background): renormalise
-                norm = _normalize_fast if name.startswith("light:") else _normalize_soa
-                ups[name] = norm(vec, ws)
+                ups[name] = ((planes[3 * i], planes[3 * i + 1], planes[3 * i + 2]), c, True, None)
         return ups
 
-    def field(self, i: int, win: Win, ws: _Work, ups: dict[str, SoA]) -> SoA:
+    def field(self, i: int, win: Win, ws: _Work, ups: dict[str, Src]) -> Src:
         r0, r1, x0, x1 = win
         inp = self.inp
         if inp.fields is not None:
-            return _copy_in(ws.vec(f"n{i}"), inp.fields[i][r0:r1, x0:x1])
+            return _copy_in(ws.vec(f"n{i}"), inp.fields[i][r0:r1, x0:x1]), 0, False, None
         assert inp.pyr is not None
         lvl = inp.pyr.levels[i]
         if lvl > self.k:
             return ups[f"n{i}"]
         if self.k == 0:
-            return _copy_in(ws.vec(f"n{i}"), inp.pyr.normals[i][r0:r1, x0:x1])
-        return _window(inp.pyr.planes(i), win)
+            flat = _flat_rows(inp.pyr.normals[i], r0, r1)
+            if flat is not None:
+                return _NO_PLANES, x0, False, flat
+            return _copy_in(ws.vec(f"n{i}"), inp.pyr.normals[i][r0:r1, x0:x1]), 0, False, None
+        return _rows(inp.pyr.planes(i), r0, r1), x0, False, None
 
-    def view(self, win: Win, ws: _Work) -> SoA:
+    def field_planes(self, i: int, win: Win, ws: _Work) -> Src:
+        """Level-0 field n_{i+1} of the pyramid split into planes (for the frame's z)."""
+        r0, r1, x0, x1 = win
+        assert self.inp.pyr is not None
+        return _copy_in(ws.vec(f"n{i}"), self.inp.pyr.normals[i][r0:r1, x0:x1]), 0, False, None
+
+    def view(self, win: Win, ws: _Work) -> Src:
         r0, r1, x0, x1 = win
         inp = self.inp
         if inp.view is None:
             assert inp.view_const is not None
-            return _fill(ws.vec("view"), inp.view_const)
+            return _fill(ws.vec("view"), inp.view_const), 0, False, None
         if self.k == 0:
-            return _copy_in(ws.vec("view"), inp.view[r0:r1, x0:x1])
-        return _window(inp.view_planes(self.k), win)
+            flat = _flat_rows(inp.view, r0, r1)
+            if flat is not None:
+                return _NO_PLANES, x0, False, flat
+            return _copy_in(ws.vec("view"), inp.view[r0:r1, x0:x1]), 0, False, None
+        return _rows(inp.view_planes(self.k), r0, r1), x0, False, None
 
-    def light(self, g: str, win: Win, ws: _Work, ups: dict[str, SoA]) -> SoA:
+    def light(self, g: str, win: Win, ws: _Work, ups: dict[str, Src]) -> Src:
         if self.states.get(g) is not None:
             return ups[f"light:{g}"]
         r0, r1, x0, x1 = win
         inp = self.inp
         if inp.lfield is None:
             assert inp.const is not None
-            return _fill(ws.vec("light_in"), inp.const)
+            return _fill(ws.vec("light_in"), inp.const), 0, False, None
         if self.k == 0:
-            return _copy_in(ws.vec("light_in"), inp.lfield[r0:r1, x0:x1])
-        return _window(inp.light_planes(self.k), win)
+            return _copy_in(ws.vec("light_in"), inp.lfield[r0:r1, x0:x1]), 0, False, None
+        return _rows(inp.light_planes(self.k), r0, r1), x0, False, None
 
     # -- a strip ------------------------------------------------------------------------------
 
@@ -704,17 +877,16 @@ class _Stage:
         wd = min(width, -(-(int(cols[-1]) + 1 - x0) // step) * step)
         x0 = min(x0, width - wd)
         win = (r0, r1, x0, x0 + wd)
-        if k == 0:  # the original light outside the window (inside it: :meth:`write`)
+        if k == 0:  # components left unchanged keep the original light (the others: write)
             for g, dst in inp.outs.items():
-                if g in self.active:
-                    self.fill(dst, r0, r1, 0, x0)
-                    self.fill(dst, r0, r1, x0 + wd, width)
-                else:
+                if g not in self.active:
                     self.fill(dst, r0, r1, 0, width)
         ws = _Work.get((r1 - r0, wd))
         ups = self.upsample(win, ws)
         view = self.view(win, ws) if self.with_view else None
-        fields: dict[int, SoA] = {}
+        fields: dict[int, Src] = {}
+        eta = np.float32(1.0 / inp.ior)
+        egam = np.float32(inp.egam)
         for g in self.active:
             light = self.light(g, win, ws, ups)
             ping = 0
@@ -725,27 +897,40 @@ class _Stage:
                 for i in (j, j + 1):
                     if i not in fields:
                         fields[i] = self.field(i, win, ws, ups)
-                a = _guide_soa(g, fields[j], view, inp.ior, ws.vec("ga"), ws)
-                b = _guide_soa(g, fields[j + 1], view, inp.ior, ws.vec("gb"), ws)
+                if fields[j + 1][3] is not None:  # z = a_{i+1} is read from planes
+                    fields[j + 1] = self.field_planes(j + 1, win, ws)
+                na, oa, _, fa = fields[j]
+                nb, ob, norm_b, _ = fields[j + 1]
+                vw, ov, _, fv = view if view is not None else (_NO_PLANES, 0, False, None)
                 out = ws.vec(f"light{ping}")
-                light = _rotate(a, b, light, sig, inp.egam, out, ws)
+                _eq1_rows(
+                    na, nb, vw, light[0], out,
+                    _NO_FLAT if fa is None else fa, _NO_FLAT if fv is None else fv,
+                    (oa, ob, ov, light[1]), _GUIDE_CODE[g], (eta, np.float32(sig), egam),
+                    (norm_b, light[2]),
+                )  # fmt: skip
+                light = (out, 0, False, None)
                 ping = 1 - ping
-            self.write(g, light, win, ws)
+            self.write(g, light, win)
 
-    def write(self, g: str, light: SoA, win: Win, ws: _Work) -> None:
+    def write(self, g: str, light: Src, win: Win) -> None:
         r0, r1, x0, x1 = win
         inp = self.inp
-        if self.k == 0:  # the window, then its background pixels back to the original light
-            out = inp.outs[g][r0:r1, x0:x1]
-            cv2.merge(list(light), out)
-            orig = inp.lfield if inp.lfield is not None else inp.rows
-            assert orig is not None
-            r_o = (r0, r1) if inp.lfield is not None else (0, r1 - r0)
-            cv2.copyTo(orig[r_o[0] : r_o[1], x0:x1], inp.back8[r0:r1, x0:x1], out)
+        planes, ol, norm_l, _ = light
+        if self.k == 0:  # the window's covered pixels; the original light everywhere else
+            out = inp.outs[g][r0:r1]
+            if inp.lfield is not None:
+                orig = inp.lfield[r0:r1]
+            else:
+                assert inp.rows is not None
+                orig = inp.rows[: r1 - r0]
+            flat = (r1 - r0, 3 * self.shape[1])
+            _write_rows(
+                planes, ol, norm_l, self.mask[r0:r1], orig.reshape(flat), out.reshape(flat),
+                x0, x1 - x0,
+            )  # fmt: skip
             return
-        mrows = self.mask[r0:r1, x0:x1]
-        for comp, dst in zip(light, self.new[g], strict=True):
-            np.multiply(comp, mrows, out=dst[r0:r1, x0:x1])
+        _store_rows(planes, ol, norm_l, self.mask[r0:r1], _rows(self.new[g], r0, r1), x0, x1 - x0)
 
     def run(self) -> None:
         rows = _strip_rows(self.shape[1])
