@@ -31,6 +31,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from ops.jit import kernel
 from ops.parallel import run_strips
 
 Vec3 = tuple[float, float, float]
@@ -708,6 +709,10 @@ def shade_directions(
     lobes = ["diffuse"] + (["specular"] if specular != "none" else [])
     lobes += ["transmission"] if transmission else []
     out = {lobe: np.empty((*shape, 3), np.float32) for lobe in lobes}
+    if all(light.kind == "directional" for light in lights) and lights and not transmission:
+        if specular in ("blinn_phong", "none"):
+            _shade_directional(normal, view_a, lights, dirs, diffuse, specular, shininess, out)
+            return out
 
     def strip(r0: int, r1: int) -> None:
         # the same per-pixel formulas as on whole fields, on row strips that stay in the caches,
@@ -762,6 +767,135 @@ def shade_directions(
 
     run_strips(shape[0], strip, rows=_SHADE_ROWS)
     return out
+
+
+def _shade_directional(
+    normal: np.ndarray,
+    view: np.ndarray,
+    lights: Sequence[Light],
+    dirs: dict[str, list[np.ndarray]],
+    diffuse: str,
+    specular: str,
+    shininess: float,
+    out: dict[str, np.ndarray],
+) -> None:
+    """:func:`shade_directions` for directional lights, Lambert or half-Lambert and Blinn-Phong
+    or no specular: per light, one compiled pass per strip for the terms (:func:`_terms_rows`),
+    (n·h)^s with cv2.pow on the strip, and one pass adding them times the irradiance."""
+    hgt, wid = normal.shape[:2]
+
+    def rows(a: np.ndarray) -> tuple[np.ndarray, bool]:  # (rows, 3W) field or (1, 3W) constant
+        if a.ndim == 1:
+            return np.tile(np.asarray(a, np.float32), wid).reshape(1, 3 * wid), True
+        return np.ascontiguousarray(a, np.float32).reshape(hgt, 3 * wid), False
+
+    nrm = normal.reshape(hgt, 3 * wid)
+    v, vc = rows(view)
+    per_light = []
+    for i, light in enumerate(lights):
+        own = np.asarray(light.vector, np.float32)
+        ld, ldc = rows(dirs["diffuse"][i] if "diffuse" in dirs else own)
+        ls, lsc = rows(dirs["specular"][i] if "specular" in dirs else own)
+        e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
+        per_light.append((ld, ldc, ls, lsc, e.reshape(3)))
+    spec = specular != "none"
+    half = diffuse != "lambert"
+    od = out["diffuse"].reshape(hgt, 3 * wid)
+    os_ = out["specular"].reshape(hgt, 3 * wid) if spec else od[:0]
+
+    def strip(r0: int, r1: int) -> None:
+        n = r1 - r0
+        d_term = np.empty((n, wid), np.float32)
+        nh = np.empty((n, wid), np.float32)
+        gate = np.empty((n, wid), np.float32)
+        for i, (ld, ldc, ls, lsc, e) in enumerate(per_light):
+            _terms_rows(
+                nrm[r0:r1],
+                ld if ldc else ld[r0:r1],
+                ldc,
+                ls if lsc else ls[r0:r1],
+                lsc,
+                v if vc else v[r0:r1],
+                vc,
+                half,
+                spec,
+                d_term,
+                nh,
+                gate,
+            )
+            if spec:
+                cv2.pow(nh, float(shininess), dst=nh)
+            _add_terms(d_term, nh, gate, e, i == 0, spec, od[r0:r1], os_[r0:r1] if spec else os_)
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)
+
+
+@kernel
+def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):  # type: ignore[no-untyped-def]
+    """Per pixel of the rows of (rows, 3W) ``nrm``: the diffuse term max(n·ℓ_d, 0) (Lambert) or
+    ((n·ℓ_d + 1)/2)² (half-Lambert, ``half``) times the coverage (|n|² > 0.25) into ``d_term``;
+    with ``spec``, n·h = max((n·ℓ_s + n·v)/|ℓ_s + v|, 0) (0 where |ℓ_s + v| <= 1e-6) into ``nh``
+    and the coverage where n·ℓ_s > 0 into ``gate`` (Blinn-Phong's (n·h)^s is ``nh`` to the s).
+    ``ld``, ``ls``, ``v`` are rows like ``nrm``, or one row used for all (``ldc``, ``lsc``,
+    ``vc``): the formulas of :func:`lambert`, :func:`half_lambert` and :func:`blinn_phong`."""
+    zero, one, two, half_ = np.float32(0.0), np.float32(1.0), np.float32(2.0), np.float32(0.5)
+    quarter, tiny = np.float32(0.25), np.float32(1e-6)
+    for i in range(nrm.shape[0]):
+        n = nrm[i]
+        a = ld[0 if ldc else i]
+        b = ls[0 if lsc else i]
+        w = v[0 if vc else i]
+        dt, hr, gr = d_term[i], nh[i], gate[i]
+        for j in range(dt.shape[0]):
+            nx, ny, nz = n[3 * j], n[3 * j + 1], n[3 * j + 2]
+            cov = one if nx * nx + ny * ny + nz * nz > quarter else zero
+            nd = nx * a[3 * j] + ny * a[3 * j + 1] + nz * a[3 * j + 2]
+            hl = (nd + one) * half_
+            d = hl * hl if half else max(nd, zero)
+            dt[j] = d * cov
+        if not spec:
+            continue
+        for j in range(dt.shape[0]):
+            nx, ny, nz = n[3 * j], n[3 * j + 1], n[3 * j + 2]
+            cov = one if nx * nx + ny * ny + nz * nz > quarter else zero
+            lx, ly, lz = b[3 * j], b[3 * j + 1], b[3 * j + 2]
+            vx, vy, vz = w[3 * j], w[3 * j + 1], w[3 * j + 2]
+            nl = nx * lx + ny * ly + nz * lz
+            nv = nx * vx + ny * vy + nz * vz
+            lv = lx * vx + ly * vy + lz * vz
+            length = np.sqrt(max(two * lv + two, zero))
+            inv = one / max(length, tiny) if length > tiny else zero
+            hr[j] = max((nl + nv) * inv, zero)
+            gr[j] = cov if nl > zero else zero
+
+
+@kernel
+def _add_terms(d_term, nh, gate, e, first, spec, od, os_):  # type: ignore[no-untyped-def]
+    """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh × gate × E,
+    E = ``e`` (3,) the light's irradiance; outputs (rows, 3W)."""
+    e0, e1, e2 = e[0], e[1], e[2]
+    for i in range(od.shape[0]):
+        _add_row(d_term[i], e0, e1, e2, first, od[i])
+        if spec:
+            hr, gr, t = nh[i], gate[i], d_term[i]  # d_term's row is free now: nh × gate there
+            for j in range(hr.shape[0]):
+                t[j] = hr[j] * gr[j]
+            _add_row(t, e0, e1, e2, first, os_[i])
+
+
+@kernel
+def _add_row(t, e0, e1, e2, first, o):  # type: ignore[no-untyped-def]
+    """A row of (3W) ``o`` = (or += unless ``first``) ``t`` × (e0, e1, e2)."""
+    if first:
+        for j in range(t.shape[0]):
+            o[3 * j] = t[j] * e0
+            o[3 * j + 1] = t[j] * e1
+            o[3 * j + 2] = t[j] * e2
+    else:
+        for j in range(t.shape[0]):
+            o[3 * j] += t[j] * e0
+            o[3 * j + 1] += t[j] * e1
+            o[3 * j + 2] += t[j] * e2
 
 
 def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
