@@ -13,6 +13,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from service import allocator
+
+allocator.tune()  # as the CLI, the service and batch workers run (service/allocator.py)
+
 HD = (1080, 1920)
 
 

@@ -131,8 +131,11 @@ def process_frame(
     pinned: dict[str, float],
 ) -> dict[str, Any]:
     """Enhance one frame (on a Dask worker). Never raises: failures come back as data."""
+    from service import allocator
     from service.jobs import enhance_file
     from service.problems import from_exception
+
+    allocator.tune()
 
     t0 = time.perf_counter()
     try:

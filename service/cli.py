@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
+from service import allocator
 from service.cli_analysis import add_analysis_commands
 from service.cli_common import (
     UsageError,
@@ -287,6 +288,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    allocator.tune()
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

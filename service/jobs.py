@@ -32,6 +32,7 @@ from concurrent.futures import Future, ProcessPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from service import allocator
 from service.problems import Problem, from_exception
 
 log = logging.getLogger("depict.jobs")
@@ -49,9 +50,11 @@ class JobTimeout(Exception):
 
 
 def init_worker() -> None:
-    """Worker start: OSMesa for rendering; ^C is for the server, which stops the pool."""
+    """Worker start: OSMesa for rendering; ^C is for the server, which stops the pool; the
+    allocator settings of :mod:`service.allocator`."""
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    allocator.tune()
 
 
 def _on_alarm(signum: int, frame: Any) -> None:
