@@ -898,6 +898,72 @@ def _add_row(t, e0, e1, e2, first, o):  # type: ignore[no-untyped-def]
             o[3 * j + 2] += t[j] * e2
 
 
+def lobe_radiance(
+    lights: dict[str, np.ndarray], colors: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Each lobe's radiance ``light_j × colour_j`` and the beauty ``Σ_j light_j × colour_j``.
+
+    Parameters
+    ----------
+    lights : lobe -> (H, W, 3) light without colour (e.g. :func:`shade_directions`).
+    colors : lobe -> (H, W, 3) or (3,) colour (albedo, specular colour).
+
+    Returns
+    -------
+    (lobe -> (H, W, 3) float32 radiance, (H, W, 3) float32 beauty); one compiled pass per row
+    strip, each light and colour read once, the beauty kept in cache.
+    """
+    names = list(lights)
+    if not names:
+        raise ValueError("lobe_radiance needs at least one lobe")
+    hgt, wid = lights[names[0]].shape[:2]
+    flat = {}
+    for n in names:
+        lit = np.ascontiguousarray(lights[n], np.float32)
+        if lit.shape != (hgt, wid, 3):
+            raise ValueError(f"lights[{n!r}] must have shape {(hgt, wid, 3)}, got {lit.shape}")
+        col = np.asarray(colors[n], np.float32)
+        if col.shape == (3,):
+            col = np.tile(col, wid).reshape(1, 3 * wid)
+        elif col.shape == (hgt, wid, 3):
+            col = np.ascontiguousarray(col).reshape(hgt, 3 * wid)
+        else:
+            raise ValueError(f"colors[{n!r}] must be (3,) or {(hgt, wid, 3)}, got {col.shape}")
+        flat[n] = (lit.reshape(hgt, 3 * wid), col)
+    radiance = {n: np.empty((hgt, wid, 3), np.float32) for n in names}
+    beauty = np.empty((hgt, wid, 3), np.float32)
+    rad = {n: r.reshape(hgt, 3 * wid) for n, r in radiance.items()}
+    out = beauty.reshape(hgt, 3 * wid)
+
+    def strip(r0: int, r1: int) -> None:
+        for k, n in enumerate(names):
+            lit, col = flat[n]
+            const = col.shape[0] == 1
+            rows = col if const else col[r0:r1]
+            _radiance_rows(lit[r0:r1], rows, const, rad[n][r0:r1], out[r0:r1], k == 0)
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)
+    return radiance, beauty
+
+
+@kernel
+def _radiance_rows(lit, col, const, rad, beauty, first):  # type: ignore[no-untyped-def]
+    """Rows (3W) of :func:`lobe_radiance`: ``rad`` = lit × col (``col`` one row for all with
+    ``const``), ``beauty`` = (or += unless ``first``) rad."""
+    for i in range(lit.shape[0]):
+        a, c, r, b = lit[i], col[0 if const else i], rad[i], beauty[i]
+        if first:
+            for j in range(a.shape[0]):
+                v = a[j] * c[j]
+                r[j] = v
+                b[j] = v
+        else:
+            for j in range(a.shape[0]):
+                v = a[j] * c[j]
+                r[j] = v
+                b[j] += v
+
+
 def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """:func:`dot` (the same rounding) of (h, w, 3) fields that may be row-strided views, or
     of a field and a (3,) vector, without copying them."""

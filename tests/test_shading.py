@@ -17,6 +17,7 @@ from ops.shading import (
     lambert,
     light_irradiance,
     light_vectors,
+    lobe_radiance,
     normalize,
     parse_light,
     phong,
@@ -330,3 +331,22 @@ def test_shade_lobes_transmission_and_validation() -> None:
         shade_lobes(n, n, UP, (1.0, 2.0), [behind])
     with pytest.raises(ValueError, match="normal"):
         shade_lobes(n[..., :2], n, UP, 0.5, [behind])
+
+
+def test_lobe_radiance_is_light_times_colour_and_its_sum() -> None:
+    rng = np.random.default_rng(7)
+    lights = {
+        n: rng.random((9, 11, 3), dtype=np.float32) for n in ("ambient", "diffuse", "specular")
+    }
+    albedo = rng.random((9, 11, 3), dtype=np.float32)
+    colors = {
+        "ambient": albedo,
+        "diffuse": albedo,
+        "specular": np.array([0.5, 0.5, 0.5], np.float32),
+    }
+    radiance, beauty = lobe_radiance(lights, colors)
+    for n in lights:
+        np.testing.assert_allclose(radiance[n], lights[n] * colors[n], rtol=1e-6)
+    np.testing.assert_allclose(beauty, sum(lights[n] * colors[n] for n in lights), rtol=1e-5)
+    with pytest.raises(ValueError, match="colors"):
+        lobe_radiance(lights, {**colors, "specular": np.ones((2, 2, 3), np.float32)})

@@ -35,7 +35,7 @@ from pydantic import Field, model_validator
 from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
-from ops.shading import Light, shade_directions
+from ops.shading import Light, lobe_radiance, shade_directions
 from service.operators.common import LightsParams, channels, frame_albedo
 from service.registry import Context, register
 
@@ -240,18 +240,14 @@ def _relight(frame: Frame, p: LightAlignmentParams, light: dict[str, np.ndarray]
         if lobe not in lights:
             for name in (lobe, f"{lobe}.light", f"{lobe}.color"):
                 frame.buffers.pop(name, None)
-    beauty = np.zeros(shape, np.float32)
+    radiance, beauty = lobe_radiance(lights, {lobe: colors[lobe] for lobe in lights})
     for lobe, lit in lights.items():
         color = colors[lobe]
-        if color.ndim == 3:
-            radiance = np.asarray(cv2.multiply(lit, color))
-        else:  # a constant colour: broadcast, and stored as a read-only view
-            radiance = np.asarray(cv2.multiply(lit, (*color.tolist(), 0.0)))
+        if color.ndim != 3:  # a constant colour: stored as a read-only broadcast view
             color = np.broadcast_to(color, shape)
-        frame.buffers[lobe] = radiance
+        frame.buffers[lobe] = radiance[lobe]
         frame.buffers[f"{lobe}.light"] = lit
         frame.buffers[f"{lobe}.color"] = color
-        cv2.add(beauty, radiance, dst=beauty)
     frame.buffers.pop("remainder", None)
     old = frame.buffers.get("beauty")
     if old is not None:  # the renderer's background stays
