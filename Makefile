@@ -28,6 +28,7 @@ $(UV):
 
 $(VENV)/.installed: pyproject.toml uv.lock | $(UV)
 	$(UV) sync --frozen --python $(PYTHON)
+	$(BIN)/depict warmup
 	@touch $@
 
 example: install

@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -76,6 +77,17 @@ def cmd_render(args: argparse.Namespace) -> int:
     frame = render(mesh, args.width, args.height, camera=camera, lights=lights)
     write(frame, args.output)
     print(f"wrote {args.output} ({args.width}x{args.height})")
+    return 0
+
+
+def cmd_warmup(args: argparse.Namespace) -> int:
+    from service.warmup import warm
+
+    t0 = time.perf_counter()
+    times = warm()
+    for name, seconds in times.items():
+        print(f"  {name:<24s} {seconds:6.2f} s")
+    print(f"kernels ready ({time.perf_counter() - t0:.1f} s)")
     return 0
 
 
@@ -267,6 +279,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops (radiance)")
     add_read_options(p)
     p.set_defaults(func=cmd_preview)
+
+    p = sub.add_parser(
+        "warmup", help="compile the per-pixel kernels now (image builds, new farm nodes)"
+    )
+    p.set_defaults(func=cmd_warmup)
 
     p = sub.add_parser("ops", help="list operators with their parameters and defaults")
     p.add_argument("--json", action="store_true", help="JSON schemas of every operator")

@@ -115,6 +115,15 @@ def test_preview_writes_a_png(
     assert img.max() > img.min()
 
 
+def test_warmup_runs_every_operator(capsys: pytest.CaptureFixture[str]) -> None:
+    assert depict("warmup") == 0
+    text = capsys.readouterr().out
+    assert re.findall(r"^  (\w+)\s+\d+\.\d\d s$", text, re.M)[: len(operators())] == list(
+        operators()
+    )
+    assert "kernels ready" in text
+
+
 def test_ops_lists_every_registered_operator(capsys: pytest.CaptureFixture[str]) -> None:
     assert depict("ops") == 0
     text = capsys.readouterr().out
