@@ -13,8 +13,9 @@ range kernel G_r on **log** depth (standard deviation ``depth_sigma``), i.e. on 
 depth, so that the same parameters work at any scene scale and resolution.
 
 Cost does not grow with the kernel size: scale i is filtered on a depth-aware pyramid, at the
-level where σ_i is at most 1.5 pixels (``cv2.ximgproc.jointBilateralFilter`` with a 3×3 … 7×7
-window there), and brought back to full resolution by edge-aware upsampling:
+level where σ_i is at most 1.5 pixels (a joint bilateral filter with the circular window of
+radius 1 or 2 of ``cv2.ximgproc.jointBilateralFilter`` there, as a compiled kernel), and brought
+back to full resolution by edge-aware upsampling:
 
 - downsampling (level k → k+1) averages each 2×2 block over its covered pixels that lie on the
   front-most surface of the block (log depth within ``2·depth_sigma`` of the block's minimum),
@@ -40,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.jit import kernel
-from ops.parallel import run_strips
+from ops.parallel import STRIP_PIXELS, run_strips, strip_rows
 
 F32 = NDArray[np.float32]
 
@@ -121,6 +122,254 @@ def _gather_unit(idx, w, planes, out):  # type: ignore[no-untyped-def]
 BACKGROUND = np.float32(1e30)
 
 
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+_QUARTER = np.float32(0.25)
+_INF = np.float32(np.inf)
+
+
+@kernel
+def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):  # type: ignore[no-untyped-def]
+    """One row of 2×2 blocks of :meth:`DepthPyramid._down_geometry` from two rows ``la``,
+    ``lb`` of log depth with :data:`BACKGROUND` on background (covered iff below it): the keep
+    flags ``ka``, ``kb`` (covered and within ``thr`` of the block's front, i.e. minimum, log
+    depth), the kept fraction ``cover``, the kept log-depth mean ``low`` (0 when nothing is
+    kept), ``m_low`` = cover > 0 and ``lost`` (a covered member was left out). ``front``: a
+    scratch row. One short loop per output: LLVM vectorises a loop only with few runtime alias
+    checks, i.e. few arrays written."""
+    wh = cover.shape[0]
+    for j in range(wh):
+        front[j] = min(min(la[2 * j], la[2 * j + 1]), min(lb[2 * j], lb[2 * j + 1]))
+    for lr, kr in ((la, ka), (lb, kb)):
+        for j in range(wh):
+            f = front[j]
+            l0, l1 = lr[2 * j], lr[2 * j + 1]
+            kr[2 * j] = np.float32((l0 < BACKGROUND) & (l0 - f <= thr))
+            kr[2 * j + 1] = np.float32((l1 < BACKGROUND) & (l1 - f <= thr))
+    for j in range(wh):
+        cover[j] = (ka[2 * j] + ka[2 * j + 1] + kb[2 * j] + kb[2 * j + 1]) * _QUARTER
+    for j in range(wh):
+        s = la[2 * j] * ka[2 * j] + la[2 * j + 1] * ka[2 * j + 1]
+        s += lb[2 * j] * kb[2 * j] + lb[2 * j + 1] * kb[2 * j + 1]
+        # covered blocks have cover ≥ 1/4: max(cover, 1/4) leaves them exact, empty ones 0
+        low[j] = s * _QUARTER / max(cover[j], _QUARTER)
+    for j in range(wh):
+        m_low[j] = np.float32(cover[j] > _F0)
+    for j in range(wh):
+        n_cov = np.float32(la[2 * j] < BACKGROUND) + np.float32(la[2 * j + 1] < BACKGROUND)
+        n_cov += np.float32(lb[2 * j] < BACKGROUND) + np.float32(lb[2 * j + 1] < BACKGROUND)
+        lost[j] = n_cov > cover[j] * np.float32(4.0)
+
+
+@kernel
+def _build01_rows(depth, mask8, thr, logd0, mask0, keep0, cover, logd1, mask1, excl1):  # type: ignore[no-untyped-def]
+    """Levels 0 and 1 of :class:`DepthPyramid` on rows of an even-sized level 0.
+
+    ``depth``: (2 n, W) planar depth; ``mask8``: (2 n, W) uint8 coverage, or (0, W) for none;
+    ``logd0``: on input the log of the clamped depth, on output the level-0 log depth with
+    :data:`BACKGROUND` on background (depth not finite or ≤ 0, or mask 0); ``mask0``, ``keep0``
+    (2 n, W); ``cover``, ``logd1``, ``mask1``, ``excl1`` (n, W / 2): the blocks of
+    :func:`_block_row` (``excl1``: a covered pixel was left out).
+    """
+    wd = depth.shape[1]
+    ones = np.ones(wd, np.uint8)
+    use_mask = mask8.shape[0] > 0
+    front = np.empty(cover.shape[1], np.float32)
+    for r in range(depth.shape[0]):
+        d, lg = depth[r], logd0[r]
+        m = mask8[r] if use_mask else ones
+        for x in range(wd):
+            dx = d[x]
+            valid = (dx > _F0) & (dx < _INF) & (m[x] != 0)
+            lg[x] = lg[x] if valid else BACKGROUND
+        v_r = mask0[r]
+        for x in range(wd):
+            v_r[x] = np.float32(lg[x] < BACKGROUND)
+    for i in range(cover.shape[0]):
+        _block_row(
+            logd0[2 * i], logd0[2 * i + 1], thr, front, keep0[2 * i], keep0[2 * i + 1],
+            cover[i], logd1[i], mask1[i], excl1[i],
+        )  # fmt: skip
+
+
+@kernel
+def _down_geometry_rows(logd, m, excl, thr, keep, cover, logd_low, m_low, excl_low):  # type: ignore[no-untyped-def]
+    """Level k → k+1 of :class:`DepthPyramid` (k ≥ 1) on rows of an even-sized (padded)
+    level: ``logd``, ``m`` (covered where > 0), ``excl`` (samples excluded below, bool)
+    (2 n, w); outputs ``keep`` (2 n, w) and ``cover``, ``logd_low``, ``m_low``, ``excl_low``
+    (n, w / 2) as in :func:`_build01_rows` (``excl_low`` also where a member was excluded)."""
+    wd = logd.shape[1]
+    wh = cover.shape[1]
+    far = np.empty((2, wd), np.float32)
+    front = np.empty(wh, np.float32)
+    for i in range(cover.shape[0]):
+        for r in range(2):
+            lr, mr, fr = logd[2 * i + r], m[2 * i + r], far[r]
+            for x in range(wd):
+                fr[x] = lr[x] if mr[x] > _F0 else BACKGROUND
+        e_r = excl_low[i]
+        _block_row(
+            far[0], far[1], thr, front, keep[2 * i], keep[2 * i + 1],
+            cover[i], logd_low[i], m_low[i], e_r,
+        )  # fmt: skip
+        ea, eb = excl[2 * i], excl[2 * i + 1]
+        for j in range(wh):
+            e_r[j] = e_r[j] | ea[2 * j] | ea[2 * j + 1] | eb[2 * j] | eb[2 * j + 1]
+
+
+@kernel
+def _down_unit_rows(v, keep, out):  # type: ignore[no-untyped-def]
+    """``out`` (n, w / 2, 3) = the 2×2 block sums / 4 of ``v`` (2 n, w, 3) weighted by ``keep``
+    (2 n, w) (:meth:`DepthPyramid._down_unit`): the keep-weighted sum of each row pair in a
+    row buffer, then the sums of column pairs (two short loops that LLVM vectorises)."""
+    wh = out.shape[1]
+    wd = 2 * wh
+    acc = np.empty(3 * wd, np.float32)
+    for i in range(out.shape[0]):
+        ra, rb = v[2 * i].reshape(3 * wd), v[2 * i + 1].reshape(3 * wd)
+        ka, kb = keep[2 * i], keep[2 * i + 1]
+        for x in range(wd):
+            a, b = ka[x], kb[x]
+            p = 3 * x
+            acc[p] = a * ra[p] + b * rb[p]
+            acc[p + 1] = a * ra[p + 1] + b * rb[p + 1]
+            acc[p + 2] = a * ra[p + 2] + b * rb[p + 2]
+        o = out[i].reshape(3 * wh)
+        for j in range(wh):
+            p, q = 6 * j, 3 * j
+            o[q] = (acc[p] + acc[p + 3]) * _QUARTER
+            o[q + 1] = (acc[p + 1] + acc[p + 4]) * _QUARTER
+            o[q + 2] = (acc[p + 2] + acc[p + 5]) * _QUARTER
+
+
+#: The taps (dy, dx) of the circular 5×5 window (radius 2) of :func:`_jbf_rows`, row by row;
+#: a radius-1 window is its 5-tap cross, the other taps getting a spatial weight of 0.
+_JBF_TAPS = (
+    (-2, 0),
+    (-1, -1), (-1, 0), (-1, 1),
+    (0, -2), (0, -1), (0, 0), (0, 1), (0, 2),
+    (1, -1), (1, 0), (1, 1),
+    (2, 0),
+)  # fmt: skip
+# e^{-u} of the range kernel: u clamped here (e^-64 ≈ 1.6e-28 counts as 0), halved this many
+# times before the polynomial (see _range_weight).
+_EXP_U_MAX = np.float32(64.0)
+_EXP_SQUARINGS = 5
+_EXP_SCALE = np.float32(1.0 / (1 << _EXP_SQUARINGS))
+_E2, _E3, _E4, _E5 = (np.float32((-1.0) ** n / math.factorial(n)) for n in (2, 3, 4, 5))
+
+
+@kernel
+def _range_weight(u):  # type: ignore[no-untyped-def]
+    """e^{−u} for u ≥ 0, vectorisable (no exp call), within 2e-7 absolute (0 for u ≥ 64):
+    e^{−u} = (e^{−t})^32 with t = min(u, 64)/32 ∈ [0, 2] and e^{−t} ≈ 1 + q, q the degree-5
+    Taylor polynomial less 1; the 5 squarings are done on q, (1 + q)² = 1 + q (q + 2), so that
+    weights near 1 keep their relative precision."""
+    t = min(u, _EXP_U_MAX) * _EXP_SCALE
+    q = ((((_E5 * t + _E4) * t + _E3) * t + _E2) * t - _F1) * t
+    for _ in range(_EXP_SQUARINGS):
+        q = q * (q + np.float32(2.0))
+    return q + _F1
+
+
+#: Columns per chunk of :func:`_jbf_rows` (its local buffers have this compile-time row length).
+_JBF_CHUNK = 128
+_JBF_RS = _JBF_CHUNK + 4
+
+
+@kernel
+def _jb_tap(gc, g, x, y, z, j, sw, c, ax, ay, az):  # type: ignore[no-untyped-def]
+    """(ax, ay, az) plus tap j of guide row ``g`` and planes ``x``, ``y``, ``z``: spatial
+    weight ``sw`` times the range weight e^{−c (g[j] − gc)²}."""
+    d = g[j] - gc
+    wt = sw * _range_weight(d * d * c)
+    return ax + wt * x[j], ay + wt * y[j], az + wt * z[j]
+
+
+@kernel
+def _jb_planes(b, r, dx):  # type: ignore[no-untyped-def]
+    """Guide and x, y, z rows of window row ``r`` in the chunk buffer ``b`` of
+    :func:`_jbf_rows`, from column 2 + ``dx`` on."""
+    o = 4 * r * _JBF_RS + 2 + dx
+    return b[o:], b[o + _JBF_RS :], b[o + 2 * _JBF_RS :], b[o + 3 * _JBF_RS :]
+
+
+@kernel
+def _jbf_rows(guide, src, mask, sw, c, out):  # type: ignore[no-untyped-def]
+    """Joint bilateral filter of a unit-vector field on rows, window of radius ≤ 2
+    (:func:`_bilateral`), renormalised and times the coverage as by :func:`normalize_field`.
+
+    ``guide``: (n + 4, w + 4) log depth padded by 2 on each side; ``src``: (n + 4, 3 (w + 4))
+    the field, padded the same and flattened per row; ``mask``: (n, w) coverage; ``sw``: (13,)
+    spatial weights of :data:`_JBF_TAPS`; ``c`` = 1 / (2 σ_r²); ``out``: (n, 3 w).
+
+    Chunks of :data:`_JBF_CHUNK` columns of the 5 window rows are first copied, as guide and
+    x, y, z planes, into one local buffer of fixed row length: the 13 taps then read rows of a
+    single array at constant distances, which LLVM vectorises without runtime alias checks or
+    index-wrap assumptions (with one view per input row it does not).
+    """
+    wd = mask.shape[1]
+    w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11, w12 = (
+        sw[0], sw[1], sw[2], sw[3], sw[4], sw[5], sw[6],
+        sw[7], sw[8], sw[9], sw[10], sw[11], sw[12],
+    )  # fmt: skip
+    tiny = np.float32(1e-20)
+    rs, ch = _JBF_RS, _JBF_CHUNK
+    b = np.zeros(21 * rs, np.float32)  # 5 rows × (guide, x, y, z), then the mask
+    ob = np.zeros(3 * ch, np.float32)
+    ox, oy, oz = ob[:ch], ob[ch : 2 * ch], ob[2 * ch :]
+    bm = b[20 * rs :]
+    for i in range(mask.shape[0]):
+        for j0 in range(0, wd, ch):
+            n = min(ch, wd - j0)
+            for r in range(5):
+                gr = guide[i + r][j0 : j0 + n + 4]
+                sr = src[i + r][3 * j0 : 3 * (j0 + n + 4)]
+                bg, bx = b[4 * r * rs :], b[(4 * r + 1) * rs :]
+                by, bz = b[(4 * r + 2) * rs :], b[(4 * r + 3) * rs :]
+                for x in range(n + 4):
+                    bg[x] = gr[x]
+                for x in range(n + 4):
+                    bx[x], by[x], bz[x] = sr[3 * x], sr[3 * x + 1], sr[3 * x + 2]
+            mr = mask[i][j0 : j0 + n]
+            for x in range(n):
+                bm[x] = mr[x]
+            g0, x0, y0, z0 = _jb_planes(b, 0, 0)
+            g1, x1, y1, z1 = _jb_planes(b, 1, -1)
+            g2, x2, y2, z2 = _jb_planes(b, 1, 0)
+            g3, x3, y3, z3 = _jb_planes(b, 1, 1)
+            g4, x4, y4, z4 = _jb_planes(b, 2, -2)
+            g5, x5, y5, z5 = _jb_planes(b, 2, -1)
+            g6, x6, y6, z6 = _jb_planes(b, 2, 0)
+            g7, x7, y7, z7 = _jb_planes(b, 2, 1)
+            g8, x8, y8, z8 = _jb_planes(b, 2, 2)
+            g9, x9, y9, z9 = _jb_planes(b, 3, -1)
+            g10, x10, y10, z10 = _jb_planes(b, 3, 0)
+            g11, x11, y11, z11 = _jb_planes(b, 3, 1)
+            g12, x12, y12, z12 = _jb_planes(b, 4, 0)
+            for j in range(n):
+                gc = g6[j]
+                ax, ay, az = w6 * x6[j], w6 * y6[j], w6 * z6[j]
+                ax, ay, az = _jb_tap(gc, g0, x0, y0, z0, j, w0, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g1, x1, y1, z1, j, w1, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g2, x2, y2, z2, j, w2, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g3, x3, y3, z3, j, w3, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g4, x4, y4, z4, j, w4, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g5, x5, y5, z5, j, w5, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g7, x7, y7, z7, j, w7, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g8, x8, y8, z8, j, w8, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g9, x9, y9, z9, j, w9, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g10, x10, y10, z10, j, w10, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g11, x11, y11, z11, j, w11, c, ax, ay, az)
+                ax, ay, az = _jb_tap(gc, g12, x12, y12, z12, j, w12, c, ax, ay, az)
+                n2 = ax * ax + ay * ay + az * az
+                inv = bm[j] / np.sqrt(n2) if n2 > tiny else _F0
+                ox[j], oy[j], oz[j] = ax * inv, ay * inv, az * inv
+            o = out[i][3 * j0 : 3 * (j0 + n)]
+            for j in range(n):
+                o[3 * j], o[3 * j + 1], o[3 * j + 2] = ox[j], oy[j], oz[j]
+
+
 def _log_depth(depth: F32, mask: np.ndarray | None, out: F32 | None = None) -> F32:
     """Log depth with background (mask 0, depth not finite or ≤ 0) pushed to ≥ BACKGROUND,
     by arithmetic only (masked writes cost ~8 ms at 1080p; cv2.log is slow on +inf, so clamp
@@ -193,10 +442,12 @@ class DepthPyramid:
 
     def _build_01(self, depth: F32, mask: np.ndarray | None) -> None:
         """Levels 0 and 1 (even-sized level 0), strip by strip on all cores: the same per-pixel
-        and per-block arithmetic as :func:`_log_depth` and :meth:`_down_geometry` (exact 2×2
-        area resizes do not mix blocks), and the level-1 samples that lost pixels to another
-        surface (:meth:`_excluded`)."""
+        and per-block arithmetic as :func:`_log_depth` and :meth:`_down_geometry`, in one
+        compiled pass (:func:`_build01_rows`) after the log of the clamped depth (cv2.log is
+        slow on +inf), with the level-1 samples that lost pixels to another surface
+        (:meth:`_excluded`)."""
         h, w = depth.shape
+        depth = np.ascontiguousarray(depth)
         logd0 = np.empty((h, w), np.float32)
         mask0 = np.empty((h, w), np.float32)
         keep0 = np.empty((h, w), np.float32)
@@ -205,48 +456,30 @@ class DepthPyramid:
         mask1 = np.empty((h // 2, w // 2), np.float32)
         excl1 = np.empty((h // 2, w // 2), np.bool_)
         thr = np.float32(_DOWN_EXCLUDE * self.depth_sigma)
-
-        mask_b = None if mask is None else (mask if mask.dtype == np.bool_ else mask > 0)
-        rows = STRIP_ROWS
-        background = np.full((rows, w), BACKGROUND, np.float32)
+        no_mask = np.zeros((0, w), np.uint8)
+        mask8 = None
+        if mask is not None and mask.dtype == np.bool_:
+            mask8 = np.ascontiguousarray(mask).view(np.uint8)
 
         def strip(b0: int, b1: int) -> None:  # level-1 rows b0:b1, level-0 rows 2 b0:2 b1
             r0, r1 = 2 * b0, 2 * b1
             d = depth[r0:r1]
-            # log depth, then BACKGROUND where invalid (log of a clamped depth: cv2.log is slow
-            # on +inf; NaN and the rest of the invalid pixels are overwritten)
             far = logd0[r0:r1]
             clamped = cv2.min(d, float(BACKGROUND))  # type: ignore[call-overload]
             cv2.max(clamped, 1e-30, clamped)  # type: ignore[call-overload]
             cv2.log(clamped, far)
-            valid = (d > 0) & (d < np.inf)
-            if mask_b is not None:
-                valid &= mask_b[r0:r1]
-            invalid = ~valid
-            cv2.copyTo(background[: r1 - r0], invalid.view(np.uint8), far)
-            m = mask0[r0:r1]
-            np.copyto(m, valid)
-            # front surface of each 2×2 block; keep its members within 2 depth_sigma of it
-            rmin = np.minimum(far[0::2], far[1::2])
-            front = np.minimum(rmin[:, 0::2], rmin[:, 1::2])
-            front_rows = np.repeat(front, 2, axis=0)
-            front_up = cv2.merge([front_rows, front_rows]).reshape(r1 - r0, w)
-            keep_b = (far - front_up) <= thr
-            keep_b &= valid
-            keep = keep0[r0:r1]
-            np.copyto(keep, keep_b)
-            half = (w // 2, b1 - b0)
-            wsum = cover0[b0:b1]
-            cv2.resize(keep, half, wsum, interpolation=cv2.INTER_AREA)
-            lsum = cv2.resize(far * keep, half, interpolation=cv2.INTER_AREA)
-            np.greater(wsum, 0, out=mask1[b0:b1], casting="unsafe")
-            # covered block sums are ≥ 1/4: dividing by max(wsum, 1/4) leaves them exact and
-            # the empty blocks (lsum = 0) at 0
-            np.divide(lsum, cv2.max(wsum, 0.25), out=logd1[b0:b1])  # type: ignore[call-overload]
-            lost = cv2.resize(m - keep, half, interpolation=cv2.INTER_AREA)
-            np.greater(lost, 0, out=excl1[b0:b1])
+            if mask is None:
+                m8 = no_mask
+            elif mask8 is not None:
+                m8 = mask8[r0:r1]
+            else:
+                m8 = np.asarray(mask[r0:r1] > 0).view(np.uint8)
+            _build01_rows(
+                d, m8, thr, far, mask0[r0:r1], keep0[r0:r1],
+                cover0[b0:b1], logd1[b0:b1], mask1[b0:b1], excl1[b0:b1],
+            )  # fmt: skip
 
-        run_strips(h // 2, strip, rows=STRIP_ROWS // 2)
+        run_strips(h // 2, strip, rows=max(1, strip_rows(w) // 2))
         self.logd += [logd0, logd1]
         self.mask += [mask0, mask1]
         self.keep.append(keep0)
@@ -254,29 +487,37 @@ class DepthPyramid:
         self._masks[1001] = excl1
 
     def _down_geometry(self, logd: F32, m: F32) -> tuple[F32, F32]:
+        """Level k + 1 from level k = ``self.levels`` (log depth ``logd``, coverage ``m``):
+        the front-surface block means of :func:`_down_geometry_rows` (odd sizes padded with
+        background), appending level k's ``keep`` and level k + 1's ``cover`` and excluded
+        samples (:meth:`_excluded`). Returns level k + 1's log depth and coverage."""
+        k = self.levels
         h, w = logd.shape
         ph, pw = h + (h & 1), w + (w & 1)
-        far = np.where(m > 0, logd, BACKGROUND) if len(self.logd) > 1 else logd
+        excl = self._excluded(k)
+        logd = np.ascontiguousarray(logd, np.float32)
+        m = np.ascontiguousarray(m, np.float32)
         if (ph, pw) != (h, w):
-            far = np.pad(far, ((0, ph - h), (0, pw - w)), constant_values=BACKGROUND)
-            m = np.pad(m, ((0, ph - h), (0, pw - w)))
-        front = np.minimum(
-            np.minimum(far[0::2, 0::2], far[0::2, 1::2]),
-            np.minimum(far[1::2, 0::2], far[1::2, 1::2]),
-        )
-        front_up = cv2.resize(front, (pw, ph), interpolation=cv2.INTER_NEAREST)
-        keep_b = (far - front_up) <= np.float32(_DOWN_EXCLUDE * self.depth_sigma)
-        keep_b &= m > 0
-        keep = keep_b.astype(np.float32)
+            pad = ((0, ph - h), (0, pw - w))
+            logd, m, excl = np.pad(logd, pad), np.pad(m, pad), np.pad(excl, pad)
+        keep = np.empty((ph, pw), np.float32)
+        cover = np.empty((ph // 2, pw // 2), np.float32)
+        l_low = np.empty((ph // 2, pw // 2), np.float32)
+        m_low = np.empty((ph // 2, pw // 2), np.float32)
+        excl_low = np.empty((ph // 2, pw // 2), np.bool_)
+        thr = np.float32(_DOWN_EXCLUDE * self.depth_sigma)
+
+        def strip(b0: int, b1: int) -> None:
+            r0, r1 = 2 * b0, 2 * b1
+            _down_geometry_rows(
+                logd[r0:r1], m[r0:r1], excl[r0:r1], thr, keep[r0:r1],
+                cover[b0:b1], l_low[b0:b1], m_low[b0:b1], excl_low[b0:b1],
+            )  # fmt: skip
+
+        run_strips(ph // 2, strip, rows=max(1, strip_rows(pw) // 2))
         self.keep.append(keep if (ph, pw) == (h, w) else np.ascontiguousarray(keep[:h, :w]))
-        wsum = np.asarray(
-            cv2.resize(keep, (pw // 2, ph // 2), interpolation=cv2.INTER_AREA), np.float32
-        )
-        self.cover.append(wsum)
-        lsum = cv2.resize(far * keep, (pw // 2, ph // 2), interpolation=cv2.INTER_AREA)
-        m_low = np.asarray(wsum > 0, np.float32)
-        l_low = np.zeros(lsum.shape, np.float32)
-        np.divide(lsum, wsum, out=l_low, where=wsum > 0)
+        self.cover.append(cover)
+        self._masks[1000 + k + 1] = excl_low
         return l_low, m_low
 
     def _weighted(self, v: F32, lvl: int) -> F32:
@@ -323,23 +564,17 @@ class DepthPyramid:
         return np.asarray(v * (inv[..., None] if v.ndim == 3 else inv), np.float32)
 
     def _down_unit(self, v: F32, lvl: int) -> F32:
-        """Block sums / 4 of a unit-vector field (even-sized level): a plain area resize, then
-        the blocks that are not entirely kept (silhouettes, depth jumps) redone from their kept
-        pixels only — the same as weighting by ``keep``, without a full-resolution multiply."""
+        """Block sums / 4 of a unit-vector field (even-sized level, C-contiguous) weighted by
+        ``keep``, strip-parallel (:func:`_down_unit_rows`); blocks without kept pixels are 0."""
         h, w = self.shape(lvl)
-        out = np.asarray(cv2.resize(v, (w // 2, h // 2), interpolation=cv2.INTER_AREA), np.float32)
-        cover = self.cover[lvl]
-        part = np.flatnonzero((cover < 1.0) & (cover > 0.0))
+        out = np.empty((h // 2, w // 2, 3), np.float32)
         keep = self.keep[lvl]
-        if part.size:
-            by, bx = np.divmod(part, w // 2)
-            acc = np.zeros((part.size, 3), np.float32)
-            for dy in (0, 1):
-                for dx in (0, 1):
-                    yy, xx = 2 * by + dy, 2 * bx + dx
-                    acc += keep[yy, xx][:, None] * v[yy, xx]
-            out.reshape(-1, 3)[part] = acc * np.float32(0.25)
-        return out  # blocks without kept pixels: unspecified (zeroed by the caller)
+
+        def strip(b0: int, b1: int) -> None:
+            _down_unit_rows(v[2 * b0 : 2 * b1], keep[2 * b0 : 2 * b1], out[b0:b1])
+
+        run_strips(h // 2, strip, rows=max(1, strip_rows(w) // 2))
+        return out
 
     @property
     def levels(self) -> int:
@@ -432,7 +667,8 @@ class DepthPyramid:
 
     def _excluded(self, k: int) -> NDArray[np.bool_]:
         """(h_k, w_k): samples of level k whose blocks lost a covered level-0 pixel to the
-        front-surface selection of some level below (a surface not represented there)."""
+        front-surface selection of some level below (a surface not represented there); made
+        with each level by :meth:`_down_geometry` (cached), else from the level below."""
         key = 1000 + k
         got = self._masks.get(key)
         if got is not None:
@@ -770,7 +1006,16 @@ def normal_pyramid(
 
 
 def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
-    """Joint bilateral filter of a unit-vector field at level k, guided by log depth."""
+    """Joint bilateral filter of a unit-vector field at level k, guided by log depth, then
+    renormalised and 0 on background (LLA §5).
+
+    Weights G_σ(p − q) G_r(g_p − g_q) over the circular window of radius
+    max(1, round(1.5 σ)) (that of ``cv2.ximgproc.jointBilateralFilter``, borders reflected),
+    G_r of standard deviation ``depth_sigma`` on the guide g: log depth, background far behind
+    every surface. Radii ≤ 2 (every level the pyramid picks, σ ≤ 1.5) run the compiled
+    :func:`_jbf_rows` on row strips, with G_r evaluated to 2e-7 (:func:`_range_weight`);
+    larger ones (levels capped by a small image) ``cv2.ximgproc.jointBilateralFilter``.
+    """
     m = geo.mask[k]
     valid = m > 0
     if not np.any(valid):
@@ -780,10 +1025,34 @@ def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
     far = max(float(logd.max()), 0.0) + 40.0 * geo.depth_sigma
     guide = np.asarray(logd + (np.float32(1.0) - m) * np.float32(far), np.float32)
     radius = max(1, round(1.5 * sigma))
-    out = cv2.ximgproc.jointBilateralFilter(
-        guide, np.ascontiguousarray(src), 2 * radius + 1, geo.depth_sigma, sigma
+    if radius > 2:
+        out = cv2.ximgproc.jointBilateralFilter(
+            guide, np.ascontiguousarray(src), 2 * radius + 1, geo.depth_sigma, sigma
+        )
+        return normalize_field(np.asarray(out, np.float32), m)
+    h, w = m.shape
+    border = cv2.BORDER_REFLECT_101
+    guide_p = cv2.copyMakeBorder(guide, 2, 2, 2, 2, border)
+    src_p = cv2.copyMakeBorder(np.ascontiguousarray(src, np.float32), 2, 2, 2, 2, border)
+    src_p = src_p.reshape(h + 4, 3 * (w + 4))
+    sw = np.array(
+        [
+            math.exp(-0.5 * (dy * dy + dx * dx) / (sigma * sigma))
+            if dy * dy + dx * dx <= radius * radius
+            else 0.0
+            for dy, dx in _JBF_TAPS
+        ],
+        np.float32,
     )
-    return normalize_field(np.asarray(out, np.float32), m)
+    c = np.float32(0.5 / (geo.depth_sigma * geo.depth_sigma))
+    res = np.empty((h, w, 3), np.float32)
+    flat = res.reshape(h, 3 * w)
+
+    def strip(r0: int, r1: int) -> None:
+        _jbf_rows(guide_p[r0 : r1 + 4], src_p[r0 : r1 + 4], m[r0:r1], sw, c, flat[r0:r1])
+
+    run_strips(h, strip, rows=strip_rows(w, STRIP_PIXELS // 4))
+    return res
 
 
 def multiscale_normals(
