@@ -31,7 +31,7 @@ def warm(mesh: Path = EXAMPLE, size: tuple[int, int] = (96, 72)) -> dict[str, fl
     frame = render(loaded, width, height, camera=auto_camera(loaded, width=width, height=height))
     bare = frame.copy()
     for name in list(bare.buffers):
-        if name not in ("normal", "depth", "albedo"):
+        if name not in ("normal", "depth", "albedo", "beauty"):
             bare.buffers.pop(name)
     times: dict[str, float] = {}
     for name in operators():
