@@ -964,6 +964,105 @@ def _radiance_rows(lit, col, const, rad, beauty, first):  # type: ignore[no-unty
                 b[j] += v
 
 
+def ratio_relight(
+    beauty: np.ndarray,
+    lobes: dict[str, tuple[np.ndarray, np.ndarray | None]],
+    original: dict[str, np.ndarray],
+    aligned: dict[str, np.ndarray],
+    eps: float,
+    ratio_max: float,
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Renderer lobes relit by a ratio of two shadings (Depict's ratio form of relighting)::
+
+        ρ_j = clamp((aligned_j + ε) / (original_j + ε), 0, ratio_max),
+        lobe_j' = ρ_j · lobe_j,   light_j' = ρ_j · light_j,
+        beauty' = beauty + Σ_j (lobe_j' − lobe_j)
+
+    so the renderer's own lighting, textures and indirect light are kept and only the change of
+    the shading (e.g. Local Light Alignment's aligned lights, :func:`shade_directions`) is applied.
+
+    Parameters
+    ----------
+    beauty : (H, W, 3) the beauty the lobes are part of.
+    lobes : lobe -> ((H, W, 3) radiance, (H, W, 3) light without colour or None).
+    original, aligned : lobe -> (H, W, 3) the two shadings of each lobe.
+    eps : ε > 0 keeps the ratio finite where the original shading is dark.
+    ratio_max : the largest ratio.
+
+    Returns
+    -------
+    (beauty', lobe -> lobe', lobe -> light' for the lobes given a light); one compiled pass per
+    row strip, every input read once.
+    """
+    hgt, wid = beauty.shape[:2]
+    shape = (hgt, wid, 3)
+
+    def flat(a: np.ndarray, what: str) -> np.ndarray:
+        a = np.ascontiguousarray(a, np.float32)
+        if a.shape != shape:
+            raise ValueError(f"{what} must have shape {shape}, got {a.shape}")
+        return a.reshape(hgt, 3 * wid)
+
+    base = flat(beauty, "beauty")
+    names = list(lobes)
+    ins = {
+        n: (
+            flat(lobes[n][0], f"lobes[{n!r}]"),
+            None if lobes[n][1] is None else flat(lobes[n][1], f"light of {n!r}"),  # type: ignore[arg-type]
+            flat(aligned[n], f"aligned[{n!r}]"),
+            flat(original[n], f"original[{n!r}]"),
+        )
+        for n in names
+    }
+    out = np.empty(shape, np.float32)
+    new = {n: np.empty(shape, np.float32) for n in names}
+    new_light = {n: np.empty(shape, np.float32) for n in names if lobes[n][1] is not None}
+    acc = out.reshape(hgt, 3 * wid)
+    e, rmax = np.float32(eps), np.float32(ratio_max)
+
+    def strip(r0: int, r1: int) -> None:
+        acc[r0:r1] = base[r0:r1]
+        for n in names:
+            lobe, light, a, o = ins[n]
+            nl = new_light[n].reshape(hgt, 3 * wid)[r0:r1] if light is not None else acc[r0:r0]
+            _ratio_rows(
+                lobe[r0:r1],
+                lobe[r0:r0] if light is None else light[r0:r1],
+                a[r0:r1],
+                o[r0:r1],
+                e,
+                rmax,
+                new[n].reshape(hgt, 3 * wid)[r0:r1],
+                nl,
+                acc[r0:r1],
+            )
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)
+    return out, new, new_light
+
+
+@kernel
+def _ratio_rows(lobe, light, a, o, eps, rmax, new, new_light, acc):  # type: ignore[no-untyped-def]
+    """Rows (3W) of :func:`ratio_relight` for one lobe: ``new`` = ρ·lobe, ``acc`` += new − lobe
+    and, when ``light`` has rows, ``new_light`` = ρ·light."""
+    zero = np.float32(0.0)
+    with_light = light.shape[0] > 0
+    ratio = np.empty(lobe.shape[1], np.float32)
+    for i in range(lobe.shape[0]):
+        lb, ar, orow, nw, ac = lobe[i], a[i], o[i], new[i], acc[i]
+        for j in range(lb.shape[0]):
+            r = (ar[j] + eps) / (orow[j] + eps)
+            r = min(max(r, zero), rmax)
+            ratio[j] = r
+            v = lb[j] * r
+            nw[j] = v
+            ac[j] += v - lb[j]
+        if with_light:
+            lt, nlt = light[i], new_light[i]
+            for j in range(lt.shape[0]):
+                nlt[j] = lt[j] * ratio[j]
+
+
 def _dot_rows(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """:func:`dot` (the same rounding) of (h, w, 3) fields that may be row-strided views, or
     of a field and a (3,) vector, without copying them."""

@@ -21,6 +21,7 @@ from ops.shading import (
     normalize,
     parse_light,
     phong,
+    ratio_relight,
     reflect,
     refract,
     shade_lobes,
@@ -350,3 +351,24 @@ def test_lobe_radiance_is_light_times_colour_and_its_sum() -> None:
     np.testing.assert_allclose(beauty, sum(lights[n] * colors[n] for n in lights), rtol=1e-5)
     with pytest.raises(ValueError, match="colors"):
         lobe_radiance(lights, {**colors, "specular": np.ones((2, 2, 3), np.float32)})
+
+
+def test_ratio_relight_scales_each_lobe_by_the_clamped_ratio() -> None:
+    rng = np.random.default_rng(3)
+    shape = (7, 13, 3)
+    diffuse, specular, light = (rng.random(shape, dtype=np.float32) for _ in range(3))
+    remainder = rng.random(shape, dtype=np.float32)
+    beauty = diffuse + specular + remainder
+    original = {n: rng.random(shape, dtype=np.float32) for n in ("diffuse", "specular")}
+    aligned = {n: 3 * rng.random(shape, dtype=np.float32) for n in ("diffuse", "specular")}
+    kept = {n: a.copy() for n, a in original.items()}
+    lobes = {"diffuse": (diffuse, light), "specular": (specular, None)}
+    out, new, new_light = ratio_relight(beauty, lobes, original, aligned, 0.05, 4.0)
+    ratio = {n: np.clip((aligned[n] + 0.05) / (original[n] + 0.05), 0, 4.0) for n in aligned}
+    np.testing.assert_allclose(new["diffuse"], diffuse * ratio["diffuse"], rtol=1e-6)
+    np.testing.assert_allclose(new["specular"], specular * ratio["specular"], rtol=1e-6)
+    np.testing.assert_allclose(new_light["diffuse"], light * ratio["diffuse"], rtol=1e-6)
+    assert set(new_light) == {"diffuse"}
+    np.testing.assert_allclose(out, remainder + new["diffuse"] + new["specular"], atol=1e-5)
+    for n in original:  # the inputs are left as they were
+        np.testing.assert_array_equal(original[n], kept[n])

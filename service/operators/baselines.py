@@ -38,7 +38,7 @@ class OneLightParams(Params):
 
 def _shade(frame: Frame, p: OneLightParams, shading: np.ndarray) -> None:
     albedo = frame_albedo(frame, p.albedo)
-    img = (np.asarray(shading, np.float32)[..., None] * albedo).astype(np.float32)
+    img = (np.asarray(shading, np.float32)[..., None] * albedo).astype(np.float32, copy=False)
     old = frame.buffers.get("beauty")
     frame.buffers["beauty"] = (
         img if old is None else np.where((frame.mask > 0)[..., None], img, old)

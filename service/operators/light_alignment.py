@@ -35,7 +35,7 @@ from pydantic import Field, model_validator
 from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
-from ops.shading import Light, lobe_radiance, shade_directions
+from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
 from service.operators.common import LightsParams, channels, frame_albedo
 from service.registry import Context, register
 
@@ -267,15 +267,9 @@ def _ratio(
     lobes = [lobe for lobe in aligned if lobe in frame.buffers]
     if not lobes:
         frame.need("diffuse", "form 'ratio' needs a diffuse, specular or transmission lobe")
-    beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty").astype(np.float32)
-    for lobe in lobes:
-        ratio = np.clip((aligned[lobe] + eps) / (original[lobe] + eps), 0.0, p.ratio_max)
-        old = frame.buffers[lobe]
-        new = (old * ratio).astype(np.float32)
-        beauty = beauty + (new - old)
-        frame.buffers[lobe] = new
-        if f"{lobe}.light" in frame.buffers:
-            frame.buffers[f"{lobe}.light"] = (frame.buffers[f"{lobe}.light"] * ratio).astype(
-                np.float32
-            )
-    frame.buffers["beauty"] = beauty.astype(np.float32)
+    beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty")
+    given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
+    out, new, new_light = ratio_relight(beauty, given, original, aligned, eps, p.ratio_max)
+    frame.buffers.update(new)
+    frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
+    frame.buffers["beauty"] = out

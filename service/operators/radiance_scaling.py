@@ -269,7 +269,7 @@ def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context)
         if "beauty" in frame.buffers:  # the renderer's background passes through
             covered = (frame.mask > 0)[..., None]
             beauty = np.where(covered, beauty, frame.buffers["beauty"])
-    frame.buffers["beauty"] = beauty.astype(np.float32)
+    frame.buffers["beauty"] = beauty.astype(np.float32, copy=False)
     if ctx.debug_layers:
         frame.set_layer("curvature", {"H": curv_ops.isotropic(curv, p.gain)})
         for lobe, s in sigmas.items():

@@ -94,7 +94,9 @@ def _pixel_sizes(frame: Frame, p: UnsharpParams) -> np.ndarray:
         return pixel_sizes(frame, "unsharp_masking with sigma in scene units")
     depth = frame.need("depth", "unsharp_masking")
     focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
-    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(np.float32)
+    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(
+        np.float32, copy=False
+    )
 
 
 def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
@@ -138,7 +140,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             raise PipelineError(f"unsharp_masking: no RGB layer {p.unlit!r} (unlit) in the file")
         unlit_y = luminance(np.dstack([unlit["R"], unlit["G"], unlit["B"]]))
         term = np.clip(luminance(beauty) / np.maximum(unlit_y, np.float32(1e-6)), 0.0, 1.0)
-        signal = np.repeat(term[..., None], 3, axis=2).astype(np.float32)
+        signal = np.repeat(term[..., None], 3, axis=2).astype(np.float32, copy=False)
         white: float | Auto = 1.0
     else:
         lobe = None if p.signal == "beauty" else p.signal
@@ -166,11 +168,13 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
     )
     if p.signal == "shadows":
         factor = out[..., :1] / np.maximum(signal[..., :1], np.float32(1e-6))
-        frame.buffers["beauty"] = np.where(signal > 0, beauty * factor, beauty).astype(np.float32)
+        frame.buffers["beauty"] = np.where(signal > 0, beauty * factor, beauty).astype(
+            np.float32, copy=False
+        )
     elif p.signal == "beauty":
         frame.buffers["beauty"] = out
     else:
-        frame.buffers["beauty"] = (beauty + (out - signal)).astype(np.float32)
+        frame.buffers["beauty"] = (beauty + (out - signal)).astype(np.float32, copy=False)
         frame.buffers[p.signal] = out
 
 
