@@ -51,7 +51,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.jit import kernel
+from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
@@ -759,6 +759,19 @@ def _reflect101(i, n):  # type: ignore[no-untyped-def]
     return i
 
 
+@inline_kernel
+def _taps4(out, r0, r1, r2, r3, k, first):  # type: ignore[no-untyped-def]
+    """``out`` = (or += unless ``first``) k[0]·r0 + k[1]·r1 + k[2]·r2 + k[3]·r3, four taps of a
+    filter summed in registers per store."""
+    k0, k1, k2, k3 = k[0], k[1], k[2], k[3]
+    if first:
+        for x in range(out.shape[0]):
+            out[x] = k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+    else:
+        for x in range(out.shape[0]):
+            out[x] += k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+
+
 @kernel
 def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
     """``dst[c, i]`` = row ``a + i`` of the separable convolution of plane ``src[c]`` with
@@ -786,13 +799,7 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
                     src[c, idx[t + 2]],
                     src[c, idx[t + 3]],
                 )
-                k0, k1, k2, k3 = kp[t], kp[t + 1], kp[t + 2], kp[t + 3]
-                if t == 0:
-                    for x in range(wid):
-                        mid[x] = k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
-                else:
-                    for x in range(wid):
-                        mid[x] += k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+                _taps4(mid, r0, r1, r2, r3, kp[t : t + 4], t == 0)
             for t in range(1, g + 1):
                 col[g - t] = mid[_reflect101(-t, wid)]
                 col[g + wid - 1 + t] = mid[_reflect101(wid - 1 + t, wid)]
@@ -804,13 +811,7 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
                     col[t + 2 : t + 2 + wid],
                     col[t + 3 : t + 3 + wid],
                 )
-                k0, k1, k2, k3 = kp[t], kp[t + 1], kp[t + 2], kp[t + 3]
-                if t == 0:
-                    for x in range(wid):
-                        out[x] = k0 * s0[x] + k1 * s1[x] + k2 * s2[x] + k3 * s3[x]
-                else:
-                    for x in range(wid):
-                        out[x] += k0 * s0[x] + k1 * s1[x] + k2 * s2[x] + k3 * s3[x]
+                _taps4(out, s0, s1, s2, s3, kp[t : t + 4], t == 0)
 
 
 @kernel

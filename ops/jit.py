@@ -37,3 +37,12 @@ def kernel(fn: F) -> F:
     """Compile ``fn`` as a serial, GIL-free, cached Numba kernel with the options above."""
     jit = numba.njit(nogil=True, cache=True, fastmath=set(FASTMATH), error_model="numpy")
     return cast(F, jit(fn))
+
+
+def inline_kernel(fn: F) -> F:
+    """:func:`kernel` for a small piece of other kernels, inlined into each caller (so that a
+    loop in it is vectorised with the caller's knowledge of its arrays)."""
+    jit = numba.njit(
+        nogil=True, cache=True, fastmath=set(FASTMATH), error_model="numpy", inline="always"
+    )
+    return cast(F, jit(fn))

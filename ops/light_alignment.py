@@ -72,7 +72,7 @@ import cv2
 import numpy as np
 
 from ops.filtering import F32, NormalPyramid, normalize_field
-from ops.jit import kernel
+from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
 from ops.shading import Light, light_vectors
 
@@ -302,6 +302,13 @@ _FIELD_TINY2 = np.float32(1e-12)  # |n| ≥ 1e-6 for upsampled fields
 _LIGHT_TINY2 = np.float32(1e-24)  # |ℓ| ≥ 1e-12 for upsampled lights
 
 
+@inline_kernel
+def _deinterleave(src, dst):  # type: ignore[no-untyped-def]
+    """The first ``dst.shape[1]`` XYZ triples of the flat row ``src`` into planes ``dst`` (3, w)."""
+    for j in range(dst.shape[1]):
+        dst[0, j], dst[1, j], dst[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
+
+
 @kernel
 def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):  # type: ignore[no-untyped-def]
     """One scale of Eq. 1 (§4-6) on rows of structure-of-arrays planes.
@@ -335,16 +342,12 @@ def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):
         # rows sliced at their offsets: indices from 0 (an index ``o + j`` is not provably
         # non-negative, so its wraparound check stops vectorisation)
         if use_fa:
-            src = flat_a[i][3 * oa :]
-            for j in range(wd):
-                fa[0, j], fa[1, j], fa[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
+            _deinterleave(flat_a[i][3 * oa :], fa)
             ax_r, ay_r, az_r = fa[0], fa[1], fa[2]
         else:
             ax_r, ay_r, az_r = na[0][i][oa:], na[1][i][oa:], na[2][i][oa:]
         if use_fv:
-            src = flat_v[i][3 * ov :]
-            for j in range(wd):
-                fv[0, j], fv[1, j], fv[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
+            _deinterleave(flat_v[i][3 * ov :], fv)
             vx_r, vy_r, vz_r = fv[0], fv[1], fv[2]
         else:
             vx_r, vy_r, vz_r = view[0][i][ov:], view[1][i][ov:], view[2][i][ov:]
