@@ -760,16 +760,16 @@ def _reflect101(i, n):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _taps4(out, r0, r1, r2, r3, k, first):  # type: ignore[no-untyped-def]
-    """``out`` = (or += unless ``first``) k[0]·r0 + k[1]·r1 + k[2]·r2 + k[3]·r3, four taps of a
-    filter summed in registers per store."""
-    k0, k1, k2, k3 = k[0], k[1], k[2], k[3]
+def _taps(out, r0, r1, r2, r3, r4, k, first):  # type: ignore[no-untyped-def]
+    """``out`` = (or += unless ``first``) k[0]·r0 + … + k[4]·r4, five taps of a filter summed in
+    registers per store."""
+    k0, k1, k2, k3, k4 = k[0], k[1], k[2], k[3], k[4]
     if first:
         for x in range(out.shape[0]):
-            out[x] = k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+            out[x] = k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x] + k4 * r4[x]
     else:
         for x in range(out.shape[0]):
-            out[x] += k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x]
+            out[x] += k0 * r0[x] + k1 * r1[x] + k2 * r2[x] + k3 * r3[x] + k4 * r4[x]
 
 
 @kernel
@@ -778,11 +778,12 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
     ``kern`` ⊗ ``kern`` (odd length), edges reflected as cv2's default BORDER_REFLECT_101: what
     cv2.GaussianBlur gives on those rows, up to rounding.
 
-    Taps go four at a time, summed in registers (a row accumulated tap by tap in memory runs
-    five times slower); the kernel is padded with zero taps to a multiple of four."""
+    Taps go five at a time, summed in registers (a row accumulated tap by tap in memory runs
+    five times slower); the kernel is padded with zero taps to a multiple of five (a 9-tap
+    Gaussian takes two passes over each row)."""
     nc, n, wid = src.shape
     g = kern.shape[0] // 2
-    nt = (kern.shape[0] + 3) // 4 * 4
+    nt = (kern.shape[0] + 4) // 5 * 5
     kp = np.zeros(nt, np.float32)
     kp[: kern.shape[0]] = kern
     col = np.zeros(wid + nt + g, np.float32)  # a row of the vertical pass, reflected, 0 after
@@ -792,26 +793,18 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
         for i in range(dst.shape[1]):
             for t in range(nt):
                 idx[t] = _reflect101(a + i + min(t, 2 * g) - g, n)
-            for t in range(0, nt, 4):
-                r0, r1, r2, r3 = (
-                    src[c, idx[t]],
-                    src[c, idx[t + 1]],
-                    src[c, idx[t + 2]],
-                    src[c, idx[t + 3]],
-                )
-                _taps4(mid, r0, r1, r2, r3, kp[t : t + 4], t == 0)
+            for t in range(0, nt, 5):
+                r0, r1, r2 = src[c, idx[t]], src[c, idx[t + 1]], src[c, idx[t + 2]]
+                r3, r4 = src[c, idx[t + 3]], src[c, idx[t + 4]]
+                _taps(mid, r0, r1, r2, r3, r4, kp[t : t + 5], t == 0)
             for t in range(1, g + 1):
                 col[g - t] = mid[_reflect101(-t, wid)]
                 col[g + wid - 1 + t] = mid[_reflect101(wid - 1 + t, wid)]
             out = dst[c, i]
-            for t in range(0, nt, 4):
-                s0, s1, s2, s3 = (
-                    col[t : t + wid],
-                    col[t + 1 : t + 1 + wid],
-                    col[t + 2 : t + 2 + wid],
-                    col[t + 3 : t + 3 + wid],
-                )
-                _taps4(out, s0, s1, s2, s3, kp[t : t + 4], t == 0)
+            for t in range(0, nt, 5):
+                s0, s1, s2 = col[t : t + wid], col[t + 1 : t + 1 + wid], col[t + 2 : t + 2 + wid]
+                s3, s4 = col[t + 3 : t + 3 + wid], col[t + 4 : t + 4 + wid]
+                _taps(out, s0, s1, s2, s3, s4, kp[t : t + 5], t == 0)
 
 
 @kernel
