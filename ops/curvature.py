@@ -195,11 +195,37 @@ class _Coarse:
         return cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
 
     def directions(self) -> tuple[np.ndarray, np.ndarray]:
-        """Direction of k1 from the interpolated (d, b): θ = ½·atan2(b, d)."""
-        phi = cv2.phase(self.upsample(self.d), self.upsample(self.b))
-        np.multiply(phi, np.float32(0.5), out=phi)
-        dx, dy = _cv.polarToCart(None, phi)
+        """Direction of k1 from the interpolated (d, b): θ = ½·atan2(b, d) in [0, π), so that
+        dir_y >= 0 (:func:`_half_angle_rows`)."""
+        d, b = self.upsample(self.d), self.upsample(self.b)
+        dx, dy = np.empty_like(d), np.empty_like(d)
+        run_strips(
+            d.shape[0],
+            lambda r0, r1: _half_angle_rows(d[r0:r1], b[r0:r1], dx[r0:r1], dy[r0:r1]),
+            _STRIP_ROWS,
+        )
         return dx, dy
+
+
+@kernel
+def _half_angle_rows(d, b, dx, dy):  # type: ignore[no-untyped-def]
+    """(cos θ, sin θ) of θ = ½·atan2(b, d) taken in [0, π), without trigonometry: with
+    c = cos 2θ = d / r and s = sin 2θ = b / r (r = |(d, b)|; c = 1 where r = 0), the larger of
+    cos θ, sin θ from the half-angle formula (√((1 ± c)/2)) and the other from s = 2 sin θ cos θ,
+    which keeps both accurate; θ < 0 is turned by π (the direction of a line)."""
+    zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    for i in range(d.shape[0]):
+        dr, br, xr, yr = d[i], b[i], dx[i], dy[i]
+        for j in range(dr.shape[0]):
+            r = np.sqrt(dr[j] * dr[j] + br[j] * br[j])
+            inv = one / r if r > zero else zero
+            c = dr[j] * inv if r > zero else one
+            s = br[j] * inv
+            big = np.sqrt(max((one + abs(c)) * half, half))  # cos θ (c >= 0) or sin θ (c < 0)
+            small = abs(s) / (big + big)
+            neg = s < zero
+            xr[j] = (-big if neg else big) if c >= zero else (-small if neg else small)
+            yr[j] = small if c >= zero else big
 
 
 # -- validation ----------------------------------------------------------------------------------
