@@ -629,7 +629,7 @@ def _block_normals(normal, k, planes):  # type: ignore[no-untyped-def]
 @kernel
 def _block_coverage(depth, m8, k, cov, depth_l):  # type: ignore[no-untyped-def]
     """Per k x k block of ``depth`` (rows, W): ``cov`` 255 where the block's mean depth lies in
-    (1e-30, FLT_MAX) (every sample finite, the block in front of the camera) and, when ``m8``
+    [1e-30, FLT_MAX] (every sample finite, the block in front of the camera) and, when ``m8``
     (uint8, like ``depth``) has rows, all its mask bytes are non-zero, else 0; ``depth_l`` the
     block's top-left depth (nearest sampling: a jump stays a jump)."""
     wid = depth.shape[1]
@@ -702,8 +702,8 @@ def _hessian_rows(
 ) -> None:
     """(trace, q_x, q_y, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
     see :func:`principal_curvatures`); the block (``cov``, ``depth_l``) holds the neighbourhoods
-    those rows need, the planes of the normals ((3, rows, w): n_x, n_y, n_z; overwritten) only
-    its rows b0..b1 (below).
+    those rows need, the planes of the normals ((3, rows, w): n_x, n_y, n_z) only its rows
+    b0..b1 (below).
 
     Each step runs only on the rows the next one needs: the jump band on the whole block, the
     smoothing on ``o0 - 1 - g .. o1 + 1 + g`` (g: the kernel's half size; the rows it gets wrong
@@ -836,8 +836,8 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
 @kernel
 def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wgt):  # type: ignore[no-untyped-def]
     """The end of :func:`_hessian_rows` in one pass. From the smoothed planes N_x, N_y[, N_z] and
-    W = ``smooth[nch]`` (the rows of q): q = (N_x, N_y) / W, times (N_z / W)^-f clamped to
-    >= 0.01 when ``nch`` is 3; on q's rows ``rows[0]..rows[1]``, the trace of H = ∇q,
+    W = ``smooth[nch]`` (the rows of q): q = (N_x, N_y) / W, times (N_z / W)^-f with N_z / W
+    clamped to >= _NZ_MIN when ``nch`` is 3; on q's rows ``rows[0]..rows[1]``, the trace of H = ∇q,
     ``coef[2]``·∂q_x/∂col - ``coef[3]``·∂q_y/∂row (central differences, one-sided and doubled on
     the first and last column and on the first and last row of q), q itself, and the weight
     t²(3 - 2t)·[3x3 of ``covp`` all covered], t = clip((``wsw`` - coef[0])·coef[1], 0, 1)."""
@@ -855,7 +855,7 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wg
         if nch == 3:
             for j in range(wid):
                 inv = one / max(wr[j], np.float32(1e-6))
-                inv *= max(nz[j] * inv, np.float32(1e-2)) ** (-f)
+                inv *= max(nz[j] * inv, np.float32(_NZ_MIN)) ** (-f)
                 ox[j] = nx[j] * inv
                 oy[j] = ny[j] * inv
         else:

@@ -580,16 +580,6 @@ class DepthPyramid:
     def levels(self) -> int:
         return len(self.logd) - 1
 
-    def mask_u8(self, background: bool = False) -> NDArray[np.uint8]:
-        """(H, W) uint8 coverage of level 0, 1 on surfaces (``background``: 1 on background), a
-        ``cv2.copyTo`` mask (cached)."""
-        key = -2 if background else -1
-        got = self._masks.get(key)
-        if got is None:
-            cover = self.mask[0] > 0
-            got = self._masks[key] = np.asarray(~cover if background else cover).view(np.uint8)
-        return got
-
     def shape(self, k: int) -> tuple[int, int]:
         return (int(self.logd[k].shape[0]), int(self.logd[k].shape[1]))
 

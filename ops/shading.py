@@ -769,6 +769,22 @@ def shade_directions(
     return out
 
 
+def _flat_rows(
+    a: np.ndarray, shape: tuple[int, int, int], what: str, constant: bool = False
+) -> tuple[np.ndarray, bool]:
+    """An (H, W, 3) field as (H, 3W) float32 rows for a kernel (RGB indexed flat), or with
+    ``constant`` a (3,) vector as one (1, 3W) row used for every row; and whether it is that
+    one row."""
+    a = np.asarray(a, np.float32)
+    hgt, wid = shape[:2]
+    if constant and a.shape == (3,):
+        return np.tile(a, wid).reshape(1, 3 * wid), True
+    if a.shape != shape:
+        allowed = f"(3,) or {shape}" if constant else f"{shape}"
+        raise ValueError(f"{what} must have shape {allowed}, got {a.shape}")
+    return np.ascontiguousarray(a).reshape(hgt, 3 * wid), False
+
+
 def _shade_directional(
     normal: np.ndarray,
     view: np.ndarray,
@@ -783,19 +799,16 @@ def _shade_directional(
     or no specular: per light, one compiled pass per strip for the terms (:func:`_terms_rows`),
     (n·h)^s with cv2.pow on the strip, and one pass adding them times the irradiance."""
     hgt, wid = normal.shape[:2]
-
-    def rows(a: np.ndarray) -> tuple[np.ndarray, bool]:  # (rows, 3W) field or (1, 3W) constant
-        if a.ndim == 1:
-            return np.tile(np.asarray(a, np.float32), wid).reshape(1, 3 * wid), True
-        return np.ascontiguousarray(a, np.float32).reshape(hgt, 3 * wid), False
-
+    shape = (hgt, wid, 3)
     nrm = normal.reshape(hgt, 3 * wid)
-    v, vc = rows(view)
+    v, vc = _flat_rows(view, shape, "view", constant=True)
     per_light = []
     for i, light in enumerate(lights):
         own = np.asarray(light.vector, np.float32)
-        ld, ldc = rows(dirs["diffuse"][i] if "diffuse" in dirs else own)
-        ls, lsc = rows(dirs["specular"][i] if "specular" in dirs else own)
+        d_field = dirs["diffuse"][i] if "diffuse" in dirs else own
+        s_field = dirs["specular"][i] if "specular" in dirs else own
+        ld, ldc = _flat_rows(d_field, shape, f"directions['diffuse'][{i}]", constant=True)
+        ls, lsc = _flat_rows(s_field, shape, f"directions['specular'][{i}]", constant=True)
         e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
         per_light.append((ld, ldc, ls, lsc, e.reshape(3)))
     spec = specular != "none"
@@ -917,19 +930,14 @@ def lobe_radiance(
     if not names:
         raise ValueError("lobe_radiance needs at least one lobe")
     hgt, wid = lights[names[0]].shape[:2]
-    flat = {}
-    for n in names:
-        lit = np.ascontiguousarray(lights[n], np.float32)
-        if lit.shape != (hgt, wid, 3):
-            raise ValueError(f"lights[{n!r}] must have shape {(hgt, wid, 3)}, got {lit.shape}")
-        col = np.asarray(colors[n], np.float32)
-        if col.shape == (3,):
-            col = np.tile(col, wid).reshape(1, 3 * wid)
-        elif col.shape == (hgt, wid, 3):
-            col = np.ascontiguousarray(col).reshape(hgt, 3 * wid)
-        else:
-            raise ValueError(f"colors[{n!r}] must be (3,) or {(hgt, wid, 3)}, got {col.shape}")
-        flat[n] = (lit.reshape(hgt, 3 * wid), col)
+    shape = (hgt, wid, 3)
+    flat = {
+        n: (
+            _flat_rows(lights[n], shape, f"lights[{n!r}]")[0],
+            _flat_rows(colors[n], shape, f"colors[{n!r}]", constant=True),
+        )
+        for n in names
+    }
     radiance = {n: np.empty((hgt, wid, 3), np.float32) for n in names}
     beauty = np.empty((hgt, wid, 3), np.float32)
     rad = {n: r.reshape(hgt, 3 * wid) for n, r in radiance.items()}
@@ -937,8 +945,7 @@ def lobe_radiance(
 
     def strip(r0: int, r1: int) -> None:
         for k, n in enumerate(names):
-            lit, col = flat[n]
-            const = col.shape[0] == 1
+            lit, (col, const) = flat[n]
             rows = col if const else col[r0:r1]
             _radiance_rows(lit[r0:r1], rows, const, rad[n][r0:r1], out[r0:r1], k == 0)
 
@@ -998,10 +1005,7 @@ def ratio_relight(
     shape = (hgt, wid, 3)
 
     def flat(a: np.ndarray, what: str) -> np.ndarray:
-        a = np.ascontiguousarray(a, np.float32)
-        if a.shape != shape:
-            raise ValueError(f"{what} must have shape {shape}, got {a.shape}")
-        return a.reshape(hgt, 3 * wid)
+        return _flat_rows(a, shape, what)[0]
 
     base = flat(beauty, "beauty")
     names = list(lobes)
