@@ -15,7 +15,6 @@ allocator as it is. Elsewhere than on glibc it does nothing.
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 
 _M_TRIM_THRESHOLD = -1
@@ -33,12 +32,9 @@ def tune() -> bool:
         return True
     if os.environ.get("DEPICT_MALLOC", "tuned") == "system":
         return False
-    name = ctypes.util.find_library("c")
-    try:
-        mallopt = ctypes.CDLL(name).mallopt if name else None
-    except (OSError, AttributeError):
-        mallopt = None
-    if mallopt is None:
+    try:  # the C library the process already has (no search for it on disk)
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):  # not glibc (or no mallopt): leave the allocator as it is
         return False
     ok = mallopt(_M_MMAP_THRESHOLD, MMAP_THRESHOLD) == 1
     ok = mallopt(_M_TRIM_THRESHOLD, TRIM_THRESHOLD) == 1 and ok
