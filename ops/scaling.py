@@ -23,7 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
-from ops.jit import kernel
+from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
 #: Rec. 709 / sRGB luminance weights (linear RGB).
@@ -346,13 +346,15 @@ def scale_lobes(
     light_t = tuple(light_arr[n] for n in names)
     none = np.empty((0, 0, 3), np.float32)
 
+    gam = np.array([(g, min(g, _MAX_EXP)) for g in distinct], np.float32).reshape(-1, 2)
+
     def strip(r0: int, r1: int) -> None:
         r = slice(r0, r1)
-        expk = tuple(_exp_term(kap[r], g) for g in distinct)  # E shared by the lobes of one γ
         _scale_rows(
             tuple(x[r] for x in lobe_t),
             tuple(x[r] for x in light_t),
-            expk,
+            kap[r],
+            gam,
             coef,
             which,
             none if base is None else base[r],
@@ -378,38 +380,102 @@ def _pq_factors(alpha: float) -> tuple[float, float]:
     return 1.0, 1.0
 
 
+@inline_kernel
+def _luma_row(light, w0, w1, w2, d):  # type: ignore[no-untyped-def]
+    """d[j] = (w0, w1, w2) · pixel j of the flat RGB row ``light``."""
+    for j in range(d.shape[0]):
+        d[j] = w0 * light[3 * j] + w1 * light[3 * j + 1] + w2 * light[3 * j + 2]
+
+
+@inline_kernel
+def _exp_row(kappa, gamma, lim, e):  # type: ignore[no-untyped-def]
+    """e[j] = e^{−γκ_j}, γκ clipped to ±``lim`` and NaN κ counted as 0 (as :func:`_exp_term`)."""
+    zero = np.float32(0.0)
+    for j in range(e.shape[0]):
+        x = -gamma * kappa[j]
+        x = x if x == x else zero
+        e[j] = expf(min(max(x, -lim), lim))
+
+
+@inline_kernel
+def _sigma_row(d, e, pf, qf, s):  # type: ignore[no-untyped-def]
+    """Eq. 2 per pixel: σ = (P'E + Q') / (P' + Q'E), δ̄ = clip(d, 0, 1) (NaN → 0),
+    P' = ``pf``(1 − δ̄), Q' = ``qf`` δ̄ (see :func:`scale_lobes`)."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for j in range(s.shape[0]):
+        x = d[j]
+        x = x if x > zero else zero
+        x = x if x < one else one
+        p = pf * (one - x)
+        q = qf * x
+        s[j] = (p * e[j] + q) / (p + q * e[j])
+
+
+@inline_kernel
+def _put_scaled(acc, src, lobe, s, less):  # type: ignore[no-untyped-def]
+    """acc = src + (s − ``less``) · lobe on flat RGB rows (s per pixel; ``src`` may be ``acc``)."""
+    for j in range(s.shape[0]):
+        f = s[j] - less
+        for c in range(3):
+            m = 3 * j + c
+            acc[m] = src[m] + f * lobe[m]
+
+
+@inline_kernel
+def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):  # type: ignore[no-untyped-def]
+    """:func:`_put_scaled` of three lobes at once (one pass over ``acc``)."""
+    for j in range(s0.shape[0]):
+        f0, f1, f2 = s0[j] - less, s1[j] - less, s2[j] - less
+        for c in range(3):
+            m = 3 * j + c
+            acc[m] = src[m] + f0 * l0[m] + f1 * l1[m] + f2 * l2[m]
+
+
 @kernel
-def _scale_rows(lobes, lights, expk, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
+def _scale_rows(lobes, lights, kappa, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
     """Rows of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with ``mode``
     _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY; σ_k of lobe k
-    from E = ``expk[which[k]]`` and δ̄ = clip(coef[k, :3] · light_k, 0, 1), P' = coef[k, 3](1 - δ̄),
-    Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when it has rows. RGB rows
-    are indexed flat (3j + c) so that LLVM vectorises the loop."""
+    from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to ± ``gammas[which[k], 1]``, and
+    δ̄ = clip(coef[k, :3] · light_k, 0, 1), P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k
+    also into row ``r0 + i`` of ``sig[k]`` when it has rows.
+
+    Each step is its own loop over the row (E per γ, δ̄, σ, the sum), each vectorised by LLVM;
+    RGB rows are indexed flat (3j + c)."""
     zero, one = np.float32(0.0), np.float32(1.0)
     keep = sig.shape[1] > 0
     less = one if mode == _ACC_BEAUTY else zero
     wid = out.shape[1]
-    scratch = np.empty(wid, np.float32)  # σ of the row when it is not kept (no branch inside)
+    nl = len(lobes)
+    e = np.empty((gammas.shape[0], wid), np.float32)
+    d = np.empty(wid, np.float32)
+    zeros = np.zeros(3 * wid, np.float32)
+    s = np.empty((nl, wid), np.float32)  # σ of the row's lobes (contiguous rows)
     for i in range(out.shape[0]):
+        for g in range(gammas.shape[0]):
+            _exp_row(kappa[i], gammas[g, 0], gammas[g, 1], e[g])
+        for k in range(nl):
+            _luma_row(lights[k][i].reshape(3 * wid), coef[k, 0], coef[k, 1], coef[k, 2], d)
+            _sigma_row(d, e[which[k]], coef[k, 3], coef[k, 4], s[k])
+            if keep:
+                sig[k, r0 + i] = s[k]
         acc = out[i].reshape(3 * wid)
-        if mode == _ACC_LOBES:
-            acc[:] = zero
-        else:
-            acc[:] = base[i].reshape(3 * wid)
-        for k in range(len(lobes)):
-            lobe, light = lobes[k][i].reshape(3 * wid), lights[k][i].reshape(3 * wid)
-            e = expk[which[k]][i]
-            srow = sig[k, r0 + i] if keep else scratch
-            w0, w1, w2, pf, qf = coef[k, 0], coef[k, 1], coef[k, 2], coef[k, 3], coef[k, 4]
-            for j in range(wid):
-                d = w0 * light[3 * j] + w1 * light[3 * j + 1] + w2 * light[3 * j + 2]
-                d = d if d > zero else zero
-                d = d if d < one else one
-                p = pf * (one - d)
-                q = qf * d
-                s = (p * e[j] + q) / (p + q * e[j])
-                srow[j] = s
-                s -= less
-                acc[3 * j] += s * lobe[3 * j]
-                acc[3 * j + 1] += s * lobe[3 * j + 1]
-                acc[3 * j + 2] += s * lobe[3 * j + 2]
+        src = zeros if mode == _ACC_LOBES else base[i].reshape(3 * wid)
+        k = 0
+        while k + 3 <= nl:  # three lobes per pass over the row, then the rest one by one
+            _put_scaled3(
+                acc,
+                src,
+                lobes[k][i].reshape(3 * wid),
+                lobes[k + 1][i].reshape(3 * wid),
+                lobes[k + 2][i].reshape(3 * wid),
+                s[k],
+                s[k + 1],
+                s[k + 2],
+                less,
+            )
+            src = acc
+            k += 3
+        while k < nl:
+            _put_scaled(acc, src, lobes[k][i].reshape(3 * wid), s[k], less)
+            src = acc
+            k += 1

@@ -210,6 +210,39 @@ def test_scale_lobes_applies_sigma_per_lobe() -> None:
     )
 
 
+@pytest.mark.parametrize("count", [1, 2, 3, 4, 7])
+def test_scale_lobes_sums_any_number_of_lobes_in_every_mode(count: int) -> None:
+    """Lobes are summed three per pass, then one by one: every count, with a remainder, with
+    the beauty they are part of, or alone, and without σ layers, gives Σ σ_j · lobe_j."""
+    shape = (70, 29)
+    rng = np.random.default_rng(count)
+    names = [f"lobe{j}" for j in range(count)]
+    lights = {n: rng.random((*shape, 3), dtype=np.float32) * 1.5 for n in names}
+    lobes = {n: lights[n] * rng.random(3).astype(np.float32) for n in names}
+    kappa = rng.uniform(-1.2, 1.2, shape).astype(np.float32)
+    kappa[3, 4] = np.nan  # counts as 0
+    alpha = {n: float(a) for n, a in zip(names, rng.uniform(0.1, 0.9, count), strict=True)}
+    gamma = {n: [0.5, 3.0, 90.0][j % 3] for j, n in enumerate(names)}  # 90: γκ is clipped
+    sig_ref = {
+        n: sigma(np.nan_to_num(kappa), reflectance_delta(lights[n], 1.3), alpha[n], gamma[n])
+        for n in names
+    }
+    scaled = sum(lobes[n] * sig_ref[n][..., None] for n in names)
+    remainder = rng.random((*shape, 3), dtype=np.float32)
+    beauty = remainder + sum(lobes[n] for n in names)
+    out, sig = scale_lobes(lobes, lights, kappa, alpha, gamma, 1.3)
+    for n in names:
+        np.testing.assert_allclose(sig[n], sig_ref[n], rtol=2e-6)
+    np.testing.assert_allclose(out, scaled, rtol=1e-5, atol=1e-5)
+    bare, none = scale_lobes(lobes, lights, kappa, alpha, gamma, 1.3, with_sigmas=False)
+    assert none == {}
+    np.testing.assert_array_equal(bare, out)
+    with_rem, _ = scale_lobes(lobes, lights, kappa, alpha, gamma, 1.3, remainder)
+    np.testing.assert_allclose(with_rem, scaled + remainder, rtol=1e-5, atol=1e-5)
+    rebuilt, _ = scale_lobes(lobes, lights, kappa, alpha, gamma, 1.3, beauty=beauty)
+    np.testing.assert_allclose(rebuilt, scaled + remainder, rtol=1e-5, atol=2e-5)
+
+
 def test_scale_lobes_enhances_a_lit_sphere() -> None:
     """On a convex sphere, lit parts (δ > α) brighten and dim parts darken: more contrast."""
     s = analytic.sphere(96)
