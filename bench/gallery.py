@@ -46,6 +46,7 @@ from bench.compare_meshes import VIEWS
 from gbuffer.frame import Frame
 from gbuffer.preview import picture, srgb_encode
 from ops import relief as rl
+from ops.curvature import DEFAULT_GAIN
 from ops.scaling import luminance
 from ops.unsharp import plain_unsharp_mask
 from service import pipeline
@@ -67,11 +68,8 @@ MESH_EXPOSURE = -0.6
 RS_SCENARIOS = tuple(s for s in get_args(Scenario) if s != "auto")
 #: Scenarios that post-process the renderer's image (their "before" is the input beauty).
 RS_POST = ("lobes", "beauty")
-#: Radiance Scaling parameters of the sheets. The default curvature gain (0.1 per image height)
-#: saturates tanh on most of a detailed mesh (|κ| > 0.75 on half of igea / bunny at any size),
-#: which turns the scaling into a binary look; 0.03 keeps κ in tanh's linear range.
+#: Radiance Scaling γ of the mesh sheets (the curvature gain is the operator's default).
 RS_GAMMA = 2.5
-RS_GAIN = 0.03
 #: Light Alignment σ_i (finest first, S = 6) after LLA Fig. 7 and Fig. 9.
 LLA_SCALES: tuple[tuple[str, list[float]], ...] = (
     ("no alignment (sigma = 0)", [0.0, 0.0, 0.0, 0.0, 0.0]),
@@ -301,7 +299,7 @@ def save(img: np.ndarray, path: Path, written: list[Path]) -> None:
 def rs_pair(frame: Frame, scenario: str, **params: Any) -> tuple[np.ndarray, np.ndarray]:
     """(before, after) pictures of one scenario: the input beauty for the post-processing
     scenarios, the same shading with γ = 0 (σ ≡ 1) for the deferred ones."""
-    params = {"gamma": RS_GAMMA, "gain": RS_GAIN, **params}
+    params = {"gamma": RS_GAMMA, **params}
     after = pic(apply(frame, "radiance_scaling", scenario=scenario, **params))
     if scenario in RS_POST:
         return pic(frame), after
@@ -318,11 +316,12 @@ def radiance_scaling(mesh: Frame, mesh_name: str, blender: Frame) -> dict[str, A
     mesh_sheet = sheet(
         rows,
         f"Radiance Scaling (Vergne et al. 2011, sec. 5), every scenario, on {mesh_name}: gamma "
-        f"{RS_GAMMA:g}, curvature gain {RS_GAIN:g}; before = the input (lobes, beauty) or the "
+        f"{RS_GAMMA:g}, curvature gain {DEFAULT_GAIN:g}; before = the input (lobes, beauty) or the "
         "same shading with gamma 0",
         frame=mesh,
     )
-    # The fixture's objects are large in its frame: the default gain does not saturate there.
+    # The fixture's objects fill its small frame (low curvature per image height): a gain above
+    # the default shows them without saturating.
     fixture = {"gamma": 3.0, "gain": 0.1}
     bl: dict[str, Any] = {s: rs_pair(blender, s, **fixture) for s in RS_POST}
     before = bl["lobes"][0]
@@ -340,8 +339,8 @@ def radiance_scaling(mesh: Frame, mesh_name: str, blender: Frame) -> dict[str, A
                 (change_pic(before, bl["beauty"][1], blender.mask, 0.15), "beauty as one lobe"),
             ],
         ],
-        "Radiance Scaling on the Blender Cycles fixture (160x120, shown x2), defaults: gamma 3, "
-        "gain 0.1",
+        "Radiance Scaling on the Blender Cycles fixture (160x120, shown x2): gamma 3 (the "
+        "default), gain 0.1",
         height=240,
     )
     return {"mesh": mesh_sheet, "blender": blender_sheet, "pairs": pairs, "blender_pairs": bl}

@@ -140,7 +140,7 @@ def test_light_warping_brightens_convex_and_darkens_concave() -> None:
     for scene, sign in ((bump, 1.0), (bowl, -1.0)):
         lw = light_warping(scene.normal, scene.depth, scene.mask, OBLIQUE)
         lam = lambert_image(scene.normal, scene.mask, OBLIQUE)
-        assert sign * (lw[c, c] - lam[c, c]) > 0.1
+        assert sign * (lw[c, c] - lam[c, c]) > 0.05
         assert np.all(np.isfinite(lw)) and lw.min() >= 0.0 and lw.max() <= 1.0
         assert np.all(lw[~scene.mask] == 0.0)
     lw = light_warping(flat.normal, flat.depth, flat.mask, OBLIQUE)
