@@ -82,7 +82,7 @@ from numpy.typing import NDArray
 from gbuffer.frame import Frame
 from ops.baselines import exaggerated_shading, lambert_image, light_warping
 from ops.congruence import CongruenceResult, congruence
-from ops.curvature import DEFAULT_GAIN, DEFAULT_SCALE, isotropic, principal_curvatures
+from ops.curvature import DEFAULT_SCALE, isotropic, principal_curvatures
 from ops.directions import N_DIRECTIONS, comparison_directions
 from ops.shading import dot, lambert
 
@@ -111,6 +111,12 @@ SHEET_DIRECTIONS: tuple[int, ...] = (1, 3, 4, 6, 9, 16)
 #: Albedo choices.
 ALBEDOS: tuple[str, ...] = ("white", "frame")
 
+#: Curvature gain of the curvature-based methods here: above the operators' default (0.03,
+#: chosen for looks), as both score higher with it on the shared meshes (Radiance Scaling 0.515
+#: against 0.501, Light Warping 0.621 against 0.557, mean congruence), so neither baseline is
+#: weakened by the choice.
+COMPARE_CURVATURE_GAIN = 0.1
+
 #: Parameters of each method and of the score, as used when none are given (JSON-able).
 DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
     "congruence": {"gradient_scale": 0.002, "integration_scale": 0.01, "percentile": 95.0},
@@ -119,13 +125,13 @@ DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
         "alpha": 0.5,
         "gamma": 4.0,
         "curvature_scale": DEFAULT_SCALE,
-        "curvature_gain": DEFAULT_GAIN,
+        "curvature_gain": COMPARE_CURVATURE_GAIN,
     },
     "exaggerated_shading": {},
     "light_warping": {
         "strength": 1.0,
         "curvature_scale": DEFAULT_SCALE,
-        "curvature_gain": DEFAULT_GAIN,
+        "curvature_gain": COMPARE_CURVATURE_GAIN,
     },
     "light_alignment": {
         "sigmas": [0.5, 0.3, 0.1, 0.2, 0.2],
@@ -237,7 +243,9 @@ def _radiance_scaling(g: _Geometry, light: F32) -> F32:
     from ops.scaling import sigma
 
     p = dict(g.params["radiance_scaling"])
-    kappa = g.kappa(p.pop("curvature_scale", DEFAULT_SCALE), p.pop("curvature_gain", DEFAULT_GAIN))
+    kappa = g.kappa(
+        p.pop("curvature_scale", DEFAULT_SCALE), p.pop("curvature_gain", COMPARE_CURVATURE_GAIN)
+    )
     delta = lambert(g.normal, light)
     scale = _call("radiance_scaling", sigma, kappa, delta, **p)
     return g.finish(np.asarray(scale * delta, np.float32))
@@ -260,7 +268,9 @@ def _exaggerated(g: _Geometry, light: F32) -> F32:
 
 def _warping(g: _Geometry, light: F32) -> F32:
     p = dict(g.params["light_warping"])
-    kappa = g.kappa(p.pop("curvature_scale", DEFAULT_SCALE), p.pop("curvature_gain", DEFAULT_GAIN))
+    kappa = g.kappa(
+        p.pop("curvature_scale", DEFAULT_SCALE), p.pop("curvature_gain", COMPARE_CURVATURE_GAIN)
+    )
     img = _call(
         "light_warping",
         light_warping,
