@@ -152,6 +152,30 @@ def test_white_level_is_a_robust_percentile_of_covered_pixels() -> None:
         white_level(y, None, 0.0)
 
 
+@pytest.mark.parametrize("shape", [(40, 50), (700, 900)])  # np.percentile / the band path
+@pytest.mark.parametrize("percentile", [50.0, 99.0, 99.9, 100.0])
+def test_white_level_equals_numpy_percentile_of_counted_pixels(
+    shape: tuple[int, int], percentile: float
+) -> None:
+    """Exactly np.percentile of the covered finite values, on both of its paths, with bool and
+    float masks and without one; RGB through its Rec. 709 luminance."""
+    rng = np.random.default_rng(len(shape) + int(percentile))
+    y = (rng.random(shape, dtype=np.float32) ** 3 * 5.0).astype(np.float32)
+    y[rng.random(shape) < 0.01] = np.nan
+    y[rng.random(shape) < 0.01] = np.inf
+    y[rng.random(shape) < 0.01] = -np.inf
+    mask = rng.random(shape) < 0.7
+    expect = float(np.percentile(y[mask & np.isfinite(y)], percentile))
+    assert white_level(y, mask, percentile) == expect
+    assert white_level(y, mask.astype(np.float32), percentile) == expect
+    assert white_level(y, None, percentile) == float(np.percentile(y[np.isfinite(y)], percentile))
+    rgb = rng.random((*shape, 3), dtype=np.float32)
+    rgb[3, 4, 1] = np.nan
+    lum = luminance(rgb)
+    ok = mask & np.isfinite(lum)
+    assert white_level(rgb, mask, percentile) == float(np.percentile(lum[ok], percentile))
+
+
 # -- scale_lobes -----------------------------------------------------------------------------------
 
 
