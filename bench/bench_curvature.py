@@ -7,10 +7,10 @@ with lobes made from a Lambert and a Phong term so the scaling sees real lightin
 second frame, a sphere over a receding ground plane in perspective, times the depth-jump test
 where many pixels are candidates (a slanted surface) and few are occlusions.
 
-The ``floor`` rows time the memory traffic alone, on the same row strips and threads: one cv2
+The ``floor`` rows time the memory traffic alone, on the same row strips and threads: one compiled
 pass that reads each input once and writes each output once (normal, depth and mask in, κ out;
-three lobes, three lights and κ in, the beauty out). They bound what any
-implementation of the operation can reach on this machine.
+three lobes, three lights and κ in, the beauty out), with a sum as the only arithmetic. They
+show what the memory costs any implementation of the operation on this machine.
 """
 
 from __future__ import annotations
@@ -20,6 +20,7 @@ import numpy as np
 
 from bench.common import HD, Report
 from ops.curvature import isotropic, principal_curvatures
+from ops.jit import kernel
 from ops.parallel import run_strips
 from ops.scaling import scale_lobes
 from tests.analytic import two_spheres
@@ -129,16 +130,22 @@ def _curvature_floor(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) ->
     """Read normal, depth and mask once, write an (H, W) float32 image once."""
     hgt, wid = depth.shape
     out = np.empty((hgt, wid), np.float32)
-    ones = np.ones((1, 3), np.float32)
     m8 = mask.view(np.uint8)
-
-    def strip(r0: int, r1: int) -> None:
-        r = slice(r0, r1)
-        cv2.transform(normal[r], ones, dst=out[r])
-        cv2.add(out[r], depth[r], dst=out[r], mask=m8[r])
-
-    run_strips(hgt, strip, _FLOOR_ROWS)
+    run_strips(
+        hgt,
+        lambda r0, r1: _curvature_floor_rows(normal[r0:r1], depth[r0:r1], m8[r0:r1], out[r0:r1]),
+        _FLOOR_ROWS,
+    )
     return out
+
+
+@kernel
+def _curvature_floor_rows(normal, depth, m8, out):  # type: ignore[no-untyped-def]
+    wid = out.shape[1]
+    for i in range(out.shape[0]):
+        n, d, m, o = normal[i].reshape(3 * wid), depth[i], m8[i], out[i]
+        for j in range(wid):
+            o[j] = n[3 * j] + n[3 * j + 1] + n[3 * j + 2] + d[j] + np.float32(m[j])
 
 
 def _lobes_floor(
@@ -146,20 +153,30 @@ def _lobes_floor(
 ) -> np.ndarray:
     """Read each lobe, light and κ once; write the beauty once."""
     hgt, wid = kappa.shape
-    names = list(lobes)
+    planes = (*lobes.values(), *lights.values())
     beauty = np.empty((hgt, wid, 3), np.float32)
-
-    def strip(r0: int, r1: int) -> None:
-        r = slice(r0, r1)
-        acc = beauty[r]
-        cv2.add(lobes[names[0]][r], lights[names[0]][r], dst=acc)
-        for n in names[1:]:
-            cv2.add(acc, lobes[n][r], dst=acc)
-            cv2.add(acc, lights[n][r], dst=acc)
-        np.add(acc, kappa[r, :, None], out=acc)
-
-    run_strips(hgt, strip, _FLOOR_ROWS)
+    run_strips(
+        hgt,
+        lambda r0, r1: _lobes_floor_rows(
+            tuple(p[r0:r1] for p in planes), kappa[r0:r1], beauty[r0:r1]
+        ),
+        _FLOOR_ROWS,
+    )
     return beauty
+
+
+@kernel
+def _lobes_floor_rows(planes, kappa, out):  # type: ignore[no-untyped-def]
+    wid = out.shape[1]
+    for i in range(out.shape[0]):
+        acc, k = out[i].reshape(3 * wid), kappa[i]
+        for j in range(wid):
+            for c in range(3):
+                acc[3 * j + c] = k[j]
+        for p in planes:
+            row = p[i].reshape(3 * wid)
+            for m in range(3 * wid):
+                acc[m] += row[m]
 
 
 def _materialise(normal: np.ndarray, depth: np.ndarray, mask: np.ndarray) -> None:
