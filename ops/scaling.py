@@ -48,10 +48,9 @@ def _check_gamma(gamma: float, name: str = "gamma") -> float:
     return g
 
 
-def _clip01(x: np.ndarray, patch_nan: bool = True) -> np.ndarray:
-    """Clip to [0, 1] in place (+inf -> 1; NaN -> 0 with ``patch_nan``)."""
-    if patch_nan:
-        cv2.patchNaNs(x, 0.0)
+def _clip01(x: np.ndarray) -> np.ndarray:
+    """Clip to [0, 1] in place (+inf -> 1, NaN -> 0)."""
+    cv2.patchNaNs(x, 0.0)
     np.clip(x, np.float32(0.0), np.float32(1.0), out=x)
     return x
 
