@@ -9,7 +9,8 @@ where many pixels are candidates (a slanted surface) and few are occlusions.
 
 The ``floor`` rows time the memory traffic alone, on the same row strips and threads: one compiled
 pass that reads each input once and writes each output once (normal, depth and mask in, κ out;
-three lobes, three lights and κ in, the beauty out), with a sum as the only arithmetic. They
+three lobes and three lights in, the beauty out: κ comes from the working grid, a quarter of a
+plane), with a sum as the only arithmetic. They
 show what the memory costs any implementation of the operation on this machine.
 """
 
@@ -19,7 +20,7 @@ import cv2
 import numpy as np
 
 from bench.common import HD, Report
-from ops.curvature import isotropic, principal_curvatures
+from ops.curvature import isotropic, isotropic_field, principal_curvatures
 from ops.jit import kernel
 from ops.parallel import run_strips
 from ops.scaling import scale_lobes
@@ -31,6 +32,7 @@ def _frame() -> tuple[
 ]:
     h, w = HD
     s = two_spheres(h, width=w)
+    n = s.normal
     n = s.normal
     ell = np.array([0.4, 0.5, 0.77], np.float32)
     ell /= np.linalg.norm(ell)
@@ -70,20 +72,20 @@ def main() -> None:
     )
     curv = principal_curvatures(normal, depth, mask)
     rep.time("  materialise k1, k2, dir, weight", lambda: _materialise(normal, depth, mask))
-    kappa = isotropic(curv)
+    kappa = isotropic_field(curv)  # as the operator passes it: the working grid, upsampled per row
     whites = {"ambient": 1.0, "diffuse": 1.0, "specular": 1.0}
     rep.time(
         "scale_lobes (3 lobes, pinned whites)",
         lambda: scale_lobes(lobes, lights, kappa, 0.5, 3.0, whites, with_sigmas=False),
         repeat=15,
     )
-    rep.time("  floor: lobes, lights, κ in; beauty out", lambda: _lobes_floor(lobes, lights, kappa))
+    rep.time("  floor: lobes, lights in; beauty out", lambda: _lobes_floor(lobes, lights))
     rep.time(
         "principal_curvatures + scale_lobes (3 lobes)",
         lambda: scale_lobes(
             lobes,
             lights,
-            isotropic(principal_curvatures(normal, depth, mask)),
+            isotropic_field(principal_curvatures(normal, depth, mask)),
             0.5,
             3.0,
             whites,
@@ -148,32 +150,25 @@ def _curvature_floor_rows(normal, depth, m8, out):  # type: ignore[no-untyped-de
             o[j] = n[3 * j] + n[3 * j + 1] + n[3 * j + 2] + d[j] + np.float32(m[j])
 
 
-def _lobes_floor(
-    lobes: dict[str, np.ndarray], lights: dict[str, np.ndarray], kappa: np.ndarray
-) -> np.ndarray:
-    """Read each lobe, light and κ once; write the beauty once."""
-    hgt, wid = kappa.shape
+def _lobes_floor(lobes: dict[str, np.ndarray], lights: dict[str, np.ndarray]) -> np.ndarray:
+    """Read each lobe and light once; write the beauty once."""
     planes = (*lobes.values(), *lights.values())
-    beauty = np.empty((hgt, wid, 3), np.float32)
+    beauty = np.empty_like(planes[0])
     run_strips(
-        hgt,
-        lambda r0, r1: _lobes_floor_rows(
-            tuple(p[r0:r1] for p in planes), kappa[r0:r1], beauty[r0:r1]
-        ),
+        beauty.shape[0],
+        lambda r0, r1: _lobes_floor_rows(tuple(p[r0:r1] for p in planes), beauty[r0:r1]),
         _FLOOR_ROWS,
     )
     return beauty
 
 
 @kernel
-def _lobes_floor_rows(planes, kappa, out):  # type: ignore[no-untyped-def]
+def _lobes_floor_rows(planes, out):  # type: ignore[no-untyped-def]
     wid = out.shape[1]
     for i in range(out.shape[0]):
-        acc, k = out[i].reshape(3 * wid), kappa[i]
-        for j in range(wid):
-            for c in range(3):
-                acc[3 * j + c] = k[j]
-        for p in planes:
+        acc = out[i].reshape(3 * wid)
+        acc[:] = planes[0][i].reshape(3 * wid)
+        for p in planes[1:]:
             row = p[i].reshape(3 * wid)
             for m in range(3 * wid):
                 acc[m] += row[m]

@@ -51,7 +51,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.jit import inline_kernel, kernel
+from ops.bilinear import Upsampled
+from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
@@ -191,10 +192,7 @@ class _Coarse:
         return np.asarray(cv2.scaleAdd(self._radius, -2.0, self.k1), np.float32)
 
     def upsample(self, img: np.ndarray) -> np.ndarray:
-        h, w = self.size
-        if img.shape[:2] == (h, w):
-            return img
-        return cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
+        return np.asarray(Upsampled(img, self.size))
 
     def directions(self) -> tuple[np.ndarray, np.ndarray]:
         """Direction of k1 from the interpolated (d, b): θ = ½·atan2(b, d) in [0, π), so that
@@ -944,14 +942,31 @@ def _deriv_y(q: np.ndarray, r0: int, r1: int, scale: float) -> np.ndarray:
 # -- curvature mappings ----------------------------------------------------------------------------
 
 
-def _tanh_scaled(x: np.ndarray, s: float) -> np.ndarray:
-    """tanh(s·x) as 1 - 2 / (exp(2 s x) + 1) with cv2 (float32, saturates cleanly)."""
-    e = np.multiply(x, np.float32(2.0 * s), dtype=np.float32)
-    cv2.exp(e, dst=e)
-    np.add(e, np.float32(1.0), out=e)
-    np.divide(np.float32(-2.0), e, out=e)
-    np.add(e, np.float32(1.0), out=e)
-    return e
+def _tanh_weighted(x: np.ndarray, s: float, weight: np.ndarray) -> np.ndarray:
+    """tanh(s·x) · weight of (h, w) planes (NaN x counts as 0), float32, in one compiled pass."""
+    x = np.ascontiguousarray(x, dtype=np.float32)
+    weight = np.ascontiguousarray(weight, dtype=np.float32)
+    out = np.empty(x.shape, np.float32)
+    s2 = np.float32(2.0 * s)
+    run_strips(
+        x.shape[0],
+        lambda r0, r1: _tanh_weighted_rows(x[r0:r1], s2, weight[r0:r1], out[r0:r1]),
+        _STRIP_ROWS,
+    )
+    return out
+
+
+@kernel
+def _tanh_weighted_rows(x, s2, weight, out):  # type: ignore[no-untyped-def]
+    """out = tanh(s2/2 · x) · weight as 1 − 2 / (e^{s2·x} + 1), which saturates cleanly (the
+    exponent is clamped to ±87 by :func:`expf`), and is exactly 0 at x = 0."""
+    zero, one, two = np.float32(0.0), np.float32(1.0), np.float32(2.0)
+    for i in range(out.shape[0]):
+        xr, wr, o = x[i], weight[i], out[i]
+        for j in range(o.shape[0]):
+            a = s2 * xr[j]
+            a = a if a == a else zero
+            o[j] = (one - two / (expf(a) + one)) * wr[j]
 
 
 def _check_gain(gain: float) -> float:
@@ -969,15 +984,20 @@ def isotropic(curv: Curvature, gain: float = DEFAULT_GAIN) -> np.ndarray:
     -------
     (H, W) float32 in [-1, 1], 0 where ``curv.weight`` is 0.
     """
+    return np.asarray(isotropic_field(curv, gain))
+
+
+def isotropic_field(curv: Curvature, gain: float = DEFAULT_GAIN) -> Upsampled:
+    """:func:`isotropic` left on the working grid: the tanh is mapped there and the result is
+    read through bilinear upsampling (:class:`ops.bilinear.Upsampled`), so a kernel that
+    consumes κ (:func:`ops.scaling.scale_lobes`) interpolates each row as it needs it instead of
+    reading a full-resolution plane; ``np.asarray`` of it is :func:`isotropic`."""
     s = _check_gain(gain)
     coarse = curv._coarse_for("k1", "k2", "weight")
-    if coarse is not None:  # map on the working grid, interpolate once
-        kappa = _tanh_scaled(coarse.trace, s)
-        cv2.multiply(kappa, coarse.weight, dst=kappa)
-        return coarse.upsample(kappa)
-    kappa = _tanh_scaled(cv2.add(curv.k1, curv.k2), s)
-    cv2.multiply(kappa, curv.weight, dst=kappa)
-    return kappa
+    if coarse is not None:
+        return Upsampled(_tanh_weighted(coarse.trace, s, coarse.weight), coarse.size)
+    trace = cv2.add(curv.k1, curv.k2)
+    return Upsampled(_tanh_weighted(trace, s, curv.weight), trace.shape)
 
 
 def anisotropic(
@@ -1022,9 +1042,7 @@ def anisotropic(
         if coarse is not None:  # on the working grid, interpolated once
             arg = cv2.addWeighted(coarse.d, 2.0 * lam * cx, coarse.b, 2.0 * lam * cy, 0.0)
             cv2.add(arg, coarse.trace, dst=arg)
-            kappa = _tanh_scaled(arg, s)
-            cv2.multiply(kappa, coarse.weight, dst=kappa)
-            return coarse.upsample(kappa)
+            return coarse.upsample(_tanh_weighted(arg, s, coarse.weight))
         c2 = cv2.subtract(
             cv2.multiply(curv.dir_x, curv.dir_x), cv2.multiply(curv.dir_y, curv.dir_y)
         )
@@ -1047,9 +1065,7 @@ def anisotropic(
     trace = cv2.add(curv.k1, curv.k2)
     delta = cv2.subtract(curv.k1, curv.k2)
     arg = cv2.add(trace, cv2.multiply(delta, proj, scale=lam))
-    kappa = _tanh_scaled(arg, s)
-    cv2.multiply(kappa, curv.weight, dst=kappa)
-    return kappa
+    return _tanh_weighted(arg, s, curv.weight)
 
 
 def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[str, np.ndarray]:

@@ -23,6 +23,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike
 
+from ops.bilinear import Upsampled, upsample_row
 from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
@@ -241,7 +242,7 @@ def _per_lobe(value: object, names: list[str], what: str) -> dict[str, object]:
 def scale_lobes(
     lobes: Mapping[str, np.ndarray],
     lights: Mapping[str, np.ndarray],
-    kappa: np.ndarray,
+    kappa: np.ndarray | Upsampled,
     alpha: Mapping[str, float] | float,
     gamma: Mapping[str, float] | float,
     white: Mapping[str, float | str] | float | str = "auto",
@@ -265,8 +266,9 @@ def scale_lobes(
         Radiance of each lobe (``diffuse``, ``specular``, ...).
     lights : dict name -> (H, W, 3) float32
         Light of each lobe without its colour; a lobe missing here uses its own radiance.
-    kappa : (H, W) float32
-        Mapped curvature in [-1, 1] (e.g. :func:`ops.curvature.isotropic`).
+    kappa : (H, W) float32 or Upsampled
+        Mapped curvature in [-1, 1] (e.g. :func:`ops.curvature.isotropic`), or the same on a
+        coarser grid (:func:`ops.curvature.isotropic_field`), interpolated row by row here.
     alpha, gamma : float or dict name -> float
         α in (0, 1) and γ in [0, inf), for all lobes or per lobe.
     white : float, "auto" or dict name -> (float or "auto")
@@ -286,10 +288,13 @@ def scale_lobes(
     beauty : (H, W, 3) float32
     sigmas : dict name -> (H, W) float32, the σ applied to each lobe.
     """
-    kappa = np.asarray(kappa)
-    if kappa.ndim != 2:
-        raise ValueError(f"kappa must have shape (H, W), got {kappa.shape}")
-    hgt, wid = kappa.shape
+    if isinstance(kappa, Upsampled):
+        grid, factor, (hgt, wid) = kappa.grid, kappa.factor, kappa.shape
+    else:
+        grid, factor = np.ascontiguousarray(kappa, dtype=np.float32), 1
+        if grid.ndim != 2:
+            raise ValueError(f"kappa must have shape (H, W), got {grid.shape}")
+        hgt, wid = grid.shape
     names = list(lobes)
     alphas = {
         n: _check_alpha(float(v), f"alpha[{n!r}]")  # type: ignore[arg-type]
@@ -313,7 +318,6 @@ def scale_lobes(
             raise ValueError(f"{what} must have shape {(hgt, wid, 3)}, got {x.shape}")
         return x
 
-    kap = np.ascontiguousarray(kappa, dtype=np.float32)
     lobe_arr = {n: rgb(lobes[n], f"lobes[{n!r}]") for n in names}
     light_arr = {n: rgb(lights[n], f"lights[{n!r}]") if n in lights else lobe_arr[n] for n in names}
     levels = {
@@ -352,7 +356,8 @@ def scale_lobes(
         _scale_rows(
             tuple(x[r] for x in lobe_t),
             tuple(x[r] for x in light_t),
-            kap[r],
+            grid,
+            factor,
             gam,
             coef,
             which,
@@ -430,16 +435,33 @@ def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):  # type: ignore[no-unt
             acc[m] = src[m] + f0 * l0[m] + f1 * l1[m] + f2 * l2[m]
 
 
-@kernel
-def _scale_rows(lobes, lights, kappa, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
-    """Rows of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with ``mode``
-    _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY; σ_k of lobe k
-    from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to ± ``gammas[which[k], 1]``, and
-    δ̄ = clip(coef[k, :3] · light_k, 0, 1), P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k
-    also into row ``r0 + i`` of ``sig[k]`` when it has rows.
+@inline_kernel
+def _nonzero_span(x):  # type: ignore[no-untyped-def]
+    """(j0, j1): the first and one past the last index where ``x`` is not 0 ((0, 0) if none)."""
+    n = x.shape[0]
+    lo, hi = n, 0
+    for j in range(n):
+        nz = x[j] != np.float32(0.0)
+        lo = min(lo, j if nz else n)
+        hi = max(hi, j + 1 if nz else 0)
+    return (lo, hi) if lo < hi else (0, 0)
 
-    Each step is its own loop over the row (E per γ, δ̄, σ, the sum), each vectorised by LLVM;
-    RGB rows are indexed flat (3j + c)."""
+
+@kernel
+def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
+    """Rows ``r0 ..`` of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with
+    ``mode`` _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY.
+    κ is the ``grid`` upsampled ``f`` times (:func:`ops.bilinear.upsample_row`; f = 1: κ
+    itself); σ_k of lobe k from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to
+    ± ``gammas[which[k], 1]``, and δ̄ = clip(coef[k, :3] · light_k, 0, 1),
+    P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when
+    it has rows.
+
+    σ = 1 exactly where κ = 0 (E = 1), so on each row only the span between the first and the
+    last pixel of non-zero κ is computed: outside it no light is read, and with _ACC_BEAUTY no
+    lobe either (the beauty is copied). Background, where κ is 0, costs a copy. Each step is its
+    own loop over the span (E per γ, δ̄, σ, the sum), each vectorised by LLVM; RGB rows are
+    indexed flat (3j + c)."""
     zero, one = np.float32(0.0), np.float32(1.0)
     keep = sig.shape[1] > 0
     less = one if mode == _ACC_BEAUTY else zero
@@ -449,32 +471,50 @@ def _scale_rows(lobes, lights, kappa, gammas, coef, which, base, mode, out, sig,
     d = np.empty(wid, np.float32)
     zeros = np.zeros(3 * wid, np.float32)
     s = np.empty((nl, wid), np.float32)  # σ of the row's lobes (contiguous rows)
+    v = np.empty(grid.shape[1], np.float32)
+    kr = np.empty(wid if f > 1 else 0, np.float32)
     for i in range(out.shape[0]):
+        if f > 1:
+            upsample_row(grid, f, r0 + i, v, kr)
+            kappa = kr
+        else:
+            kappa = grid[r0 + i]
+        j0, j1 = _nonzero_span(kappa)
         for g in range(gammas.shape[0]):
-            _exp_row(kappa[i], gammas[g, 0], gammas[g, 1], e[g])
+            _exp_row(kappa[j0:j1], gammas[g, 0], gammas[g, 1], e[g, j0:j1])
         for k in range(nl):
-            _luma_row(lights[k][i].reshape(3 * wid), coef[k, 0], coef[k, 1], coef[k, 2], d)
-            _sigma_row(d, e[which[k]], coef[k, 3], coef[k, 4], s[k])
+            sk = s[k]
+            sk[:j0] = one
+            sk[j1:] = one
+            light = lights[k][i].reshape(3 * wid)[3 * j0 : 3 * j1]
+            _luma_row(light, coef[k, 0], coef[k, 1], coef[k, 2], d[j0:j1])
+            _sigma_row(d[j0:j1], e[which[k], j0:j1], coef[k, 3], coef[k, 4], sk[j0:j1])
             if keep:
-                sig[k, r0 + i] = s[k]
+                sig[k, r0 + i] = sk
         acc = out[i].reshape(3 * wid)
         src = zeros if mode == _ACC_LOBES else base[i].reshape(3 * wid)
+        a, b = 0, wid
+        if mode == _ACC_BEAUTY:  # σ - 1 = 0 outside the span: the beauty as it is
+            a, b = j0, j1
+            acc[: 3 * a] = src[: 3 * a]
+            acc[3 * b :] = src[3 * b :]
+        acc, src = acc[3 * a : 3 * b], src[3 * a : 3 * b]
         k = 0
         while k + 3 <= nl:  # three lobes per pass over the row, then the rest one by one
             _put_scaled3(
                 acc,
                 src,
-                lobes[k][i].reshape(3 * wid),
-                lobes[k + 1][i].reshape(3 * wid),
-                lobes[k + 2][i].reshape(3 * wid),
-                s[k],
-                s[k + 1],
-                s[k + 2],
+                lobes[k][i].reshape(3 * wid)[3 * a : 3 * b],
+                lobes[k + 1][i].reshape(3 * wid)[3 * a : 3 * b],
+                lobes[k + 2][i].reshape(3 * wid)[3 * a : 3 * b],
+                s[k, a:b],
+                s[k + 1, a:b],
+                s[k + 2, a:b],
                 less,
             )
             src = acc
             k += 3
         while k < nl:
-            _put_scaled(acc, src, lobes[k][i].reshape(3 * wid), s[k], less)
+            _put_scaled(acc, src, lobes[k][i].reshape(3 * wid)[3 * a : 3 * b], s[k, a:b], less)
             src = acc
             k += 1

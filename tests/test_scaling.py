@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ops.bilinear import Upsampled
 from ops.curvature import isotropic, principal_curvatures
 from ops.scaling import luminance, reflectance_delta, scale_lobes, sigma, white_level
 from tests import analytic
@@ -237,7 +238,8 @@ def test_scale_lobes_applies_sigma_per_lobe() -> None:
 @pytest.mark.parametrize("count", [1, 2, 3, 4, 7])
 def test_scale_lobes_sums_any_number_of_lobes_in_every_mode(count: int) -> None:
     """Lobes are summed three per pass, then one by one: every count, with a remainder, with
-    the beauty they are part of, or alone, and without σ layers, gives Σ σ_j · lobe_j."""
+    the beauty they are part of, or alone, and without σ layers, gives Σ σ_j · lobe_j, also
+    where runs of κ = 0 are skipped."""
     shape = (70, 29)
     rng = np.random.default_rng(count)
     names = [f"lobe{j}" for j in range(count)]
@@ -245,6 +247,12 @@ def test_scale_lobes_sums_any_number_of_lobes_in_every_mode(count: int) -> None:
     lobes = {n: lights[n] * rng.random(3).astype(np.float32) for n in names}
     kappa = rng.uniform(-1.2, 1.2, shape).astype(np.float32)
     kappa[3, 4] = np.nan  # counts as 0
+    # κ = 0 at the start of rows, on whole rows and at the end of a row: the kernel skips those
+    # pixels (σ = 1), which must change nothing
+    kappa[:, :5] = 0.0
+    kappa[10:14] = 0.0
+    kappa[20, 7:] = 0.0
+    kappa[21, 9:12] = 0.0
     alpha = {n: float(a) for n, a in zip(names, rng.uniform(0.1, 0.9, count), strict=True)}
     gamma = {n: [0.5, 3.0, 90.0][j % 3] for j, n in enumerate(names)}  # 90: γκ is clipped
     sig_ref = {
@@ -265,6 +273,26 @@ def test_scale_lobes_sums_any_number_of_lobes_in_every_mode(count: int) -> None:
     np.testing.assert_allclose(with_rem, scaled + remainder, rtol=1e-5, atol=1e-5)
     rebuilt, _ = scale_lobes(lobes, lights, kappa, alpha, gamma, 1.3, beauty=beauty)
     np.testing.assert_allclose(rebuilt, scaled + remainder, rtol=1e-5, atol=2e-5)
+
+
+@pytest.mark.parametrize("factor", [1, 2, 4])
+def test_scale_lobes_reads_kappa_from_a_coarser_grid(factor: int) -> None:
+    """κ given on a grid ``factor`` times coarser (as the operator passes it) is interpolated row
+    by row inside the kernel: the same result as the full-resolution κ, with σ layers too."""
+    grid = np.random.default_rng(factor).uniform(-1, 1, (35, 16)).astype(np.float32)
+    field = Upsampled(grid, (35 * factor, 16 * factor))
+    lobes, lights = _lobes(field.shape, seed=factor)
+    beauty = lobes["diffuse"] + lobes["specular"]
+    full = np.asarray(field)
+    for extra in ({}, {"beauty": beauty}):
+        out, sig = scale_lobes(lobes, lights, field, 0.4, 3.0, 1.2, **extra)  # type: ignore[arg-type]
+        ref, sig_ref = scale_lobes(lobes, lights, full, 0.4, 3.0, 1.2, **extra)  # type: ignore[arg-type]
+        np.testing.assert_allclose(out, ref, rtol=1e-6, atol=1e-6)
+        for n in sig:
+            np.testing.assert_allclose(sig[n], sig_ref[n], rtol=1e-6)
+    with pytest.raises(ValueError, match=r"lobes\['diffuse'\] must have shape"):
+        larger = Upsampled(grid, (35 * factor + 35, 16 * factor + 16))
+        scale_lobes(lobes, lights, larger, 0.4, 3.0, 1.2)
 
 
 def test_scale_lobes_enhances_a_lit_sphere() -> None:

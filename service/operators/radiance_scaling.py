@@ -11,6 +11,7 @@ from pydantic import Field, field_validator
 from gbuffer.frame import LOBES, Frame
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
+from ops.bilinear import Upsampled
 from ops.scaling import luminance, scale_lobes, white_level
 from service.operators.common import (
     Fraction,
@@ -113,7 +114,7 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
 
 
 def _scale_renderer_lobes(
-    frame: Frame, p: RadianceScalingParams, kappa: np.ndarray, ctx: Context
+    frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Eq. 4 on the renderer's lobes; the beauty is rebuilt as Σ σ̄_j lobe_j + remainder."""
     names = p.lobes or [lobe for lobe in LOBES if lobe in frame.buffers]
@@ -143,7 +144,7 @@ def _scale_renderer_lobes(
 
 
 def _scale_beauty(
-    frame: Frame, p: RadianceScalingParams, kappa: np.ndarray, ctx: Context
+    frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The beauty as a single lobe; its light is beauty / albedo where the frame has an albedo
     (glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
@@ -256,8 +257,9 @@ def _deferred(
 def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context) -> None:
     curv = frame_curvature(frame, p)
     scenario = _scenario(frame, p)
+    kappa = None
     if scenario in ("lobes", "beauty"):
-        kappa = curv_ops.isotropic(curv, p.gain)
+        kappa = curv_ops.isotropic_field(curv, p.gain)
         if scenario == "lobes":
             beauty, sigmas = _scale_renderer_lobes(frame, p, kappa, ctx)
         else:
@@ -271,6 +273,7 @@ def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context)
             beauty = np.where(covered, beauty, frame.buffers["beauty"])
     frame.buffers["beauty"] = beauty.astype(np.float32, copy=False)
     if ctx.debug_layers:
-        frame.set_layer("curvature", {"H": curv_ops.isotropic(curv, p.gain)})
+        h_map = curv_ops.isotropic(curv, p.gain) if kappa is None else np.asarray(kappa)
+        frame.set_layer("curvature", {"H": h_map})
         for lobe, s in sigmas.items():
             frame.set_layer(f"rs_sigma.{lobe}", {"X": s})
