@@ -5,7 +5,10 @@ Run: ``.venv/bin/python -m bench.bench_curvature``. Targets (ratios to the copy 
 The frame is analytic (tests/analytic.py): two overlapping spheres (a depth jump) on a background,
 with lobes made from a Lambert and a Phong term so the scaling sees real lighting variation. A
 second frame, a sphere over a receding ground plane in perspective, times the depth-jump test
-where many pixels are candidates (a slanted surface) and few are occlusions.
+where many pixels are candidates (a slanted surface) and few are occlusions. The spheres cover
+19 % of the first frame, and both operators skip work where nothing is covered or κ = 0: the
+``fully covered`` rows put a wavy wall behind them, so every pixel is covered and curved (the
+worst case for both).
 
 The ``floor`` rows time the memory traffic alone, on the same row strips and threads: one compiled
 pass that reads each input once and writes each output once (normal, depth and mask in, κ out;
@@ -27,12 +30,26 @@ from ops.scaling import scale_lobes
 from tests.analytic import two_spheres
 
 
-def _frame() -> tuple[
-    np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]
-]:
+def _frame(
+    covered: bool = False,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The two spheres on background (19 % of the pixels covered) or, ``covered``, in front of a
+    wavy wall that fills the rest of the frame, so that every pixel is covered and curved."""
     h, w = HD
     s = two_spheres(h, width=w)
-    n = s.normal
+    normal, depth, mask = s.normal, s.depth, s.mask
+    if covered:
+        v, u = np.mgrid[0:h, 0:w].astype(np.float32) / np.float32(h) * np.float32(2.0 * np.pi)
+        amp, freq = 0.02, 6.0  # the wall's height 0.02·sin(6u)·sin(6v), in image heights
+        gx = amp * freq * np.cos(freq * u) * np.sin(freq * v) / (2.0 * np.pi)
+        gy = amp * freq * np.sin(freq * u) * np.cos(freq * v) / (2.0 * np.pi)
+        wall = np.stack([-gx, gy, np.ones_like(gx)], axis=-1)
+        wall /= np.linalg.norm(wall, axis=-1, keepdims=True)
+        far = float(depth[mask].max()) * 2.0
+        normal = np.where(mask[..., None], normal, wall).astype(np.float32)
+        depth = np.where(mask, depth, np.float32(far)).astype(np.float32)
+        mask = np.ones_like(mask)
+    n = normal
     n = s.normal
     ell = np.array([0.4, 0.5, 0.77], np.float32)
     ell /= np.linalg.norm(ell)
@@ -40,7 +57,7 @@ def _frame() -> tuple[
     hv = ell + np.array([0, 0, 1], np.float32)
     hv /= np.linalg.norm(hv)
     spec = (np.clip(n @ hv, 0.0, None) ** 40).astype(np.float32)
-    amb = (0.5 + 0.5 * n[..., 2]).astype(np.float32) * s.mask
+    amb = (0.5 + 0.5 * n[..., 2]).astype(np.float32) * mask
     lights = {
         "ambient": np.repeat(amb[..., None], 3, axis=2),
         "diffuse": np.repeat(ndl[..., None], 3, axis=2),
@@ -48,7 +65,7 @@ def _frame() -> tuple[
     }
     colour = {"ambient": (0.1, 0.1, 0.12), "diffuse": (0.8, 0.5, 0.3), "specular": (1, 1, 1)}
     lobes = {k: (v * np.array(colour[k], np.float32)).astype(np.float32) for k, v in lights.items()}
-    return s.normal, s.depth, s.mask, lobes, lights
+    return normal, depth, mask, lobes, lights
 
 
 def main() -> None:
@@ -92,6 +109,27 @@ def main() -> None:
             with_sigmas=False,
         ),
         repeat=21,
+        target_ratio=8,
+    )
+    c_normal, c_depth, c_mask, c_lobes, c_lights = _frame(covered=True)
+    rep.time(
+        "principal_curvatures + isotropic (fully covered)",
+        lambda: isotropic(principal_curvatures(c_normal, c_depth, c_mask)),
+        repeat=15,
+        target_ratio=4,
+    )
+    rep.time(
+        "principal_curvatures + scale_lobes (fully covered)",
+        lambda: scale_lobes(
+            c_lobes,
+            c_lights,
+            isotropic_field(principal_curvatures(c_normal, c_depth, c_mask)),
+            0.5,
+            3.0,
+            whites,
+            with_sigmas=False,
+        ),
+        repeat=15,
         target_ratio=8,
     )
     rep.time(

@@ -508,13 +508,13 @@ def principal_curvatures(
         whole_n = _downsample(normal, level, (w_l, h_l))
         whole_c = _working_coverage(depth, mask, level, (w_l, h_l))
 
-    def normals(a0: int, a1: int) -> np.ndarray:
-        """(3, rows, w_l) planes of the working-grid normals of working rows a0..a1."""
-        planes = np.empty((3, a1 - a0, w_l), np.float32)
+    def normals(a0: int, a1: int, c0: int, c1: int) -> np.ndarray:
+        """(3, rows, cols) planes of the working-grid normals of rows a0..a1, columns c0..c1."""
+        planes = np.empty((3, a1 - a0, c1 - c0), np.float32)
         if exact:
-            _block_normals(normal[a0 * k : a1 * k], k, planes)
+            _block_normals(normal[a0 * k : a1 * k], k, c0, planes)
         else:
-            cv2.split(whole_n[a0:a1], list(planes))
+            cv2.split(whole_n[a0:a1, c0:c1], list(planes))
         return planes
 
     def coverage(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray]:
@@ -553,11 +553,27 @@ def principal_curvatures(
     halo = 3 + radius + nhalo
     outs = [np.empty((h_l, w_l), np.float32) for _ in range(4)]
 
+    # Only the columns around the covered pixels of a strip are computed: normals count only
+    # where covered (away from jumps), so beyond the reach of the smoothing and of the stencils
+    # that follow (g + 2 pixels), and again as far from the crop's edge, everything is 0.
+    margin = 2 * (nhalo + 1) + radius + 3
+
     def strip(r0: int, r1: int) -> None:
         a0, a1 = max(0, r0 - halo), min(h_l, r1 + halo)
-        planes = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo))
         cov, depth_l = coverage(a0, a1)
-        _hessian_rows(planes, cov, depth_l, prm, r0 - a0, r1 - a0, [o[r0:r1] for o in outs])
+        x, _, bw, _ = cv2.boundingRect(cov)
+        rows = [o[r0:r1] for o in outs]
+        c0, c1 = (max(0, x - margin), min(w_l, x + bw + margin)) if bw else (0, 0)
+        for o in rows:
+            o[:, :c0] = 0.0
+            o[:, c1:] = 0.0
+        if c1 <= c0:
+            return
+        planes = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo), c0, c1)
+        if (c0, c1) != (0, w_l):
+            cov = np.ascontiguousarray(cov[:, c0:c1])
+            depth_l = np.ascontiguousarray(depth_l[:, c0:c1])
+        _hessian_rows(planes, cov, depth_l, prm, r0 - a0, r1 - a0, [o[:, c0:c1] for o in rows])
 
     run_strips(h_l, strip, _STRIP_ROWS)
     trace, qx, qy, wgt = outs
@@ -586,35 +602,37 @@ _NO_MASK = np.empty((0, 0), np.uint8)
 
 
 @kernel
-def _block_normals(normal, k, planes):  # type: ignore[no-untyped-def]
+def _block_normals(normal, k, c0, planes):  # type: ignore[no-untyped-def]
     """``planes[c]`` = the box average of channel c of ``normal`` (rows, W, 3) over k x k blocks,
-    for every block of the rows (``planes``: (3, rows / k, W / k)). A non-finite normal makes its
-    block non-finite and nothing else, as with a plain box average."""
+    for the blocks of the rows from block column ``c0`` on (``planes``: (3, rows / k, cols)). A
+    non-finite normal makes its block non-finite and nothing else, as with a plain box average."""
     wid = normal.shape[1]
+    cols = planes.shape[2]
+    x0 = 3 * k * c0  # first value of the first block in a flat row
     inv = np.float32(1.0 / (k * k))
-    acc = np.empty(3 * wid, np.float32)
+    acc = np.empty(3 * k * cols, np.float32)
     for i in range(planes.shape[1]):
         px, py, pz = planes[0, i], planes[1, i], planes[2, i]
         if k == 2:  # both rows at once, without the row sum
-            ra = normal[2 * i].reshape(3 * wid)
-            rb = normal[2 * i + 1].reshape(3 * wid)
-            for j in range(wid // 2):
+            ra = normal[2 * i].reshape(3 * wid)[x0:]
+            rb = normal[2 * i + 1].reshape(3 * wid)[x0:]
+            for j in range(cols):
                 px[j] = (ra[6 * j] + ra[6 * j + 3] + rb[6 * j] + rb[6 * j + 3]) * inv
                 py[j] = (ra[6 * j + 1] + ra[6 * j + 4] + rb[6 * j + 1] + rb[6 * j + 4]) * inv
                 pz[j] = (ra[6 * j + 2] + ra[6 * j + 5] + rb[6 * j + 2] + rb[6 * j + 5]) * inv
             continue
-        acc[:] = normal[i * k].reshape(3 * wid)
+        acc[:] = normal[i * k].reshape(3 * wid)[x0 : x0 + acc.shape[0]]
         for dy in range(1, k):
-            row = normal[i * k + dy].reshape(3 * wid)
-            for x in range(3 * wid):
+            row = normal[i * k + dy].reshape(3 * wid)[x0:]
+            for x in range(acc.shape[0]):
                 acc[x] += row[x]
         if k == 1:
-            for j in range(wid):
+            for j in range(cols):
                 px[j] = acc[3 * j]
                 py[j] = acc[3 * j + 1]
                 pz[j] = acc[3 * j + 2]
         else:
-            for j in range(wid // k):
+            for j in range(cols):
                 sx = sy = sz = np.float32(0.0)
                 for dx in range(k):
                     o = 3 * (j * k + dx)
