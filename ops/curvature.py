@@ -305,7 +305,7 @@ def _jump_band(depth_l: np.ndarray, cov: np.ndarray, depth_jump: float, radius: 
     lo = np.empty_like(depth_l)
     jump: np.ndarray = np.empty(depth_l.shape, np.uint8)
     if _jump_candidates(depth_l, cov, np.float32(math.exp(-depth_jump)), hi, lo, jump):
-        _mark_occlusions(jump, cov, hi, lo, depth_jump)
+        _mark_occlusions(jump, cov, lo, depth_jump)
     if radius > 0 and cv2.countNonZero(jump):
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * radius + 1, 2 * radius + 1))
         jump = cv2.dilate(jump, k)
@@ -350,12 +350,10 @@ def _jump_candidates(depth_l, cov, e, hi, lo, jump):  # type: ignore[no-untyped-
     return count
 
 
-def _mark_occlusions(
-    jump: np.ndarray, cov: np.ndarray, hi: np.ndarray, lo: np.ndarray, depth_jump: float
-) -> None:
+def _mark_occlusions(jump: np.ndarray, cov: np.ndarray, lo: np.ndarray, depth_jump: float) -> None:
     """Keep the candidates in ``jump`` (uint8 255) that are next to the far side of an
-    occlusion and clear the others; ``cov`` is the coverage (uint8), ``hi`` and ``lo`` the
-    covered depth, 0 and +inf elsewhere.
+    occlusion and clear the others; ``cov`` is the coverage (uint8), ``lo`` the covered depth,
+    +inf elsewhere.
 
     Along a row or a column, a covered pixel of depth d whose two neighbours d-, d+ are covered
     (and inside the image) is the far side of an occlusion when it lies behind both of them by
@@ -375,67 +373,54 @@ def _mark_occlusions(
     occluder and the background is still cut off.
 
     Kept are the candidates within one pixel (3x3) of a far side: both sides of the jump, as the
-    3x3 test marks them at an occlusion. The tests read each candidate's neighbours (work
-    proportional to the candidates); where candidates are dense (a slanted surface at low
-    resolution) the second difference is first filtered over their bounding box with cv2.
+    3x3 test marks them at an occlusion. The covered candidates are listed (cv2.findNonZero), a
+    compiled loop reads their neighbours (work proportional to the candidates; outside the image
+    counts as missing), and a 3x3 dilation of the far sides selects the candidates kept.
     """
-    bx, by, bw, bh = cv2.boundingRect(jump)
-    h, w = lo.shape
-    # The candidates' box with 2 pixels around it, +inf (missing) outside the image.
-    x0, y0, x1, y1 = max(bx - 2, 0), max(by - 2, 0), min(bx + bw + 2, w), min(by + bh + 2, h)
-    borders = (2 - (by - y0), 2 - (y1 - by - bh), 2 - (bx - x0), 2 - (x1 - bx - bw))
-    pad = cv2.copyMakeBorder(lo[y0:y1, x0:x1], *borders, cv2.BORDER_CONSTANT, value=math.inf)
-    roi = jump[by : by + bh, bx : bx + bw]
-    covered = cv2.bitwise_and(roi, cov[by : by + bh, bx : bx + bw])  # background: never far
-    if cv2.countNonZero(covered) > 1000 + bw * bh // 8:
-        # Dense: keep the candidates behind their neighbours along a row or a column first,
-        # 2d - d- - d+ > c/2·d over the box (missing neighbours, and those outside the box, as
-        # 0: a superset of the far sides).
-        box = hi[by : by + bh, bx : bx + bw]
-        kern = _second_diff(-0.5 * math.expm1(-depth_jump))
-        sx = cv2.filter2D(box, -1, kern, borderType=cv2.BORDER_CONSTANT)
-        sy = cv2.filter2D(box, -1, kern.T, borderType=cv2.BORDER_CONSTANT)
-        behind = _cv.compare(sx, 0, cv2.CMP_GT)
-        cv2.bitwise_or(behind, _cv.compare(sy, 0, cv2.CMP_GT), dst=behind)
-        cv2.bitwise_and(covered, behind, dst=covered)
-    pts = cv2.findNonZero(covered)  # (x, y) in the box, or None
+    pts = cv2.findNonZero(cv2.bitwise_and(jump, cov))  # (x, y) of the covered candidates
     if pts is None:
-        roi[...] = 0
+        jump[...] = 0
         return
-    stride = pad.shape[1]
-    pts = pts.reshape(-1, 2)
-    at = pts[:, 1] * stride + pts[:, 0] + (2 * stride + 2)  # flat index in ``pad``
-    # Depth at (-1, +1, -2, +2) along the row, then along the column: (candidate, axis, offset).
-    nb = pad.take(at[:, None] + _offsets(stride)).reshape(-1, 2, 4)
-    dm, dp = nb[..., 0], nb[..., 1]
-    d = pad.take(at)[:, None]
     e = math.exp(-depth_jump)
-    near = np.minimum(dm, dp)
-    pair = dm + dp  # +inf when a neighbour is missing
-    jumps = near < e * d
-    far = jumps & (pair < (1 + e) * d)
-    # One neighbour missing: the far side is found from the near one and its other neighbour.
-    k = np.flatnonzero(jumps & (pair == np.inf))  # (candidate, axis) as 2·candidate + axis
-    if k.size:
-        m, dn, dk = nb.reshape(-1, 4)[k], near.reshape(-1)[k], d[k >> 1, 0]
-        dnn = np.where(m[:, 0] < m[:, 1], m[:, 2], m[:, 3])
-        far.reshape(-1)[k] = (dnn < np.inf) & (dk - dn > _LIMB_RATIO * (dn - dnn))
-    keep = np.zeros(pad.shape, np.uint8)  # far sides, in the pad's frame
-    keep.reshape(-1)[at[far[:, 0] | far[:, 1]]] = 255
-    np.bitwise_and(roi, _cv.dilate(keep, None)[2:-2, 2:-2], out=roi)  # the rest of ``jump`` is 0
+    far = np.zeros(jump.shape, np.uint8)
+    _far_sides(pts.reshape(-1, 2), lo, np.float32(e), np.float32(1.0 + e), far)
+    cv2.bitwise_and(jump, _cv.dilate(far, None), dst=jump)
 
 
-@functools.lru_cache(maxsize=64)
-def _offsets(stride: int) -> np.ndarray:
-    """Flat offsets of (-1, +1, -2, +2) along a row, then along a column, in an image of
-    ``stride`` columns."""
-    return np.array([-1, 1, -2, 2, -stride, stride, -2 * stride, 2 * stride], np.intp)
-
-
-@functools.lru_cache(maxsize=16)
-def _second_diff(c: float) -> np.ndarray:
-    """Row kernel of ``2d - d- - d+ - c·d``."""
-    return np.array([[-1.0, 2.0 - c, -1.0]], np.float32)
+@kernel
+def _far_sides(pts, lo, e, e1, far):  # type: ignore[no-untyped-def]
+    """``far`` = 255 at the points ``pts`` ((x, y) rows) that are the far side of an occlusion
+    (:func:`_mark_occlusions`; ``e`` = e^-t, ``e1`` = 1 + e^-t)."""
+    n, w = lo.shape
+    big = np.float32(np.inf)
+    limb = np.float32(_LIMB_RATIO)
+    for p in range(pts.shape[0]):
+        x, y = pts[p, 0], pts[p, 1]
+        row = lo[y]
+        d = row[x]
+        for axis in range(2):  # along the row, then along the column
+            if axis == 0:
+                dm = row[x - 1] if x >= 1 else big
+                dp = row[x + 1] if x + 1 < w else big
+                dmm = row[x - 2] if x >= 2 else big
+                dpp = row[x + 2] if x + 2 < w else big
+            else:
+                dm = lo[y - 1, x] if y >= 1 else big
+                dp = lo[y + 1, x] if y + 1 < n else big
+                dmm = lo[y - 2, x] if y >= 2 else big
+                dpp = lo[y + 2, x] if y + 2 < n else big
+            near = min(dm, dp)
+            if not near < e * d:
+                continue
+            pair = dm + dp  # +inf when a neighbour is missing
+            if pair < e1 * d:
+                far[y, x] = 255
+                break
+            if pair == big:  # the far side from the near one and its other neighbour
+                dnn = dmm if dm < dp else dpp
+                if dnn < big and d - near > limb * (near - dnn):
+                    far[y, x] = 255
+                    break
 
 
 def principal_curvatures(
