@@ -29,7 +29,8 @@ from ops.parallel import run_strips
 
 #: Rec. 709 / sRGB luminance weights (linear RGB).
 REC709 = (0.2126, 0.7152, 0.0722)
-_LUMA = np.array([REC709], dtype=np.float32)  # (1, 3) for cv2.transform
+_LUMA = np.array([REC709], dtype=np.float32)  # (1, 3)
+_LUMA_W = (np.float32(REC709[0]), np.float32(REC709[1]), np.float32(REC709[2]))  # for kernels
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
 _ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
@@ -143,8 +144,20 @@ def luminance(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) RGB array, got shape {rgb.shape}")
-    m = _LUMA if scale == 1.0 else _LUMA * np.float32(scale)
-    return cv2.transform(rgb, m)
+    s32 = np.float32(scale)
+    w0, w1, w2 = _LUMA_W[0] * s32, _LUMA_W[1] * s32, _LUMA_W[2] * s32
+    out = np.empty(rgb.shape[:2], np.float32)
+    run_strips(
+        out.shape[0], lambda r0, r1: _luma_rows(rgb[r0:r1], w0, w1, w2, out[r0:r1]), _STRIP_ROWS
+    )
+    return out
+
+
+@kernel
+def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
+    wid = out.shape[1]
+    for i in range(out.shape[0]):
+        _luma_row(rgb[i].reshape(3 * wid), w0, w1, w2, out[i])
 
 
 def white_level(
@@ -166,53 +179,126 @@ def white_level(
     p = float(percentile)
     if not 0.0 < p <= 100.0:
         raise ValueError(f"percentile={percentile!r} is outside the allowed range (0, 100]")
-    vals = np.asarray(values)
-    y = luminance(vals) if vals.ndim == 3 else np.asarray(vals, np.float32)
-    if mask is not None:
-        m = np.asarray(mask)
-        if m.shape != y.shape:
-            raise ValueError(f"mask must have shape {y.shape}, got {m.shape}")
-        y = y[m > 0.5] if m.dtype != np.bool_ else y[m]
-    y = y[np.isfinite(y)]
-    if y.size == 0:
-        return 1.0
-    level = _percentile(y, p)
+    vals, m8, wid = _counting(values, mask)
+    level = _banded_percentile(vals, m8, wid, p)
+    if level is None:  # small, or the bracket missed: np.percentile of all the counted values
+        y = _count(vals, m8, wid)[2]
+        level = float(np.percentile(y, p, overwrite_input=True)) if y.size else 0.0
     return level if level > 0.0 else 1.0
 
 
 _BAND_MIN = 1 << 16  # below this many values np.percentile is cheap enough
-_BAND_SAMPLES = 1 << 15
+_SAMPLE_ROWS = 128  # rows of the sample that brackets the percentile
+_SAMPLE_MIN = 1024  # fewer sampled values than this bracket nothing
+_NO_MASK = np.empty((0, 0), np.uint8)
+_INF = float("inf")
 
 
-def _percentile(y: np.ndarray, p: float) -> float:
-    """``np.percentile(y, p)`` (linear) of a 1-D finite float32 array, which it may reorder.
+def _counting(values: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, int]:
+    """``values`` as rows of (W) values or (3W) RGB, float32, the mask as uint8 rows (no rows:
+    every pixel counts) and W."""
+    vals = np.ascontiguousarray(values, dtype=np.float32)
+    if vals.ndim not in (2, 3) or (vals.ndim == 3 and vals.shape[2] != 3):
+        raise ValueError(f"expected an (H, W) or (H, W, 3) array, got shape {vals.shape}")
+    shape = vals.shape[:2]
+    m8 = _NO_MASK
+    if mask is not None:
+        m = np.asarray(mask)
+        if m.shape != shape:
+            raise ValueError(f"mask must have shape {shape}, got {m.shape}")
+        m8 = np.ascontiguousarray(m if m.dtype == np.bool_ else m > 0.5).view(np.uint8)
+    return vals.reshape(shape[0], -1), m8, shape[1]
 
-    Exact and deterministic, without partitioning all of ``y``: a strided subsample brackets the
-    two order statistics the percentile interpolates, one pass counts the values below the
-    bracket and keeps those inside it, and only those are partitioned; numpy's own interpolation
-    of the two values gives the result. Falls back to ``np.percentile`` if the bracket misses.
-    """
-    n = y.size
+
+def _count(
+    vals: np.ndarray, m8: np.ndarray, wid: int, lo: float = -_INF, hi: float = _INF
+) -> tuple[int, int, np.ndarray]:
+    """Over the counted pixels (finite values of covered pixels; RGB: their luminance): how
+    many there are, how many are below ``lo``, and those in [lo, hi], in row order (1-D)."""
+    hgt = vals.shape[0]
+    buf = np.empty(hgt * wid, np.float32)
+    starts = range(0, hgt, _STRIP_ROWS)
+    res = np.zeros((len(starts), 3), np.int64)
+    lo32, hi32 = np.float32(lo), np.float32(hi)
+
+    def strip(r0: int, r1: int) -> None:
+        rows = m8[r0:r1] if m8.shape[0] else m8
+        out = buf[r0 * wid : r1 * wid]
+        res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, out)
+
+    run_strips(hgt, strip, _STRIP_ROWS)
+    pieces = [buf[a * wid : a * wid + n] for a, n in zip(starts, res[:, 2], strict=True)]
+    return int(res[:, 0].sum()), int(res[:, 1].sum()), np.concatenate(pieces)
+
+
+def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> float | None:
+    """``np.percentile`` (linear) of the counted values, exactly, without gathering them all:
+    the counted values of every (H / 128)-th row bracket the two order statistics the
+    percentile interpolates; one pass counts the values and those below the bracket and keeps
+    the few inside it, and only those are partitioned (numpy's own interpolation of the two
+    gives the result). None when the frame is small or the bracket misses them."""
+    hgt = vals.shape[0]
+    if hgt * wid < _BAND_MIN:
+        return None
+    step = max(1, hgt // _SAMPLE_ROWS)
+    sample = np.empty(((hgt + step - 1) // step) * wid, np.float32)
+    ns = _count_rows(vals, m8, wid, step, np.float32(-_INF), np.float32(_INF), sample)[2]
+    if ns < _SAMPLE_MIN:
+        return None
+    sample = sample[:ns]
     q = np.true_divide(p, 100)
+    centre = q * (ns - 1)
+    margin = 8.0 * math.sqrt(ns * q * (1.0 - q)) + 32.0  # order-statistic spread, with room
+    lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
+    sample.partition([lo_r, hi_r])
+    n, n_below, band = _count(vals, m8, wid, sample[lo_r], sample[hi_r])
     g = (n - 1) * q  # numpy's virtual index for the linear method
     k = math.floor(g)
-    if n < _BAND_MIN or k + 1 > n - 1:
-        return float(np.percentile(y, p, overwrite_input=True))
-    sub = y[:: n // _BAND_SAMPLES].copy()
-    ns = sub.size
-    centre = k / (n - 1) * (ns - 1)
-    margin = 6.0 * math.sqrt(ns * q * (1.0 - q)) + 8.0  # order-statistic spread, with room
-    lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
-    sub.partition([lo_r, hi_r])
-    below = y < sub[lo_r]
-    n_below = int(np.count_nonzero(below))
-    band = y[(y <= sub[hi_r]) & ~below]
-    if not (n_below <= k and n_below + band.size > k + 1):
-        return float(np.percentile(y, p, overwrite_input=True))
+    if n < _BAND_MIN or k + 1 > n - 1 or not (n_below <= k and n_below + band.size > k + 1):
+        return None
     band.partition([k - n_below, k + 1 - n_below])
-    pair = np.array([band[k - n_below], band[k + 1 - n_below]], y.dtype)
+    pair = np.array([band[k - n_below], band[k + 1 - n_below]], np.float32)
     # quantile of the pair at the fractional part: numpy's lerp, with the same (weak) weight.
     return float(np.quantile(pair, float(g - k)))
+
+
+@kernel
+def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-def]
+    """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
+    uint8 coverage, or no rows): (counted, below ``lo``, packed into ``out``). The counts are
+    vectorised reductions that also flag the values in the band; only the 8-byte words of flags
+    that hold one are looked at to pack them."""
+    y = np.empty(wid, np.float32)
+    ones = np.ones(wid, np.uint8)
+    nw = (wid + 7) // 8
+    flags = np.zeros(8 * nw, np.uint8)
+    words = flags.view(np.uint64)
+    w0, w1, w2 = _LUMA_W
+    big = np.float32(np.inf)
+    counted = below = k = 0
+    for i in range(0, rows.shape[0], step):
+        if rows.shape[1] == wid:
+            y[:] = rows[i]
+        else:
+            _luma_row(rows[i], w0, w1, w2, y)
+        mr = m8[i] if m8.shape[0] else ones
+        n_in = 0
+        for j in range(wid):
+            v = y[j]
+            ok = (abs(v) < big) & (mr[j] != 0)
+            band = ok & (v >= lo) & (v <= hi)
+            counted += ok
+            below += ok & (v < lo)
+            n_in += band
+            flags[j] = band
+        if n_in:
+            for q in range(nw):
+                if words[q]:
+                    for j in range(8 * q, min(8 * q + 8, wid)):
+                        if flags[j]:
+                            out[k] = y[j]
+                            k += 1
+    return counted, below, k
 
 
 def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
@@ -321,7 +407,7 @@ def scale_lobes(
     lobe_arr = {n: rgb(lobes[n], f"lobes[{n!r}]") for n in names}
     light_arr = {n: rgb(lights[n], f"lights[{n!r}]") if n in lights else lobe_arr[n] for n in names}
     levels = {
-        n: white_level(luminance(light_arr[n]), mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
+        n: white_level(light_arr[n], mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
     if remainder is not None and beauty is not None:

@@ -177,6 +177,18 @@ def test_white_level_equals_numpy_percentile_of_counted_pixels(
     assert white_level(rgb, mask, percentile) == float(np.percentile(lum[ok], percentile))
 
 
+def test_white_level_is_exact_when_its_row_sample_misleads() -> None:
+    """The rows the bracket is sampled from (every H/128-th) hold only dark values, the rest of
+    the frame bright ones: the bracket misses and the level is still np.percentile's."""
+    shape = (1024, 300)
+    rng = np.random.default_rng(7)
+    y = (rng.random(shape, dtype=np.float32) + 1.0).astype(np.float32)
+    y[:: shape[0] // 128] = rng.random((128, shape[1]), dtype=np.float32) * 0.01
+    mask = rng.random(shape) < 0.9
+    for p in (50.0, 99.0):
+        assert white_level(y, mask, p) == float(np.percentile(y[mask], p))
+
+
 # -- scale_lobes -----------------------------------------------------------------------------------
 
 
