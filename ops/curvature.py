@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -493,14 +494,15 @@ def principal_curvatures(
         whole_n = _downsample(normal, level, (w_l, h_l))
         whole_c = _working_coverage(depth, mask, level, (w_l, h_l))
 
-    def normals(a0: int, a1: int, c0: int, c1: int) -> np.ndarray:
-        """(3, rows, cols) planes of the working-grid normals of rows a0..a1, columns c0..c1."""
-        planes = np.empty((3, a1 - a0, c1 - c0), np.float32)
+    def weighted(a0: int, a1: int, c0: int, c1: int, covp: np.ndarray, nch: int) -> np.ndarray:
+        """(nch + 1, rows, cols): the first ``nch`` working-grid normal components of rows
+        a0..a1, columns c0..c1, times w = [covp != 0], and w (:func:`_weigh_blocks`)."""
+        out = np.empty((nch + 1, a1 - a0, c1 - c0), np.float32)
         if exact:
-            _block_normals(normal[a0 * k : a1 * k], k, c0, planes)
+            _weigh_blocks(normal[a0 * k : a1 * k], k, c0, covp, nch, out)
         else:
-            cv2.split(whole_n[a0:a1, c0:c1], list(planes))
-        return planes
+            _weigh_blocks(whole_n[a0:a1], 1, c0, covp, nch, out)
+        return out
 
     def coverage(a0: int, a1: int) -> tuple[np.ndarray, np.ndarray]:
         """Working-grid coverage and depth of working rows a0..a1."""
@@ -554,11 +556,15 @@ def principal_curvatures(
             o[:, c1:] = 0.0
         if c1 <= c0:
             return
-        planes = normals(max(0, r0 - nhalo), min(h_l, r1 + nhalo), c0, c1)
         if (c0, c1) != (0, w_l):
             cov = np.ascontiguousarray(cov[:, c0:c1])
             depth_l = np.ascontiguousarray(depth_l[:, c0:c1])
-        _hessian_rows(planes, cov, depth_l, prm, r0 - a0, r1 - a0, [o[:, c0:c1] for o in rows])
+        b0, b1 = max(0, r0 - nhalo), min(h_l, r1 + nhalo)
+
+        def weigh(covp: np.ndarray, nch: int) -> np.ndarray:
+            return weighted(b0, b1, c0, c1, covp, nch)
+
+        _hessian_rows(weigh, cov, depth_l, prm, r0 - a0, r1 - a0, [o[:, c0:c1] for o in rows])
 
     run_strips(h_l, strip, _STRIP_ROWS)
     trace, qx, qy, wgt = outs
@@ -587,17 +593,23 @@ _NO_MASK = np.empty((0, 0), np.uint8)
 
 
 @kernel
-def _block_normals(normal, k, c0, planes):  # type: ignore[no-untyped-def]
-    """``planes[c]`` = the box average of channel c of ``normal`` (rows, W, 3) over k x k blocks,
-    for the blocks of the rows from block column ``c0`` on (``planes``: (3, rows / k, cols)). A
-    non-finite normal makes its block non-finite and nothing else, as with a plain box average."""
+def _weigh_blocks(normal, k, c0, covp, nch, out):  # type: ignore[no-untyped-def]
+    """The box averages over k x k blocks of ``normal`` (rows, W, 3), from block column ``c0``
+    on, of its first ``nch`` components, times w = [``covp`` != 0] into ``out[:nch]``, and w into
+    ``out[nch]`` (``out``: (nch + 1, rows / k, cols)). A non-finite product (a non-finite normal
+    in the block) is set to 0, so it counts nowhere."""
     wid = normal.shape[1]
-    cols = planes.shape[2]
+    cols = out.shape[2]
     x0 = 3 * k * c0  # first value of the first block in a flat row
     inv = np.float32(1.0 / (k * k))
+    zero, one, big = np.float32(0.0), np.float32(1.0), np.float32(np.inf)
     acc = np.empty(3 * k * cols, np.float32)
-    for i in range(planes.shape[1]):
-        px, py, pz = planes[0, i], planes[1, i], planes[2, i]
+    box = np.empty((3, cols), np.float32)
+    for i in range(out.shape[1]):
+        cr, wr = covp[i], out[nch, i]
+        for j in range(cols):
+            wr[j] = one if cr[j] != 0 else zero
+        px, py, pz = box[0], box[1], box[2]
         if k == 2:  # both rows at once, without the row sum
             ra = normal[2 * i].reshape(3 * wid)[x0:]
             rb = normal[2 * i + 1].reshape(3 * wid)[x0:]
@@ -605,18 +617,12 @@ def _block_normals(normal, k, c0, planes):  # type: ignore[no-untyped-def]
                 px[j] = (ra[6 * j] + ra[6 * j + 3] + rb[6 * j] + rb[6 * j + 3]) * inv
                 py[j] = (ra[6 * j + 1] + ra[6 * j + 4] + rb[6 * j + 1] + rb[6 * j + 4]) * inv
                 pz[j] = (ra[6 * j + 2] + ra[6 * j + 5] + rb[6 * j + 2] + rb[6 * j + 5]) * inv
-            continue
-        acc[:] = normal[i * k].reshape(3 * wid)[x0 : x0 + acc.shape[0]]
-        for dy in range(1, k):
-            row = normal[i * k + dy].reshape(3 * wid)[x0:]
-            for x in range(acc.shape[0]):
-                acc[x] += row[x]
-        if k == 1:
-            for j in range(cols):
-                px[j] = acc[3 * j]
-                py[j] = acc[3 * j + 1]
-                pz[j] = acc[3 * j + 2]
         else:
+            acc[:] = normal[i * k].reshape(3 * wid)[x0 : x0 + acc.shape[0]]
+            for dy in range(1, k):
+                row = normal[i * k + dy].reshape(3 * wid)[x0:]
+                for x in range(acc.shape[0]):
+                    acc[x] += row[x]
             for j in range(cols):
                 sx = sy = sz = np.float32(0.0)
                 for dx in range(k):
@@ -627,6 +633,11 @@ def _block_normals(normal, k, c0, planes):  # type: ignore[no-untyped-def]
                 px[j] = sx * inv
                 py[j] = sy * inv
                 pz[j] = sz * inv
+        for c in range(nch):  # the weighting, on rows in L1
+            o, bc = out[c, i], box[c]
+            for j in range(cols):
+                v = bc[j] * wr[j]
+                o[j] = v if abs(v) < big else zero
 
 
 @kernel
@@ -695,7 +706,7 @@ class _Params:
 
 
 def _hessian_rows(
-    planes: np.ndarray,
+    weigh: Callable[[np.ndarray, int], np.ndarray],
     cov: np.ndarray,
     depth_l: np.ndarray,
     prm: _Params,
@@ -705,8 +716,8 @@ def _hessian_rows(
 ) -> None:
     """(trace, q_x, q_y, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
     see :func:`principal_curvatures`); the block (``cov``, ``depth_l``) holds the neighbourhoods
-    those rows need, the planes of the normals ((3, rows, w): n_x, n_y, n_z) only its rows
-    b0..b1 (below).
+    those rows need; ``weigh(covp, nch)`` gives the weighted normals of its rows b0..b1 (below)
+    for their reliable coverage ``covp``: n_x·w, n_y·w[, n_z·w], w.
 
     Each step runs only on the rows the next one needs: the jump band on the whole block, the
     smoothing on ``o0 - 1 - g .. o1 + 1 + g`` (g: the kernel's half size; the rows it gets wrong
@@ -719,11 +730,10 @@ def _hessian_rows(
     g = max(ks // 2, 2)
     q0, q1 = max(0, o0 - 1), min(n, o1 + 1)
     b0, b1 = max(0, q0 - g), min(n, q1 + g)
-    assert planes.shape[1] == b1 - b0
     covp = covp[b0:b1]
     nch = 3 if prm.f > 0.0 else 2  # n_z is only needed for the foreshortening
-    weighted = np.empty((nch + 1, *covp.shape), np.float32)  # n_x·w, n_y·w[, n_z·w], w
-    _weigh_normals(planes, covp, nch, weighted)
+    weighted = weigh(covp, nch)
+    assert weighted.shape == (nch + 1, *covp.shape)
 
     # Normalised convolution of the normals with the weight map, G*(n·w) / G*w, on rows q0..q1.
     qa, qb = q0 - b0, q1 - b0
@@ -760,22 +770,6 @@ def _hessian_rows(
 def _gaussian_kernel(ksize: int, sigma: float) -> np.ndarray:
     """cv2.GaussianBlur's 1-D kernel (``cv2.getGaussianKernel``), float32."""
     return np.ascontiguousarray(cv2.getGaussianKernel(ksize, sigma, cv2.CV_32F)[:, 0])
-
-
-@kernel
-def _weigh_normals(planes, covp, nch, weighted):  # type: ignore[no-untyped-def]
-    """w = ``covp`` / 255 (covp: 0 or 255) into ``weighted[nch]`` and the first ``nch`` planes
-    times w into ``weighted[:nch]``, non-finite products (a non-finite normal) set to 0."""
-    zero, one, big = np.float32(0.0), np.float32(1.0), np.float32(np.inf)
-    for i in range(covp.shape[0]):
-        cr, wr = covp[i], weighted[nch, i]
-        for j in range(wr.shape[0]):
-            wr[j] = one if cr[j] != 0 else zero
-        for c in range(nch):
-            pr, out = planes[c, i], weighted[c, i]
-            for j in range(wr.shape[0]):
-                v = pr[j] * wr[j]
-                out[j] = v if abs(v) < big else zero
 
 
 @kernel

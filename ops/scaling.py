@@ -146,10 +146,9 @@ def luminance(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
         raise ValueError(f"expected an (H, W, 3) RGB array, got shape {rgb.shape}")
     s32 = np.float32(scale)
     w0, w1, w2 = _LUMA_W[0] * s32, _LUMA_W[1] * s32, _LUMA_W[2] * s32
-    out = np.empty(rgb.shape[:2], np.float32)
-    run_strips(
-        out.shape[0], lambda r0, r1: _luma_rows(rgb[r0:r1], w0, w1, w2, out[r0:r1]), _STRIP_ROWS
-    )
+    hgt, wid = rgb.shape[:2]
+    out = np.empty((hgt, wid), np.float32)
+    run_strips(hgt, lambda r0, r1: _luma_rows(rgb[r0:r1], w0, w1, w2, out[r0:r1]), _STRIP_ROWS)
     return out
 
 
