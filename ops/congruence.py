@@ -18,7 +18,18 @@ lowering the score.
 
 Implementation choices (the paper does not fix them):
 
-- Shading = Rec.709 luminance of linear RGB (``cv2.transform``). Shape = **log** depth, so the
+- Shading = Rec.709 luminance of linear RGB (``cv2.transform``).
+- Shape = the **normals** when they are given: the structure tensor of the gradients of the
+  camera-space normal (summed over its three components), i.e. how fast and in which direction
+  the surface turns in the image. The paper computes the shape flow "using depth gradients" and
+  expects that "curved surfaces will thus have much more impact on the final score than flat
+  ones, for which the directions become undefined". Depth gradients give that only for planes
+  facing the camera: a receding floor has a strong, well-defined depth gradient everywhere, and
+  on path-traced frames with a ground plane it carried most of the weight (80 % of Σ e_shape on
+  a Cycles still life), so the score mostly measured the floor's cast shadows and noise, which
+  no shape enhancement should touch. The normal's gradient is 0 on every plane, whatever its
+  slant, and on a curved surface points across the feature like the depth gradient does; it is
+  dimensionless, like the log depth. Without normals the shape is the **log** depth, so the
   flow does not depend on the scene's units or its distance to the camera (∇log d = ∇d / d).
 - Gradients at ``gradient_scale`` (a Gaussian σ relative to the image height), integration at
   ``integration_scale`` (idem). For speed the image is area-downsampled by an integer factor so
@@ -29,7 +40,11 @@ Implementation choices (the paper does not fix them):
   neighbours; the tensors are integrated by normalised convolution over those pixels, so the
   silhouette neither produces shape flow nor bleeds background into the shading flow.
 - Strengths are made comparable by dividing each by its ``percentile``-th percentile over the
-  covered pixels and clipping to [0, 1]. This makes the score invariant to scaling the image
+  covered pixels and clipping to [0, 1]. With normals both are taken where there is shape: the
+  shape's over the pixels whose shape strength is above 1e-4 of the largest (not the planes,
+  where it is 0), the shading's over those whose normalised shape strength is above 0.1, so the
+  shading strength of a floor's cast shadows does not set the scale the objects' shading is
+  measured on. This makes the score invariant to scaling the image
   brightness (the tensor scales by k², and so does the percentile) and to the depth units.
   To compare several renderings of one frame (LLA §7), the shading strength can instead be
   divided by a reference's (``shading_norm``): then only the shape's scale is per image, and a
@@ -65,6 +80,10 @@ REC709 = np.array([[0.2126, 0.7152, 0.0722]], dtype=np.float32)
 
 # Relative floor under which a tensor is treated as zero (float32 rounding noise).
 _REL_FLOOR = 1e-10
+# With normals: the pixels whose shape strength exceeds this fraction of the largest set the
+# shape's scale, and those whose normalised shape strength exceeds _SHAPE_COUNTED the shading's.
+_REL_CURVED = 1e-4
+_SHAPE_COUNTED = 0.1
 
 
 @dataclass
@@ -171,26 +190,34 @@ _ONES3 = np.ones((3, 3), np.uint8)
 
 
 def _covered_level(
-    img: F32, dep: F32, mask: NDArray[np.generic] | None, f: int, size: tuple[int, int]
-) -> tuple[F32, F32, F32]:
-    """Covered luminance, covered depth and coverage, area-downsampled by ``f`` to ``size``.
+    img: F32,
+    dep: F32,
+    mask: NDArray[np.generic] | None,
+    f: int,
+    size: tuple[int, int],
+    normal: F32 | None = None,
+) -> list[F32]:
+    """Covered luminance, covered depth and coverage (then, with ``normal``, the covered n_x,
+    n_y, n_z), area-downsampled by ``f`` to ``size``.
 
-    Coverage is finite positive depth (and mask > 0.5); the depth and luminance are 0 where it
-    is 0 (a NaN depth stays NaN). When ``f`` divides the image this runs on strips of rows (an
+    Coverage is finite positive depth (and mask > 0.5); the other planes are 0 where it is 0
+    (a NaN depth stays NaN). When ``f`` divides the image this runs on strips of rows (an
     integer area resize only mixes rows of one strip, so the result is the same as one pass).
     """
     h, w = dep.shape
     ws, hs = size
     strips = f == 1 or (w == ws * f and h == hs * f)
-    out = [np.empty((hs, ws), np.float32) for _ in range(3)]
+    n_out = 3 if normal is None else 6
+    out = [np.empty((hs, ws), np.float32) for _ in range(n_out)]
     msk = None if mask is None else np.asarray(mask)
 
     def strip(a: int, b: int) -> None:
         r0, r1 = (a * f, b * f) if strips else (0, h)
         if f == 1:
-            lum, depc, covf = (o[a:b] for o in out)
+            planes = [o[a:b] for o in out]
         else:
-            lum, depc, covf = (np.empty((r1 - r0, w), np.float32) for _ in range(3))
+            planes = [np.empty((r1 - r0, w), np.float32) for _ in range(n_out)]
+        lum, depc, covf = planes[:3]
         cv2.threshold(dep[r0:r1], 1e30, 0, cv2.THRESH_TOZERO_INV, dst=depc)  # +inf -> 0
         cv2.threshold(depc, 0, 1, cv2.THRESH_BINARY, dst=covf)  # > 0 -> 1
         if msk is not None:
@@ -201,58 +228,77 @@ def _covered_level(
             cv2.multiply(lum, covf, dst=lum)
         else:
             cv2.multiply(img[r0:r1], covf, dst=lum)
+        if normal is not None:
+            for c, dst in enumerate(planes[3:]):
+                cv2.multiply(np.ascontiguousarray(normal[r0:r1, :, c]), covf, dst=dst)
+                cv2.patchNaNs(dst, 0.0)  # uncovered normals may be NaN (NaN * 0 = NaN)
         if f > 1:
             rows = slice(a, b) if strips else slice(0, hs)
-            for src, o in zip((lum, depc, covf), out, strict=True):
+            for src, o in zip(planes, out, strict=True):
                 cv2.resize(src, (ws, o[rows].shape[0]), dst=o[rows], interpolation=cv2.INTER_AREA)
 
     run_strips(hs, strip, _ROWS_COVER if strips else hs)
-    return out[0], out[1], out[2]
+    return out
 
 
 def _tensor_products(
-    lum: F32, dep: F32, cov: F32, sigma: float, jump: float, f: int, size: tuple[int, int]
+    planes: list[F32], sigma: float, jump: float, f: int, size: tuple[int, int]
 ) -> list[F32]:
-    """Gradient-level pass: blur the covered luminance, depth and coverage by ``sigma``,
-    normalise, take Sobel gradients of the luminance and log depth where the whole stencil is
-    covered and the log depth steps by at most ``jump``, and return the structure-tensor
-    products [lxx, lxy, lyy, dxx, dxy, dyy, valid] area-downsampled by ``f`` to ``size``.
+    """Gradient-level pass over the planes of :func:`_covered_level` (luminance, depth,
+    coverage and, when given, n_x, n_y, n_z): blur them by ``sigma``, normalise by the
+    coverage, take Sobel gradients of the luminance and of the shape signal (the log depth, or
+    each normal component) where the whole stencil is covered and the log depth steps by at most
+    ``jump``, and return the structure-tensor products [lxx, lxy, lyy, sxx, sxy, syy, valid]
+    area-downsampled by ``f`` to ``size`` (the shape products summed over the normal's
+    components).
 
     Runs on strips of rows with a halo covering the blur and the 3×3 stencils when ``f``
     divides the level, which gives the same result as one pass over the whole level.
     """
+    cov = planes[2]
     h, w = cov.shape
     ws, hs = size
     strips = f == 1 or (w == ws * f and h == hs * f)
     halo = int(4.0 * sigma) + 4  # > Gaussian radius (≈ 4σ) + the Sobel / erosion row
     out = [np.empty((hs, ws), np.float32) for _ in range(7)]
 
+    def sobel(x: F32, rows: slice) -> tuple[F32, F32]:
+        return (
+            _f32(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[rows]),
+            _f32(cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[rows]),
+        )
+
     def strip(a: int, b: int) -> None:
         lo, hi = max(0, a - halo), min(h, b + halo)
-        chans = [x[lo:hi] for x in (lum, dep, cov)]
+        chans = [x[lo:hi] for x in planes]
         if sigma >= 0.3:
             chans = [_f32(cv2.GaussianBlur(x, (0, 0), sigma)) for x in chans]
-        lum1, dep1, c1 = chans
+        lum1, dep1, c1 = chans[:3]
         # 1 / coverage; where the coverage is <= 1e-6 this is 1e6 instead of 0, which only
         # changes values no kept gradient reads (those need coverage > 0.999) and keeps them
         # finite
         inv = cv2.divide(1.0, np.maximum(c1, np.float32(1e-6)))
-        lum1 = _f32(cv2.multiply(lum1, inv))
-        logd1 = cv2.log(np.maximum(cv2.multiply(dep1, inv), np.float32(1e-30)))
+        logd1 = _f32(cv2.log(np.maximum(cv2.multiply(dep1, inv), np.float32(1e-30))))
         # Sobel derivatives per level pixel (x right, rows down), kept where the whole stencil
         # is covered and the log depth does not jump; computed on the strip, used on [a, b)
         rows = slice(a - lo, b - lo)
-        lx, ly, dx, dy = (
-            cv2.Sobel(x, cv2.CV_32F, ox, 1 - ox, ksize=3, scale=0.125)[rows]
-            for x in (lum1, logd1)
-            for ox in (1, 0)
-        )
+        lx, ly = sobel(_f32(cv2.multiply(lum1, inv)), rows)
+        dx, dy = sobel(logd1, rows)
         full = cv2.erode(cv2.threshold(c1, 0.999, 1, cv2.THRESH_BINARY)[1], _ONES3)[rows]
         steep = cv2.max(np.abs(dx), np.abs(dy))
         vf = cv2.multiply(cv2.threshold(steep, jump, 1, cv2.THRESH_BINARY_INV)[1], full)
-        lx, ly, dx, dy = (cv2.multiply(g, vf) for g in (lx, ly, dx, dy))
+        shape = [(dx, dy)]
+        if len(chans) > 3:  # the normal's components
+            shape = [sobel(_f32(cv2.multiply(n, inv)), rows) for n in chans[3:]]
+        lx, ly = _f32(cv2.multiply(lx, vf)), _f32(cv2.multiply(ly, vf))
+        sxx, sxy, syy = (np.zeros_like(vf) for _ in range(3))
+        for sx, sy in shape:
+            gx, gy = cv2.multiply(sx, vf), cv2.multiply(sy, vf)
+            cv2.accumulateSquare(gx, sxx)
+            cv2.accumulateProduct(gx, gy, sxy)
+            cv2.accumulateSquare(gy, syy)
         # xy products in image (row-down) convention; the sign is flipped to y-up later
-        prods = (lx * lx, lx * ly, ly * ly, dx * dx, dx * dy, dy * dy, vf)
+        prods = (lx * lx, lx * ly, ly * ly, sxx, sxy, syy, vf)
         orows = slice(a // f, b // f) if strips else slice(0, hs)
         for p, o in zip(prods, out, strict=True):
             if f > 1:
@@ -335,10 +381,12 @@ def _flow(
     ref: float,
     q: float,
     norm: float | None = None,
+    counted: NDArray[np.bool_] | None = None,
 ) -> tuple[F32, F32, F32, NDArray[np.bool_], float]:
     """Normalised strength, doubled-angle direction (cos 2θ, sin 2θ), definedness and the
-    strength mapped to 1 (``norm``, else the ``q``-th percentile) of one integrated structure
-    tensor (row-down xy products; y flipped to up here)."""
+    strength mapped to 1 (``norm``, else the ``q``-th percentile over the ``counted`` pixels,
+    by default the ``inside`` ones) of one integrated structure tensor (row-down xy products; y
+    flipped to up here)."""
     jxx = np.multiply(txx, invw)
     jyy = np.multiply(tyy, invw)
     e = np.add(jxx, jyy)
@@ -351,7 +399,7 @@ def _flow(
     defined &= e > floor
     defined &= inside
     if norm is None:
-        vals = e[inside]
+        vals = e[inside if counted is None else counted]
         p = _percentile(vals, q) if vals.size else 0.0
     else:
         p = float(norm)
@@ -384,13 +432,15 @@ def congruence(
     percentile: float = 95.0,
     depth_jump: float = 0.05,
     shading_norm: float | None = None,
+    normal: NDArray[np.floating] | None = None,
 ) -> CongruenceResult:
     """Congruence score between shading and shape flows (Mestres et al. 2021, §7, Eq. 2).
 
     ``s = Σ e_shape (1 − ⌊e_shape − e_shading⌋) |v_shape·v_shading| / Σ e_shape`` over the
     covered pixels, with (v, e) the dominant eigenvector and mean eigenvalue of the structure
-    tensor ``G_σi * (∇f ∇fᵀ)`` of f = luminance (shading) and f = log depth (shape), the gradient
-    taken at σ_g. See the module docstring for the normalisation of e.
+    tensor ``G_σi * (∇f ∇fᵀ)`` of f = luminance (shading) and, for the shape, the normal's
+    components summed (``normal`` given: a curvature flow) or f = log depth; the gradient taken
+    at σ_g. See the module docstring for the shape flow and the normalisation of e.
 
     Parameters
     ----------
@@ -419,6 +469,10 @@ def congruence(
         parameters) to put several renderings on one scale, so that a shading with more contrast
         than the reference is not normalised back down (the clamp of Eq. 2 then does what the
         paper says: exaggeration, e_shading > e_shape, does not lower the score).
+    normal : (H, W, 3) float, optional
+        Camera-space unit normals: the shape flow is then the structure tensor of the normal's
+        gradients, which is 0 on planes (see the module docstring); without them, of the log
+        depth's gradients.
 
     Returns
     -------
@@ -459,7 +513,11 @@ def congruence(
     # the covered depth, luminance and coverage, blur them, and normalise by the coverage.
     f1 = max(1, min(int(sg), h // 8 or 1, w // 8 or 1))
     size1 = (max(w // f1, 3), max(h // f1, 3)) if f1 > 1 else (w, h)
-    lum0, dep0, cov0 = _covered_level(img, dep, mask, f1, size1)
+    nrm = None if normal is None else np.asarray(normal, np.float32)
+    if nrm is not None and nrm.shape != (h, w, 3):
+        raise ValueError(f"normal must be (H, W, 3) matching depth {dep.shape}, got {nrm.shape}")
+    level = _covered_level(img, dep, mask, f1, size1, nrm)
+    lum0, dep0, cov0 = level[:3]
     # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small
     # copies (a sum accumulated in float64 cannot overflow: it is finite iff every value is)
     if not np.isfinite(cv2.sumElems(lum0)[0] + cv2.sumElems(dep0)[0]):
@@ -483,9 +541,9 @@ def congruence(
     if win is None:  # nothing covered
         return CongruenceResult(0.0, (size2[1], size2[0]), shading_norm or 0.0, (h, w), low)
     (y0, y1, x0, x1), (v0, v1, u0, u1) = win
-    crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in (lum0, dep0, cov0)]
+    crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in level]
     jump = 0.5 * float(depth_jump)
-    prods = _tensor_products(crop[0], crop[1], crop[2], s1, jump, f2, (u1 - u0, v1 - v0))
+    prods = _tensor_products(crop, s1, jump, f2, (u1 - u0, v1 - v0))
     area = prods[6]  # fraction of each analysis pixel with valid gradients
     tens = list(prods)
 
@@ -499,13 +557,26 @@ def congruence(
 
     inside = area > 0.5
     outside = ~inside
-    # signal scales for the noise floors: lref (brightness) above, log depth is dimensionless
+    # signal scales for the noise floors: lref (brightness) above; log depth and unit normals
+    # are dimensionless
     dref = 1.0
 
-    es, ca, sa, ds, norm_s = _flow(
-        tens[0], tens[1], tens[2], invw, inside, outside, lref, percentile, shading_norm
+    # with normals, the scales are measured where there is shape: planes (0) do not set the
+    # shape's, nor a floor's cast shadows the shading's; the log depth's flow is strong on
+    # floors too, so it counts every pixel
+    curved = None
+    if nrm is not None:
+        e_shape = np.multiply(np.add(tens[3], tens[5]), invw)
+        curved = inside & (e_shape > _REL_CURVED * float(e_shape.max(initial=0.0)))
+        curved = curved if curved.any() else None
+    ec, cb, sb, dc, _ = _flow(
+        tens[3], tens[4], tens[5], invw, inside, outside, dref, percentile, None, curved
     )
-    ec, cb, sb, dc, _ = _flow(tens[3], tens[4], tens[5], invw, inside, outside, dref, percentile)
+    counted = None if curved is None else inside & (ec > _SHAPE_COUNTED)
+    counted = counted if counted is not None and counted.any() else None
+    es, ca, sa, ds, norm_s = _flow(
+        tens[0], tens[1], tens[2], invw, inside, outside, lref, percentile, shading_norm, counted
+    )
     cosd = ca * cb
     cosd += sa * sb  # cos of the doubled-angle difference
     cosd += 1.0

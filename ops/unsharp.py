@@ -53,6 +53,7 @@ import cv2
 import numpy as np
 
 from ops import color
+from ops.masked import masked_gaussian
 from ops.parallel import STRIP_PIXELS
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -1493,13 +1494,19 @@ def unsharp_masking(
     white: float | Literal["auto"] = "auto",
     depth_sigma: float = 1.0,
     normal_sigma: float | None = 1.0,
+    fine_px: float = 0.0,
 ) -> Array:
     """3D unsharp masking of a rendered image along its surfaces (Ritschel et al. 2008).
 
-    U(L*) = L* + λ_adapt (L* − L*_σ)                 (§4: U(S) = S + λ C(S), C(S) = S − S_σ)
+    U(L*) = L* + λ_adapt (L*_f − L*_σ)               (§4: U(S) = S + λ C(S), C(S) = S − S_σ)
     λ_adapt = λ · g · α · √(1 + Var(S))                (Eq. 1)
     (L*, a*, b*) → (U, k a*, k b*),  k = U / L*        (§4: hue angle and saturation kept)
 
+    * L*_f is L* itself (``fine_px`` = 0, the paper) or L* averaged over the surface's pixels
+      with a Gaussian of ``fine_px`` pixels (:func:`ops.masked.masked_gaussian`): the contrast
+      added is then that of the structure between the two scales, and the pixel-scale
+      Monte-Carlo noise of a path-traced frame passes through as it is instead of being
+      multiplied by 1 + λ.
     * L*_σ is L* smoothed along the surfaces with σ = ``sigma_scene`` scene units
       (:func:`surface_blur`: depth- and normal-aware, σ converted per pixel through
       ``pixel_size``) - the image-space version of the paper's smoothing over the mesh (§5).
@@ -1539,10 +1546,12 @@ def unsharp_masking(
         Linear white level for CIELAB; "auto": 99th percentile of luminance over the surface
         (:func:`ops.color.auto_white`); pin a number for sequences.
     depth_sigma, normal_sigma : see :func:`surface_blur`.
+    fine_px : float
+        σ of L*_f in pixels (≥ 0; 0: L* itself).
 
     Returns
     -------
-    (H, W, 3) float32 linear RGB.
+    (H, W, 3) float32 linear RGB, never negative.
     """
     img = _rgb("beauty", beauty)
     shape = (int(img.shape[0]), int(img.shape[1]))
@@ -1602,6 +1611,7 @@ def unsharp_masking(
         adapt = (a, 2**kv)
     up = None if res is None else res[0]  # None: too small for any level, nothing to smooth
     lam32 = np.float32(lam)
+    fine = lum if fine_px <= 0.0 else masked_gaussian(lum, surf.valid, _finite("fine_px", fine_px))
 
     def k_rows(r: slice) -> color.KRows:
         """k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4, Eq. 1), and
@@ -1637,16 +1647,20 @@ def unsharp_masking(
             lam_r = _cv.multiply(lam_r, _sub_resize(adapt[0], adapt[1], r, c), dst=lam_r)
         lum_r = lum[rc]
         new = lum_r.copy() if up is None else up.rows(r, c)[0]  # L*_σ (a view: written in)
-        new = _cv.subtract(lum_r, new, dst=new)
+        new = _cv.subtract(fine[rc], new, dst=new)
         new = _cv.multiply(lam_r, new, dst=new)
         new = _cv.add(lum_r, new, dst=new)
         new = _cv.max(new, 0.0, dst=new)
         return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
 
     if sub_shape == shape:
-        return color.scale_lab(img_box, k_rows, wl)
-    out = _outside(img, box)
-    color.scale_lab(img_box, k_rows, wl, out=out[box])
+        out = color.scale_lab(img_box, k_rows, wl)
+    else:
+        out = _outside(img, box)
+        color.scale_lab(img_box, k_rows, wl, out=out[box])
+    # saturated colours can leave the RGB cube below 0 when their lightness drops: clip the
+    # changed values (the pixels kept bit for bit are left as they came)
+    np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != img))
     return out
 
 

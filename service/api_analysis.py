@@ -43,7 +43,7 @@ class Score(BaseModel):
     score: float = Field(description="congruence score (LLA Eq. 2) in [0, 1]")
     analysis_shape: list[int] = Field(description="(h, w) at which the score was evaluated")
     image_shape: list[int] = Field(description="(h, w) of the frame")
-    params: dict[str, float] = Field(description="the congruence parameters used")
+    params: dict[str, float | str] = Field(description="the congruence parameters used")
 
 
 class Comparison(BaseModel):
@@ -140,6 +140,10 @@ def install(
         shading_norm: Annotated[
             float | None, Form(gt=0, description="pinned shading strength scale")
         ] = None,
+        shape: Annotated[
+            Literal["normals", "depth"] | None,
+            Form(description="shape flow from the normals' gradients (default) or the log depth's"),
+        ] = None,
     ) -> dict[str, Any]:
         from service import pipeline as pipelines
 
@@ -150,6 +154,7 @@ def install(
             "percentile": percentile,
             "depth_jump": depth_jump,
             "shading_norm": shading_norm,
+            "shape": shape,
         }
         options = {k: v for k, v in given.items() if v is not None}
         out = await upload_job(

@@ -28,13 +28,14 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 # -- score -------------------------------------------------------------------------------------
 
 
-def _score_options(args: argparse.Namespace) -> dict[str, float]:
+def _score_options(args: argparse.Namespace) -> dict[str, float | str]:
     given = {
         "gradient_scale": args.gradient_scale,
         "integration_scale": args.integration_scale,
         "percentile": args.percentile,
         "depth_jump": args.depth_jump,
         "shading_norm": args.shading_norm,
+        "shape": args.shape,
     }
     return {k: v for k, v in given.items() if v is not None}
 
@@ -239,6 +240,11 @@ def add_analysis_commands(sub: Any) -> None:
     p.add_argument("--depth-jump", type=float, help="largest log-depth step of a surface (0.05)")
     p.add_argument(
         "--shading-norm", type=float, help="pinned shading strength scale (default: per image)"
+    )
+    p.add_argument(
+        "--shape",
+        choices=("normals", "depth"),
+        help="shape flow from the normals' gradients (default) or the log depth's",
     )
     add_pipeline_options(p, "score the frame after these steps")
     add_read_options(p)

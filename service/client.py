@@ -284,11 +284,12 @@ class Client:
         camera: Any = None,
         mapping: Mapping[str, str] | None = None,
         normal_space: str | None = None,
-        **options: float,
+        **options: float | str,
     ) -> dict[str, Any]:
         """``POST /v1/score``: the congruence score of a frame's beauty (after ``pipeline``).
 
-        ``options``: ``gradient_scale``, ``integration_scale``, ``percentile``, ``depth_jump``.
+        ``options``: ``gradient_scale``, ``integration_scale``, ``percentile``, ``depth_jump``,
+        ``shading_norm``, ``shape``.
         """
         data = self._read_fields(preset, camera, mapping, normal_space)
         data.update({k: str(v) for k, v in options.items()})

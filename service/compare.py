@@ -119,7 +119,12 @@ COMPARE_CURVATURE_GAIN = 0.1
 
 #: Parameters of each method and of the score, as used when none are given (JSON-able).
 DEFAULT_PARAMS: dict[str, dict[str, Any]] = {
-    "congruence": {"gradient_scale": 0.002, "integration_scale": 0.01, "percentile": 95.0},
+    "congruence": {
+        "gradient_scale": 0.002,
+        "integration_scale": 0.01,
+        "percentile": 95.0,
+        "shape": "normals",
+    },
     "lambert": {},
     "radiance_scaling": {
         "alpha": 0.5,
@@ -178,6 +183,30 @@ def _call(name: str, fn: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
         return fn(*args, **kwargs)
     except TypeError as exc:
         raise ValueError(f"params[{name!r}]: {exc}") from None
+
+
+#: Shape signals of the score: the normals' gradients (planes carry no weight) or the log depth's.
+SHAPES = ("normals", "depth")
+
+
+def score_image(
+    image: F32,
+    depth: F32,
+    mask: NDArray[np.generic],
+    normal: F32 | None,
+    image_height: int,
+    **cong: Any,
+) -> CongruenceResult:
+    """:func:`ops.congruence.congruence` of ``image`` with the congruence parameters ``cong``,
+    whose ``shape`` ("normals", the default, or "depth") picks the shape signal; without
+    normals the shape is the depth."""
+    shape = cong.pop("shape", "normals")
+    if shape not in SHAPES:
+        raise ValueError(f"params['congruence']: shape must be one of {SHAPES}, got {shape!r}")
+    use = normal if shape == "normals" else None
+    return _call(
+        "congruence", congruence, image, depth, mask, image_height=image_height, normal=use, **cong
+    )
 
 
 # -- the methods -------------------------------------------------------------------------------
@@ -610,14 +639,8 @@ def compare(
     geo = _frame_geometry(frame, albedo, resolved)
     cong = dict(resolved["congruence"])
     if shading_norm == "reference":
-        reference = _call(
-            "congruence",
-            congruence,
-            _lambert(geo, sweep[0]),
-            geo.depth,
-            geo.mask,
-            image_height=geo.image_height,
-            **cong,
+        reference = score_image(
+            _lambert(geo, sweep[0]), geo.depth, geo.mask, geo.normal, geo.image_height, **cong
         )
         cong["shading_norm"] = reference.shading_norm
         norm = {"mode": "reference", "value": reference.shading_norm}
@@ -642,15 +665,7 @@ def compare(
             t0 = time.perf_counter()
             img = _SHADERS[m](geo, light)
             t1 = time.perf_counter()
-            res = _call(
-                "congruence",
-                congruence,
-                img,
-                geo.depth,
-                geo.mask,
-                image_height=geo.image_height,
-                **cong,
-            )
+            res = score_image(img, geo.depth, geo.mask, geo.normal, geo.image_height, **cong)
             seconds[m] += t1 - t0
             seconds["score"] += time.perf_counter() - t1
             scores[i, j] = res.score
@@ -693,15 +708,10 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     cong = {**DEFAULT_PARAMS["congruence"], **params}
     beauty = np.asarray(frame.need("beauty", "the image to score"), np.float32)
     depth = np.asarray(frame.need("depth", "for the shape flow of the score"), np.float32)
-    res = _call(
-        "congruence",
-        congruence,
-        beauty,
-        depth,
-        frame.mask,
-        image_height=int(frame.image_height),
-        **cong,
-    )
+    normal = frame.buffers.get("normal")
+    if normal is None:
+        cong["shape"] = "depth"
+    res = score_image(beauty, depth, frame.mask, normal, int(frame.image_height), **dict(cong))
     out: dict[str, Any] = {
         "score": res.score,
         "analysis_shape": list(res.analysis_shape),

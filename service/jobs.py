@@ -253,7 +253,7 @@ def score_job(
         "score": float(out["score"]),
         "analysis_shape": [int(v) for v in out["analysis_shape"]],
         "image_shape": [int(v) for v in out["image_shape"]],
-        "params": {k: float(v) for k, v in out["params"].items()},
+        "params": {k: v if isinstance(v, str) else float(v) for k, v in out["params"].items()},
         "op_s": op_s,
     }
 

@@ -10,17 +10,32 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, ClassVar
 
-from pydantic import BaseModel, ConfigDict, ValidationError
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
 
 from gbuffer.frame import Frame
 
 
 class Params(BaseModel):
-    """Base of every operator's parameters: unknown keys are refused, values validated."""
+    """Base of every operator's parameters: unknown keys are refused, values validated.
+
+    An operator may name sets of parameter values in ``PRESETS`` (e.g. ``"paper"``: the values
+    that reproduce its paper's figures) and declare a ``preset`` field listing them: a step's
+    ``preset`` fills in every parameter the step does not give itself.
+    """
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_preset(cls, data: Any) -> Any:
+        if isinstance(data, dict) and isinstance(data.get("preset"), str):
+            values = cls.PRESETS.get(data["preset"])
+            if values is not None:  # an unknown name is refused by the field's own choices
+                return {**values, **data}
+        return data
 
 
 @dataclass

@@ -85,15 +85,20 @@ def test_scores_are_the_congruence_of_the_images(frame: Frame, result: Compariso
     """Every rendering is scored on the scale of the frame's Lambert rendering under #1."""
     depth = np.where(frame.mask > 0.5, frame.buffers["depth"], np.inf).astype(np.float32)
     assert result.shading_norm["mode"] == "reference"
-    reference = congruence(result.image("lambert", 1), depth, frame.mask > 0.5)
+    normal = frame.buffers["normal"]
+    reference = congruence(result.image("lambert", 1), depth, frame.mask > 0.5, normal=normal)
     assert result.shading_norm["value"] == pytest.approx(reference.shading_norm, rel=1e-6)
     for m in ("lambert", "light_alignment"):
         direct = congruence(
-            result.image(m, 3), depth, frame.mask > 0.5, shading_norm=reference.shading_norm
+            result.image(m, 3),
+            depth,
+            frame.mask > 0.5,
+            shading_norm=reference.shading_norm,
+            normal=normal,
         )
         # the threaded strips sum in varying order: the scale and the score agree to ~1e-9
         assert result.score(m, 3) == pytest.approx(direct.score, abs=1e-7)
-        own = congruence(result.image(m, 3), depth, frame.mask > 0.5)
+        own = congruence(result.image(m, 3), depth, frame.mask > 0.5, normal=normal)
         assert own.shading_norm != pytest.approx(reference.shading_norm)
 
 
@@ -103,7 +108,8 @@ def test_per_image_normalisation_scores_each_rendering_alone(frame: Frame) -> No
     )
     depth = np.where(frame.mask > 0.5, frame.buffers["depth"], np.inf).astype(np.float32)
     for m in ("lambert", "light_alignment"):
-        direct = congruence(res.image(m, 3), depth, frame.mask > 0.5)
+        normal = frame.buffers["normal"]
+        direct = congruence(res.image(m, 3), depth, frame.mask > 0.5, normal=normal)
         assert res.score(m, 3) == pytest.approx(direct.score, abs=1e-9)
     assert res.shading_norm == {"mode": "per_image", "value": None}
     with pytest.raises(ValueError, match="shading_norm"):
@@ -192,8 +198,14 @@ def test_albedo_frame_multiplies_the_white_rendering(frame: Frame) -> None:
 
 def test_score_frame_scores_the_beauty(frame: Frame) -> None:
     out = score_frame(frame, maps=True)
-    direct = congruence(frame.buffers["beauty"], frame.buffers["depth"], frame.mask)
+    normal = frame.buffers["normal"]
+    direct = congruence(frame.buffers["beauty"], frame.buffers["depth"], frame.mask, normal=normal)
     assert out["score"] == pytest.approx(direct.score, abs=1e-9)
+    assert out["params"]["shape"] == "normals"
+    by_depth = score_frame(frame, shape="depth")
+    plain = congruence(frame.buffers["beauty"], frame.buffers["depth"], frame.mask)
+    assert by_depth["score"] == pytest.approx(plain.score, abs=1e-9)
+    assert by_depth["score"] != pytest.approx(out["score"], abs=1e-3)
     assert 0.0 < out["score"] <= 1.0
     assert out["image_shape"] == [SIZE, SIZE]
     layers = out["layers"]

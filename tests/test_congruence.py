@@ -54,6 +54,39 @@ def test_shading_across_the_shape_flow_scores_low() -> None:
     assert congruence(along, plane, integration_scale=0.06).score > 0.9
 
 
+def test_with_normals_planes_carry_no_weight() -> None:
+    """The normals' shape flow is 0 on a plane (LLA §7: flat surfaces should not count), so what
+    a slanted floor shows (cast shadows, noise) does not move the score; the log depth's flow
+    gives the same floor most of the weight."""
+    floor = analytic.plane(128, tilt_y_deg=60.0, distance=30.0)
+    ball = analytic.sphere(128, 0.25)
+    on_ball = ball.mask
+    normal = np.where(on_ball[..., None], ball.normal, floor.normal).astype(np.float32)
+    depth = np.where(on_ball, ball.depth, floor.depth).astype(np.float32)
+    lit = lambert(normal, (0.1, 0.3, 1.0))
+    y, x = np.mgrid[0:128, 0:128].astype(np.float32)
+    shadows = (0.55 + 0.45 * np.sin(2 * np.pi * (x + 0.4 * y) / 23.0)).astype(np.float32)
+    striped = np.where(on_ball, lit, lit * shadows).astype(np.float32)
+    by_normals = [congruence(img, depth, normal=normal).score for img in (lit, striped)]
+    by_depth = [congruence(img, depth).score for img in (lit, striped)]
+    assert by_normals[0] > 0.5
+    assert by_normals[1] == pytest.approx(by_normals[0], abs=0.02)
+    assert abs(by_depth[1] - by_depth[0]) > 0.1
+    res = congruence(lit, depth, normal=normal)
+    weight = res.shape_strength * res.weight
+    assert weight[~on_ball].sum() < 0.01 * weight.sum()
+
+
+def test_normals_shape_flow_follows_the_surface() -> None:
+    normal, depth = sphere()
+    assert congruence(lambert(normal, (0, 0, 1)), depth, normal=normal).score > 0.85
+    cyl = analytic.cylinder(128)
+    across = lambert(cyl.normal, (0.3, 0.0, 1.0))
+    assert congruence(across, cyl.depth, normal=cyl.normal).score > 0.8
+    with pytest.raises(ValueError, match="normal must be"):
+        congruence(depth, depth, normal=normal[:-1])
+
+
 def test_constant_image_scores_zero() -> None:
     _, depth = sphere()
     res = congruence(np.full((*depth.shape, 3), 0.7, np.float32), depth)

@@ -17,7 +17,8 @@ import gbuffer
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
-from ops.curvature import Curvature, isotropic, principal_curvatures
+from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
+from ops.masked import masked_gaussian
 from ops.scaling import reflectance_delta, sigma
 from ops.shading import parse_light
 from service import pipeline
@@ -83,8 +84,14 @@ def rs_run(
 
 
 def curvature_of(frame: Frame) -> Curvature:
+    """The curvature at the operators' default scale, floored at a pixel as they floor it."""
+    scale = max(DEFAULT_SCALE, 1.0 / frame.image_height)
     return principal_curvatures(
-        frame.buffers["normal"], frame.buffers["depth"], frame.mask, image_height=frame.image_height
+        frame.buffers["normal"],
+        frame.buffers["depth"],
+        frame.mask,
+        scale=scale,
+        image_height=frame.image_height,
     )
 
 
@@ -106,8 +113,9 @@ def test_every_scenario_on_a_real_render(
 ) -> None:
     frame = get_frame(request, which)
     beauty_in = frame.buffers["beauty"].copy()
-    out = rs_run(frame, debug=True, scenario=scenario, gamma=3.0)
-    ref = rs_run(frame, scenario=scenario, gamma=0.0)  # the same shading, unscaled
+    # Eq. 2 as printed (σ = 1 where κ = 0): the default also keeps the lighting (tested below)
+    out = rs_run(frame, debug=True, scenario=scenario, preset="paper", gamma=3.0)
+    ref = rs_run(frame, scenario=scenario, preset="paper", gamma=0.0)  # unscaled
     # the input frame is left as it was
     np.testing.assert_array_equal(frame.buffers["beauty"], beauty_in)
     assert not any(k.startswith(("rs_sigma.", "curvature.")) for k in frame.outputs)
@@ -146,7 +154,7 @@ def test_every_scenario_on_a_real_render(
 
 def test_lobes_with_gamma_zero_reproduce_the_blender_beauty(blender_frame: Frame) -> None:
     """beauty' = Σ σ̄_j lobe_j + remainder with σ̄ ≡ 1 is the input beauty."""
-    out = rs_run(blender_frame, scenario="lobes", gamma=0.0)
+    out = rs_run(blender_frame, scenario="lobes", preset="paper", gamma=0.0)
     np.testing.assert_allclose(
         out.buffers["beauty"], blender_frame.buffers["beauty"], rtol=1e-6, atol=1e-6
     )
@@ -157,7 +165,9 @@ def test_lobes_rebuild_the_beauty_from_each_lobe_and_its_light(blender_frame: Fr
     its colour, DiffDir + DiffInd), each lobe with its own γ; the remainder passes unchanged."""
     f = blender_frame
     ctx = Context(debug_layers=True)
-    out = rs_run(f, context=ctx, scenario="lobes", alpha=0.4, gamma=3.0, gamma_specular=1.5)
+    out = rs_run(
+        f, context=ctx, scenario="lobes", preset="paper", alpha=0.4, gamma=3.0, gamma_specular=1.5
+    )
     kappa = out.outputs["curvature.H"]
     expect = f.buffers["remainder"].copy()
     for lobe, g in (("diffuse", 3.0), ("specular", 1.5), ("transmission", 3.0)):
@@ -168,10 +178,62 @@ def test_lobes_rebuild_the_beauty_from_each_lobe_and_its_light(blender_frame: Fr
     np.testing.assert_allclose(out.buffers["beauty"], expect, rtol=1e-5, atol=1e-5)
     # a pinned white level (a sequence) is used instead of measuring it
     pinned = Context(debug_layers=True, pinned={"radiance_scaling.white.diffuse": 0.5})
-    out2 = rs_run(f, context=pinned, scenario="lobes", alpha=0.4, gamma=3.0)
+    out2 = rs_run(f, context=pinned, scenario="lobes", preset="paper", alpha=0.4, gamma=3.0)
     s = sigma(kappa, reflectance_delta(f.buffers["diffuse.light"], 0.5), 0.4, 3.0)
     np.testing.assert_allclose(out2.outputs["rs_sigma.diffuse.X"], s, rtol=1e-5)
     assert "radiance_scaling.white.diffuse" not in pinned.measured
+
+
+def blurred_luminance(rgb: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
+    return masked_gaussian(lum(rgb), mask, sigma_px)
+
+
+def test_default_adds_detail_and_keeps_the_lighting(blender_frame: Frame) -> None:
+    """The default keeps what the eye reads as lighting (the luminance smoothed over 4 % of the
+    image height) and changes the picture where the surface is curved; Eq. 4 as printed
+    (preset paper) relights the objects."""
+    f = blender_frame
+    covered = f.mask > 0.5
+    ctx = Context(debug_layers=True)
+    out = rs_run(f, context=ctx)
+    paper = rs_run(f, preset="paper")
+    b0, b1, bp = f.buffers["beauty"], out.buffers["beauty"], paper.buffers["beauty"]
+    assert np.isfinite(b1).all() and (b1 >= 0).all()
+    sigma_px = 0.04 * f.image_height
+    lf0, lf1, lfp = (blurred_luminance(b, covered, sigma_px)[covered] for b in (b0, b1, bp))
+    drift = np.abs(lf1 / lf0 - 1.0)
+    assert np.percentile(drift, 95) < 0.03
+    assert np.percentile(np.abs(lfp / lf0 - 1.0), 95) > 3 * np.percentile(drift, 95)
+    kappa = out.outputs["curvature.H"]
+    curved = (np.abs(kappa) > 0.2) & (lum(b0) > 1e-3)
+    change = np.abs(lum(b1) - lum(b0))[curved] / lum(b0)[curved]
+    assert np.median(change) > 0.01
+
+
+def test_delta_is_mapped_from_the_smoothed_light(blender_frame: Frame) -> None:
+    """δ̄ = lum(light averaged at light_scale) / white: noise does not drive σ."""
+    f = blender_frame
+    ctx = Context(debug_layers=True)
+    out = rs_run(f, context=ctx, keep_lighting=False, light_scale=0.02, lobes=["diffuse"])
+    light = masked_gaussian(f.buffers["diffuse.light"], f.mask, 0.02 * f.image_height)
+    white = ctx.measured["radiance_scaling.white.diffuse"]
+    assert white == pytest.approx(float(np.percentile(lum(light)[f.mask > 0], 99)), rel=1e-4)
+    s = sigma(out.outputs["curvature.H"], reflectance_delta(light, white), 0.5, 1.0)
+    np.testing.assert_allclose(out.outputs["rs_sigma.diffuse.X"], s, rtol=1e-5, atol=1e-6)
+
+
+def test_presets_fill_in_what_a_step_does_not_give() -> None:
+    from service.registry import get
+
+    op = get("radiance_scaling")
+    paper = op.parse({"preset": "paper"})
+    assert (paper.gamma, paper.light_scale, paper.keep_lighting) == (3.0, 0.0, False)
+    mine = op.parse({"preset": "paper", "gamma": 1.5})
+    assert (mine.gamma, mine.keep_lighting) == (1.5, False)
+    default = op.parse({})
+    assert (default.gamma, default.light_scale, default.keep_lighting) == (1.0, None, True)
+    with pytest.raises(PipelineError, match="preset"):
+        op.parse({"preset": "nope"})
 
 
 @pytest.mark.parametrize("scenario", ["lobes", "phong"])
@@ -189,7 +251,7 @@ def test_gamma_per_lobe(request: pytest.FixtureRequest, which: str, scenario: st
 )
 def test_lobes_left_out_stay_in_the_beauty(request: pytest.FixtureRequest, which: str) -> None:
     f = get_frame(request, which)
-    only = rs_run(f, debug=True, scenario="lobes", gamma=3.0, lobes=["diffuse"])
+    only = rs_run(f, debug=True, scenario="lobes", preset="paper", gamma=3.0, lobes=["diffuse"])
     s = only.outputs["rs_sigma.diffuse.X"]
     rest = f.buffers["beauty"] - f.buffers["diffuse"]
     np.testing.assert_allclose(
@@ -277,7 +339,7 @@ PARAMS = {
 def direct(frame: Frame, scenario: str) -> rs.Scaled:
     """What the scenario must compute, called on ops/ directly with PARAMS."""
     p = PARAMS
-    curv = principal_curvatures(frame.buffers["normal"], frame.buffers["depth"], frame.mask)
+    curv = curvature_of(frame)
     n, view, pos = frame.buffers["normal"], frame.view_vectors(), frame.positions()
     lights = [parse_light(t) for t in p["lights"]]
     albedo = np.array([0.8, 0.8, 0.8], np.float32)  # the frame has none
@@ -316,8 +378,9 @@ def test_deferred_scenarios_pass_their_parameters_to_ops(scenario: str) -> None:
     for lobe, s in expect.sigmas.items():
         np.testing.assert_allclose(out.outputs[f"rs_sigma.{lobe}.X"], s, rtol=1e-5, atol=1e-6)
     # the curvature layer is κ at the operator's gain
-    curv = principal_curvatures(frame.buffers["normal"], frame.buffers["depth"], frame.mask)
-    np.testing.assert_allclose(out.outputs["curvature.H"], isotropic(curv, 0.2), atol=1e-6)
+    np.testing.assert_allclose(
+        out.outputs["curvature.H"], isotropic(curvature_of(frame), 0.2), atol=1e-6
+    )
 
 
 def test_beauty_scenario_uses_beauty_over_albedo_as_its_light() -> None:
@@ -326,7 +389,8 @@ def test_beauty_scenario_uses_beauty_over_albedo_as_its_light() -> None:
         np.array([0.5, 0.25, 0.5], np.float32), frame.buffers["beauty"].shape
     ).copy()
     light = frame.buffers["beauty"] / frame.buffers["albedo"]
-    out = rs_run(frame, debug=True, scenario="beauty", alpha=0.4, gamma=2.0, white=1.5, gain=0.2)
+    params = {"alpha": 0.4, "gamma": 2.0, "white": 1.5, "gain": 0.2}
+    out = rs_run(frame, debug=True, scenario="beauty", preset="paper", **params)
     kappa = out.outputs["curvature.H"]
     s = sigma(kappa, reflectance_delta(light, 1.5), 0.4, 2.0)
     np.testing.assert_allclose(out.outputs["rs_sigma.beauty.X"], s, rtol=1e-5)

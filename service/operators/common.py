@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Annotated, Literal
 
@@ -10,6 +11,7 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from gbuffer.frame import Frame
+from ops.lighting import lighting_gain
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.images import load_image
 from service.registry import Context, Params, PipelineError
@@ -74,6 +76,51 @@ def pixel_sizes(frame: Frame, why: str) -> np.ndarray:
     camera = frame.need_camera(why)
     depth = frame.need("depth", why)
     return camera.pixel_size_at(np.where(np.isfinite(depth), depth, np.inf), frame.image_height)
+
+
+#: Vertical field of view assumed for sizes relative to the image height when a frame has no
+#: camera (they only need pixel sizes up to a common factor).
+NOMINAL_FOV_Y_DEG = 40.0
+
+
+def relative_pixel_sizes(frame: Frame, why: str) -> np.ndarray:
+    """:func:`pixel_sizes` with the frame's camera, else with a perspective camera of
+    :data:`NOMINAL_FOV_Y_DEG`: enough for smoothing whose size is relative to the image height
+    (its size in scene units is taken at the covered pixels' median pixel size)."""
+    if frame.camera is not None:
+        return pixel_sizes(frame, why)
+    depth = frame.need("depth", why)
+    focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
+    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(
+        np.float32, copy=False
+    )
+
+
+def kept_lighting_gain(
+    frame: Frame, before: np.ndarray, after: np.ndarray, scale: float, why: str
+) -> np.ndarray:
+    """:func:`ops.lighting.lighting_gain` of an operator's change on ``frame``: the factor per
+    pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
+    ``scale`` (relative to the image height)."""
+    pixel_size = relative_pixel_sizes(frame, why)
+    return lighting_gain(
+        before,
+        after,
+        frame.need("depth", why),
+        frame.buffers.get("normal"),
+        frame.mask,
+        sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
+        pixel_size=pixel_size,
+    )
+
+
+def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
+    """``fraction`` of the image height in scene units at the covered pixels' median pixel size
+    (1.0 when nothing is covered)."""
+    covered = (frame.mask > 0) & np.isfinite(pixel_size)
+    if not covered.any():
+        return 1.0
+    return fraction * frame.image_height * float(np.median(pixel_size[covered]))
 
 
 def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:

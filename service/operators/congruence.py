@@ -9,6 +9,8 @@ last in a pipeline to measure what the steps before it did (``depict score`` pri
 
 from __future__ import annotations
 
+from typing import Literal
+
 from pydantic import Field
 
 from gbuffer.frame import Frame
@@ -38,6 +40,12 @@ class CongruenceParams(Params):
         gt=0.0,
         le=100.0,
         description="percentile each strength is divided by (both e in [0, 1])",
+    )
+    shape: Literal["normals", "depth"] = Field(
+        _DEFAULTS["shape"],
+        description="shape flow from the normals' gradients (planes carry no weight; the depth "
+        "when the frame has no normals) or from the log depth's gradients (the paper's wording, "
+        "which gives receding floors most of the weight)",
     )
     depth_jump: float = Field(
         0.05, gt=0.0, le=100.0, description="largest log-depth step still one surface"

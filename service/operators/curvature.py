@@ -9,6 +9,9 @@ from gbuffer.frame import Frame
 from ops import curvature as curv_ops
 from service.registry import Context, Params, register
 
+#: Smallest derivative / averaging scale, pixels.
+MIN_SCALE_PX = 1.0
+
 
 class CurvatureParams(Params):
     """View-centred curvature (RS §4), shared by every operator that needs it."""
@@ -17,7 +20,7 @@ class CurvatureParams(Params):
         curv_ops.DEFAULT_SCALE,
         gt=0.0,
         le=0.1,
-        description="derivative scale, relative to the image height (Gaussian σ)",
+        description="derivative scale, relative to the image height (Gaussian σ, at least a pixel)",
     )
     gain: float = Field(
         curv_ops.DEFAULT_GAIN,
@@ -39,13 +42,19 @@ class CurvatureParams(Params):
     )
 
 
+def scale_px(frame: Frame, scale: float) -> float:
+    """A scale relative to the image height in pixels, at least :data:`MIN_SCALE_PX` (below a
+    pixel a derivative or an average only sees pixel noise)."""
+    return max(scale * frame.image_height, MIN_SCALE_PX)
+
+
 def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
-    """The view-centred curvature of a frame at the parameters' scale."""
+    """The view-centred curvature of a frame at the parameters' scale (at least a pixel)."""
     return curv_ops.principal_curvatures(
         frame.need("normal", "for curvature"),
         frame.need("depth", "for curvature"),
         frame.mask,
-        scale=p.scale,
+        scale=min(scale_px(frame, p.scale) / frame.image_height, 0.1),
         foreshortening=p.foreshortening,
         image_height=frame.image_height,
         depth_jump=p.depth_jump,

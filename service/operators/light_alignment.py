@@ -26,7 +26,7 @@ The aligned directions are written as ``lla_light.<component>.X/Y/Z`` (the first
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, ClassVar, Literal
 
 import cv2
 import numpy as np
@@ -36,24 +36,37 @@ from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
-from service.operators.common import LightsParams, channels, frame_albedo
+from service.operators.common import LightsParams, channels, frame_albedo, kept_lighting_gain
 from service.registry import Context, register
 
 Component = Literal["diffuse", "specular", "transmission"]
 Sigmas = list[float]
 #: σ_1 … σ_5 of the paper's "fine-tuned" 6-scale result (LLA Fig. 7), finest first.
 PAPER_SIGMAS = [0.5, 0.3, 0.1, 0.2, 0.2]
+#: The default: less of the finest scale, whose filtering is a few pixels wide and shows the
+#: triangles of a mesh's interpolated normals on production frames, more of the middle ones.
+DEFAULT_SIGMAS = [0.1, 0.3, 0.3, 0.2, 0.2]
 _SIGMA_ITEMS = {"min_length": 1, "max_length": 7}
+#: Fig. 7's scales, the ratio as is and no lighting kept (``preset: "paper"``).
+PAPER = {"sigmas": PAPER_SIGMAS, "ratio_max": 8.0, "keep_lighting": False}
 
 
 class LightAlignmentParams(LightsParams):
     """Local Light Alignment (LLA §4-6) and the shading with the aligned lights."""
 
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {"default": {}, "paper": PAPER}
+
+    preset: Literal["default", "paper"] = Field(
+        "default",
+        description="default: σ_i that spare the finest scale, ratio ≤ 2 and the lighting kept; "
+        "paper: LLA Fig. 7's σ_i, ratio ≤ 8, no lighting kept; parameters given with it "
+        "override it",
+    )
     sigmas: Sigmas = Field(
-        default_factory=lambda: list(PAPER_SIGMAS),
+        default_factory=lambda: list(DEFAULT_SIGMAS),
         **_SIGMA_ITEMS,
         description="σ_1 … σ_{S−1} in [0, 1], finest first, of the diffuse component (S = "
-        "len + 1 scales, up to 8; default: LLA Fig. 7)",
+        "len + 1 scales, up to 8; paper: [0.5, 0.3, 0.1, 0.2, 0.2], LLA Fig. 7)",
     )
     specular_sigmas: Sigmas | None = Field(
         None, **_SIGMA_ITEMS, description="σ_i of the specular component (default: `sigmas`)"
@@ -114,7 +127,24 @@ class LightAlignmentParams(LightsParams):
         description="ratio form: ε in (shade_aligned + ε)/(shade_original + ε), relative to "
         "the lights' irradiance",
     )
-    ratio_max: float = Field(8.0, ge=1.0, le=1000.0, description="ratio form: largest factor")
+    ratio_max: float = Field(
+        2.0,
+        ge=1.0,
+        le=1000.0,
+        description="ratio form: largest factor (more brightens grazing rims at silhouettes)",
+    )
+    keep_lighting: bool = Field(
+        True,
+        description="ratio form: divide the relit lobes by their low-frequency gain along the "
+        "surfaces (at `lighting_scale`), so the mean luminance of every region stays the "
+        "input's and only the alignment's shape detail is added (false: the ratio as is)",
+    )
+    lighting_scale: float = Field(
+        0.04,
+        gt=0.0,
+        le=0.5,
+        description="σ of the lighting kept by `keep_lighting`, relative to the image height",
+    )
 
     @model_validator(mode="after")
     def _check(self) -> LightAlignmentParams:
@@ -270,6 +300,15 @@ def _ratio(
     beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty")
     given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
     out, new, new_light = ratio_relight(beauty, given, original, aligned, eps, p.ratio_max)
+    if p.keep_lighting:
+        before = np.sum([given[lobe][0] for lobe in lobes], axis=0)
+        after = np.sum([new[lobe] for lobe in lobes], axis=0)
+        gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")[
+            ..., None
+        ]
+        out = np.asarray(out + (after * gain - after), np.float32)
+        new = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new.items()}
+        new_light = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new_light.items()}
     frame.buffers.update(new)
     frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
     frame.buffers["beauty"] = out

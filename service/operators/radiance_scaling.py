@@ -3,7 +3,7 @@ of §5, on the renderer's lobes or by deferred shading of the G-buffer."""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -12,16 +12,18 @@ from gbuffer.frame import LOBES, Frame
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.bilinear import Upsampled
+from ops.masked import masked_gaussian
 from ops.scaling import luminance, scale_lobes, white_level
 from service.operators.common import (
     Fraction,
     LightsParams,
     Magnitude,
     frame_albedo,
+    kept_lighting_gain,
     statistic,
     user_image,
 )
-from service.operators.curvature import CurvatureParams, frame_curvature
+from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
 from service.registry import Context, register
 
 #: Albedo (luminance) below which a pixel's light is not beauty / albedo (scenario 'beauty').
@@ -42,8 +44,15 @@ Scenario = Literal[
 ]
 
 
+#: The parameter values of the paper's Eq. 2 and Eq. 4 as printed: δ̄ from each pixel's own
+#: light and no lighting kept (``preset: "paper"``; the figures of earlier releases).
+PAPER = {"gamma": 3.0, "light_scale": 0.0, "keep_lighting": False}
+
+
 class RadianceScalingParams(LightsParams, CurvatureParams):
     """Radiance Scaling (Vergne et al. 2011) in every rendering scenario of §5."""
+
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {"default": {}, "paper": PAPER}
 
     scenario: Scenario = Field(
         "auto",
@@ -54,7 +63,13 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
         "frame has them, else beauty",
     )
     alpha: Fraction = Field(0.5, description="scaling-invariant point α in (0, 1) (Eq. 2)")
-    gamma: Magnitude = Field(3.0, description="scaling magnitude γ ≥ 0 for every lobe (Eq. 2)")
+    preset: Literal["default", "paper"] = Field(
+        "default",
+        description="default: enhance shape and keep the lighting (δ̄ from the light smoothed "
+        "at `light_scale`, `keep_lighting`, γ = 1); paper: Eq. 2 and 4 as printed (γ = 3, δ̄ "
+        "per pixel, no lighting kept); parameters given with it override it",
+    )
+    gamma: Magnitude = Field(1.0, description="scaling magnitude γ ≥ 0 for every lobe (Eq. 2)")
     gamma_ambient: Magnitude | None = Field(None, description="γ of the ambient lobe")
     gamma_diffuse: Magnitude | None = Field(None, description="γ of the diffuse lobe")
     gamma_specular: Magnitude | None = Field(None, description="γ of the specular lobe")
@@ -68,6 +83,26 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
         "the `white_percentile` of the covered pixels",
     )
     white_percentile: float = Field(99.0, gt=50.0, le=100.0, description="percentile of auto")
+    light_scale: float | None = Field(
+        None,
+        ge=0.0,
+        le=0.1,
+        description="lobes, beauty: δ̄ from the light averaged over this σ, relative to the image "
+        "height (at least a pixel), so Monte-Carlo noise does not drive σ (default: the "
+        "curvature `scale`; 0: each pixel's own light, as the paper)",
+    )
+    keep_lighting: bool = Field(
+        True,
+        description="lobes, beauty: divide the scaled radiance by its low-frequency gain along "
+        "the surfaces (at `lighting_scale`), so the mean luminance of every region stays the "
+        "input's and only shape detail is added (false: Eq. 4 as printed)",
+    )
+    lighting_scale: float = Field(
+        0.04,
+        gt=0.0,
+        le=0.5,
+        description="σ of the lighting kept by `keep_lighting`, relative to the image height",
+    )
     lobes: list[str] | None = Field(
         None, description="renderer lobes to scale (default: every lobe the frame has)"
     )
@@ -113,6 +148,25 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
     return "lobes" if any(lobe in frame.buffers for lobe in LOBES) else "beauty"
 
 
+def _light(frame: Frame, p: RadianceScalingParams, light: np.ndarray) -> np.ndarray:
+    """The light δ̄ is mapped from: averaged at ``light_scale`` (default: the curvature's)."""
+    scale = p.scale if p.light_scale is None else p.light_scale
+    return masked_gaussian(light, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
+
+
+def _kept_lighting(
+    frame: Frame, p: RadianceScalingParams, scaled: np.ndarray, before: np.ndarray
+) -> np.ndarray:
+    """``scaled`` (a beauty = rest + Σ σ̄_j lobe_j) with Σ σ̄_j lobe_j divided by its
+    low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.lighting_gain`)."""
+    if not p.keep_lighting:
+        return scaled
+    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else 0.0
+    after = scaled - rest
+    gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "radiance_scaling")
+    return np.asarray(after * gain[..., None] + rest, np.float32)
+
+
 def _scale_renderer_lobes(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -121,7 +175,7 @@ def _scale_renderer_lobes(
     if not names:
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
-    lights = {n: frame.buffers.get(f"{n}.light", lobes[n]) for n in names}
+    lights = {n: _light(frame, p, frame.buffers.get(f"{n}.light", lobes[n])) for n in names}
     mask = frame.mask > 0
     white = {n: _white(ctx, p, n, lights[n], mask) for n in names}
     remainder = frame.buffers.get("remainder")
@@ -129,7 +183,7 @@ def _scale_renderer_lobes(
         for lobe in LOBES:
             if lobe in frame.buffers and lobe not in lobes:
                 remainder = remainder + frame.buffers[lobe]
-    return scale_lobes(
+    beauty, sigmas = scale_lobes(
         lobes,
         lights,
         kappa,
@@ -141,6 +195,9 @@ def _scale_renderer_lobes(
         beauty=frame.buffers.get("beauty") if remainder is None else None,
         with_sigmas=ctx.debug_layers,
     )
+    if p.keep_lighting:
+        beauty = _kept_lighting(frame, p, beauty, np.sum(list(lobes.values()), axis=0))
+    return beauty, sigmas
 
 
 def _scale_beauty(
@@ -157,8 +214,9 @@ def _scale_beauty(
         has_albedo = luminance(albedo) > MIN_ALBEDO
         light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
         counted &= has_albedo
+    light = _light(frame, p, light)
     white = _white(ctx, p, "beauty", light, counted)
-    return scale_lobes(
+    scaled, sigmas = scale_lobes(
         {"beauty": beauty},
         {"beauty": light},
         kappa,
@@ -167,6 +225,7 @@ def _scale_beauty(
         white,
         with_sigmas=ctx.debug_layers,
     )
+    return _kept_lighting(frame, p, scaled, beauty), sigmas
 
 
 def _camera_to_world(frame: Frame) -> np.ndarray | None:

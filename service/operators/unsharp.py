@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Literal
+from typing import Any, ClassVar, Literal
 
 import cv2
 import numpy as np
@@ -33,19 +33,43 @@ from pydantic import Field, model_validator
 
 from gbuffer.frame import Frame
 from ops import color
+from ops import curvature as curv_ops
+from ops.masked import masked_gaussian
 from ops.scaling import luminance
 from ops.unsharp import depth_unsharp_masking, unsharp_masking
-from service.operators.common import Auto, layer_plane, pixel_sizes, statistic, user_image
+from service.operators.common import (
+    Auto,
+    layer_plane,
+    pixel_sizes,
+    relative_pixel_sizes,
+    relative_scene_sigma,
+    statistic,
+    user_image,
+)
+from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
 from service.registry import Context, Params, PipelineError, register
 
 Signal = Literal["beauty", "ambient", "diffuse", "specular", "transmission", "shadows"]
-#: Vertical field of view assumed when ``sigma`` is ``auto`` and the frame has no camera.
-NOMINAL_FOV_Y_DEG = 40.0
+
+
+#: §4 as printed: every pixel's own lightness, enhanced everywhere (``preset: "paper"``).
+PAPER = {"relief_only": False, "fine_scale": 0.0}
 
 
 class UnsharpParams(Params):
     """3D unsharp masking (Ritschel et al. 2008, §4-5)."""
 
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {
+        "default": {},
+        "paper": {"relief_only": False, "fine_scale": 0.0},
+    }
+
+    preset: Literal["default", "paper"] = Field(
+        "default",
+        description="default: contrast added where the surface has relief, from the signal "
+        "above `fine_scale` (noise and flat surfaces kept as rendered); paper: §4 as printed, "
+        "every pixel's own lightness, everywhere; parameters given with it override it",
+    )
     amount: float = Field(1.0, ge=-10.0, le=10.0, description="λ (users preferred 1.7-2, §6)")
     sigma: float | Auto = Field(
         "auto",
@@ -77,6 +101,20 @@ class UnsharpParams(Params):
     normal_sigma: float | None = Field(
         1.0, gt=0.0, le=100.0, description="normal change counted as one σ (null: no crease term)"
     )
+    fine_scale: float = Field(
+        0.002,
+        ge=0.0,
+        le=0.1,
+        description="σ of the lightness the contrast is taken from, relative to the image height "
+        "(at least a pixel): Monte-Carlo noise finer than it is not amplified (0: each pixel's "
+        "own, as the paper)",
+    )
+    relief_only: bool = Field(
+        True,
+        description="gain × the surface's relief, tanh(0.03·(|κ1|+|κ2|)) of the normals' "
+        "curvature averaged over σ/2: flat surfaces (floors, walls) keep their shadows, texture "
+        "and noise as rendered and no halo follows a shadow across them (needs normals)",
+    )
 
     @model_validator(mode="after")
     def _check(self) -> UnsharpParams:
@@ -90,13 +128,20 @@ class UnsharpParams(Params):
 
 
 def _pixel_sizes(frame: Frame, p: UnsharpParams) -> np.ndarray:
-    if frame.camera is not None or p.sigma != "auto":
+    if p.sigma != "auto":
         return pixel_sizes(frame, "unsharp_masking with sigma in scene units")
-    depth = frame.need("depth", "unsharp_masking")
-    focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
-    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(
-        np.float32, copy=False
-    )
+    return relative_pixel_sizes(frame, "unsharp_masking")
+
+
+def _relief(frame: Frame, p: UnsharpParams, sigma_px: float) -> np.ndarray | None:
+    """tanh(s·(|κ1| + |κ2|)) · weight of the normals' curvature at the default scale (RS §4,
+    the default gain s), averaged over the surface at ``sigma_px`` / 2; None without normals."""
+    if not p.relief_only or "normal" not in frame.buffers:
+        return None
+    curv = frame_curvature(frame, CurvatureParams())
+    trace = np.abs(curv.k1) + np.abs(curv.k2)
+    relief = np.tanh(np.float32(curv_ops.DEFAULT_GAIN) * trace) * curv.weight
+    return masked_gaussian(relief.astype(np.float32), frame.mask, 0.5 * sigma_px)
 
 
 def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
@@ -128,11 +173,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
         ctx,
         "unsharp_masking.sigma",
         p.sigma,
-        lambda: (
-            p.sigma_fraction * frame.image_height * float(np.median(pixel_size[covered]))
-            if covered.any()
-            else 1.0
-        ),
+        lambda: relative_scene_sigma(frame, pixel_size, p.sigma_fraction),
     )
     if p.signal == "shadows":
         unlit = frame.layer(p.unlit or "")
@@ -151,6 +192,11 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             p.white,
             lambda: color.auto_white(signal, covered),
         )
+    gain = _gain_map(frame, p, ctx)
+    typical = float(np.median(pixel_size[covered])) if covered.any() else 1.0
+    relief = _relief(frame, p, sigma / max(typical, 1e-30))
+    if relief is not None:
+        gain = relief if gain is None else gain * relief
     out = unsharp_masking(
         signal,
         depth,
@@ -161,10 +207,11 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
         pixel_size=pixel_size,
         adaptive=p.adaptive,
         variance_sigma=p.variance_sigma,
-        gain_map=_gain_map(frame, p, ctx),
+        gain_map=gain,
         white=white,
         depth_sigma=p.depth_sigma,
         normal_sigma=p.normal_sigma,
+        fine_px=scale_px(frame, p.fine_scale) if p.fine_scale > 0 else 0.0,
     )
     if p.signal == "shadows":
         factor = out[..., :1] / np.maximum(signal[..., :1], np.float32(1e-6))

@@ -1,0 +1,58 @@
+"""What the eye reads as lighting, kept while shape detail is added.
+
+Shape-enhancement operators (Radiance Scaling, Light Alignment, unsharp masking) should add
+detail where there is relief, not relight a frame. Two pieces keep them there on path-traced
+frames:
+
+* a lobe's light averaged over covered pixels at a small scale (:func:`ops.masked.
+  masked_gaussian`), so the reflectance mapping δ̄ of Radiance Scaling follows the lighting
+  rather than each pixel's Monte-Carlo noise (the scaling σ(κ, δ̄) then multiplies the noise
+  like any other light, it does not amplify it);
+* :func:`lighting_gain` — the factor that divides an enhanced radiance by its low-frequency
+  gain, ``out' = out · LF(Y(in)) / LF(Y(out))`` with LF a smoothing along the visible surfaces
+  (:func:`ops.unsharp.surface_blur`: depth- and crease-aware, so an object and the floor it stands
+  on are normalised apart), so the mean luminance of every surface region at that scale is the
+  input's and only the detail finer than it changes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from ops.scaling import luminance
+from ops.unsharp import surface_blur
+
+F32 = NDArray[np.float32]
+
+#: Luminance below which a region's gain is not measured (its radiance is kept as it is).
+_DARK = np.float32(1e-6)
+
+
+def lighting_gain(
+    before: np.ndarray,
+    after: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray | None,
+    mask: np.ndarray,
+    *,
+    sigma_scene: float,
+    pixel_size: np.ndarray | float,
+) -> F32:
+    """The per-pixel factor that gives ``after`` the low-frequency luminance of ``before``::
+
+        gain = LF(Y(before)) / LF(Y(after)),   LF = surface_blur(·, σ = sigma_scene)
+
+    ``before`` and ``after`` are (H, W, 3) radiance (the part an operator changed: e.g. the sum
+    of the lobes it scaled); Y is Rec. 709 luminance. The gain is 1 on uncovered pixels and where
+    either is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
+    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
+    """
+    lf_in, lf_out = (
+        surface_blur(
+            luminance(x), depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
+        )
+        for x in (before, after)
+    )
+    ok = (lf_in > _DARK) & (lf_out > _DARK) & (np.asarray(mask) > 0)
+    return np.divide(lf_in, lf_out, out=np.ones_like(lf_in), where=ok)
