@@ -67,6 +67,7 @@ bench: install
 	@for b in bench/bench_*.py; do $(BIN)/python -m bench.$$(basename $$b .py) || exit 1; done
 
 gallery: install
+	$(BIN)/python -m bench.gallery_corpus
 	$(BIN)/python -m bench.gallery
 
 # Blender Cycles renders of the corpus/ scenes (every size and sample count; hours on 2 cores)

@@ -119,6 +119,16 @@ def find_frames(folder: Path, names: Iterable[str] = ()) -> list[CorpusFrame]:
     return out
 
 
+def gather(dirs: Sequence[Path] | None = None, names: Iterable[str] = ()) -> list[CorpusFrame]:
+    """The frames of ``dirs`` (default: the committed subset, then :data:`OUT_DIR` when it
+    exists), sorted by name; a name found in several folders is taken from the last (a full
+    render rather than its packed CI copy)."""
+    folders = dirs or [d for d in (CI_DIR, OUT_DIR) if d.is_dir()]
+    wanted = tuple(names)
+    by_name = {f.name: f for d in folders for f in find_frames(d, wanted)}
+    return [by_name[k] for k in sorted(by_name)]
+
+
 # -- Blender renders -----------------------------------------------------------------------------
 
 

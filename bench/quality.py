@@ -461,10 +461,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--op", action="append", help=f"operator (repeatable; default: {DEFAULT_OPS})")
     ap.add_argument("--markdown", action="store_true", help="print a Markdown table")
     args = ap.parse_args(argv)
-    dirs = args.dir or [d for d in (corpus.CI_DIR, corpus.OUT_DIR) if d.is_dir()]
-    frames = [f for d in dirs for f in corpus.find_frames(d, args.frames)]
+    frames = corpus.gather(args.dir, args.frames)
     if not frames:
-        raise SystemExit(f"quality: no frames in {', '.join(map(str, dirs))}")
+        raise SystemExit("quality: no corpus frames (see python -m bench.corpus --help)")
     rows = []
     for cf in frames:
         ref = reference(cf.read())
