@@ -19,6 +19,7 @@ import pytest
 
 from bench import corpus
 from ops.shading import parse_light
+from service.cli import main
 
 FRAMES = corpus.find_frames(corpus.CI_DIR)
 LAYER = "ViewLayer"
@@ -57,6 +58,19 @@ def test_every_pass_with_its_pixel_type(frame: corpus.CorpusFrame) -> None:
         header = dict(exr.header())
     assert header["BlenderMultiChannel"].startswith("Blender")
     assert header["compression"] == OpenEXR.ZIP_COMPRESSION
+
+
+@pytest.mark.parametrize("frame", FRAMES, ids=IDS)
+def test_depict_inspect_reads_the_frame_with_its_camera(
+    frame: corpus.CorpusFrame, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["inspect", str(frame.exr), "--camera", str(frame.camera), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["preset"] == "blender" and info["size"] == [320, 240]
+    cam = json.loads(frame.camera.read_text()) if frame.camera else {}
+    assert info["camera"]["fov_y_deg"] == pytest.approx(cam["fov_y_deg"])
+    for buffer in ("beauty", "normal", "depth", "position", "diffuse", "specular", "transmission"):
+        assert buffer in info["buffers"], buffer
 
 
 @pytest.mark.parametrize("frame", FRAMES, ids=IDS)
