@@ -9,9 +9,9 @@ and of ``corpus/frames`` when it has been rendered (``make corpus``), it runs ea
 - the input and the result at full frame (100 % for 240p frames; larger ones scaled to
   :data:`ROW` pixels high) and the change of lightness (blue darker, red lighter);
 - two crops enlarged by whole factors with nearest-neighbour (4× for 240p, 2× for larger
-  frames), before and after: the object window with the most band-pass detail and the window
-  with the most flat, directly lit floor (where added noise shows), so the pixels can be
-  judged one by one;
+  frames), before and after: the object window with the most band-pass detail and the nearest
+  window of flat, directly lit floor (where added noise shows), so the pixels can be judged
+  one by one;
 - the figures of :mod:`bench.quality` on the change picture's label (those that miss their
   target marked ``*``).
 
@@ -70,7 +70,10 @@ def crop_windows(ref: quality.Reference) -> list[tuple[str, Box]]:
     detail = np.where(regs.objects & (coarse > 0), np.abs(band) / np.maximum(coarse, 1e-6), 0.0)
     out = [("detail", best_window(detail, side))]
     if regs.flat_floor.sum() > side * side // 2:
-        out.append(("lit floor", best_window(regs.flat_floor.astype(np.float32), side)))
+        # the nearest floor: its texture is not minified into aliasing, its noise is the frame's
+        depth = np.asarray(frame.buffers["depth"], np.float32)
+        near = np.where(regs.flat_floor, 1.0 / np.maximum(depth, 1e-6) ** 2, 0.0)
+        out.append(("lit floor", best_window(near, side)))
     return out
 
 
