@@ -136,9 +136,8 @@ def file_channel(frame: Frame, suffix: str) -> F32 | None:
 def file_luminance(frame: Frame, layer: str) -> F32 | None:
     """Rec. 709 luminance of the file's ``layer.R/G/B`` (e.g. ``DiffDir``), or None."""
     rgb = [file_channel(frame, f"{layer}.{c}") for c in "RGB"]
-    if any(c is None for c in rgb):
-        return None
-    return luminance(np.dstack(rgb))
+    planes = [c for c in rgb if c is not None]
+    return luminance(np.dstack(planes)) if len(planes) == 3 else None
 
 
 # -- filters ---------------------------------------------------------------------------------------
@@ -150,7 +149,7 @@ def masked_blur(image: F32, mask: Mask, sigma: float) -> F32:
     m = mask.astype(np.float32)
     num = cv2.GaussianBlur(np.where(mask, image, np.float32(0)).astype(np.float32), (0, 0), sigma)
     den = cv2.GaussianBlur(m, (0, 0), sigma)
-    out = np.zeros_like(num)
+    out = np.zeros(image.shape, np.float32)
     np.divide(num, den, out=out, where=den > 1e-3)
     return out
 

@@ -120,7 +120,7 @@ def test_cast_shadows_fall_away_from_the_key_light(frame: corpus.CorpusFrame) ->
     index = ch[f"{LAYER}.IndexOB.X"]
     pos = np.stack([ch[f"{LAYER}.Position.{c}"] for c in "XYZ"], -1).astype(np.float64)
     floor = (index == 1) & (ch[f"{LAYER}.Normal.Z"] > 0.99)  # the floor, not a backdrop
-    direct = sum(ch[f"{LAYER}.DiffDir.{c}"].astype(np.float64) for c in "RGB")
+    direct = np.stack([ch[f"{LAYER}.DiffDir.{c}"] for c in "RGB"]).astype(np.float64).sum(0)
     shadow = floor & (direct < 0.5 * np.percentile(direct[floor], 90))
     objects = pos[index >= 2]
     near = np.linalg.norm(pos[..., :2] - objects[:, :2].mean(0), axis=-1) < 3.0

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -86,8 +87,8 @@ FAILING_TODAY: dict[tuple[str, str], frozenset[str]] = {
 UNTUNED = pytest.mark.xfail(strict=True, reason="defaults not yet tuned for path-traced frames")
 
 
-def _cases() -> list[object]:
-    cases = []
+def _cases() -> list[Any]:
+    cases: list[Any] = []
     for op in OPS:
         for check in CHECKS:
             for name in sorted(FRAMES):

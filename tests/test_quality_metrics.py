@@ -69,7 +69,7 @@ def test_hot_pixels_are_those_over_twice_their_input_and_the_input_maximum(
     ref: quality.Reference,
 ) -> None:
     b = beauty(ref)
-    after = 2.5 * b
+    after = np.float32(2.5) * b
     expected = (after > b.reshape(-1, 3).max(axis=0)).any(axis=-1).mean()
     assert 0.01 < expected < 0.5
     assert quality.hot_fraction(b, after) == pytest.approx(expected)
@@ -117,7 +117,9 @@ def test_low_frequency_correlation(ref: quality.Reference) -> None:
     b = beauty(ref)
     covered = ref.regions.covered
     sigma = quality.LF_SIGMA * b.shape[0]
-    assert quality.lf_correlation(b, b + 0.3, covered, sigma) == pytest.approx(1.0, abs=1e-6)
+    assert quality.lf_correlation(b, b + np.float32(0.3), covered, sigma) == pytest.approx(
+        1.0, abs=1e-6
+    )
     # fine grain leaves the lighting as it was; light coming from the other side does not
     rng = np.random.default_rng(2)
     grainy = b * (1.0 + rng.normal(0.0, 0.2, b.shape[:2]).astype(np.float32)[..., None])
