@@ -11,7 +11,7 @@ export UV_PROJECT_ENVIRONMENT := $(VENV)
 export UV_PYTHON_DOWNLOADS := never
 export PYOPENGL_PLATFORM := osmesa
 
-.PHONY: install osmesa run example test lint typecheck pytest bench gallery openapi docs clean
+.PHONY: install osmesa run example test lint typecheck pytest bench gallery corpus quality openapi docs clean
 
 install: osmesa $(VENV)/.installed
 
@@ -67,7 +67,14 @@ bench: install
 	@for b in bench/bench_*.py; do $(BIN)/python -m bench.$$(basename $$b .py) || exit 1; done
 
 gallery: install
+	$(BIN)/python -m bench.gallery_corpus
 	$(BIN)/python -m bench.gallery
+
+# Blender Cycles renders of the corpus/ scenes (every size and sample count; hours on 2 cores)
+# and Depict's renders of the optional meshes, into corpus/frames/
+corpus: install
+	$(BIN)/python -m bench.corpus render
+	$(BIN)/python -m bench.corpus meshes
 
 openapi: install
 	$(BIN)/python -m service.openapi

@@ -17,6 +17,9 @@ labelled PNG sheets into ``gallery/`` (git-ignored):
 - ``relief_<mesh>.png``: Apparent Relief, the descriptor colour code, each style and a painted
   ARM (``custom_arm.png``, passed by its path).
 
+``make gallery`` runs :mod:`bench.gallery_corpus` first: every operator's defaults on the corpus
+frames, in ``gallery/corpus/``.
+
 ``--docs DIR`` also writes six small pictures for the README (≤ 640 px wide, < 150 KB):
 ``rs_scenarios.png``, ``rs_blender.png``, ``lla_scales.png``, ``lla_materials.png``, ``usm.png``
 and ``relief_styles.png`` (``make gallery`` then ``python -m bench.gallery --docs docs/images``
