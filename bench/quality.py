@@ -20,7 +20,8 @@ figure            what                                                          
 ``detail``        RMS band-pass contrast of the object pixels (difference of Gaussians at   > 1
                   :data:`DETAIL_SIGMAS` of the image height), after / before
 ``cong_*``        congruence score (LLA Eq. 2) as ``depict score`` computes it, of the      rises
-                  whole frame and of the objects alone, before and after
+                  whole frame and of the objects alone, before and after; the result's
+                  shading strength on the input's scale (two renderings of one frame)
 ================  ========================================================================  ======
 
 Pixel classes come from the object index pass (Blender's ``IndexOB``; the corpus scenes give
@@ -61,9 +62,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gbuffer.frame import Frame
-from ops.congruence import CongruenceResult, congruence
+from ops.congruence import CongruenceResult
 from ops.scaling import luminance
-from service.compare import DEFAULT_PARAMS
+from service.compare import DEFAULT_PARAMS, score_image
 
 F32 = NDArray[np.float32]
 Mask = NDArray[np.bool_]
@@ -271,15 +272,20 @@ def detail_gain(before: F32, after: F32, mask: Mask, height: int) -> float:
     return band_contrast(after, mask, sigmas) / c0 if c0 > 0 else math.nan
 
 
-def frame_congruence(frame: Frame) -> CongruenceResult:
-    """LLA Eq. 2 of the frame's beauty, with the parameters and normalisation of ``depict
-    score`` (:func:`service.compare.score_frame`)."""
-    return congruence(
+def frame_congruence(frame: Frame, shading_norm: float | None = None) -> CongruenceResult:
+    """LLA Eq. 2 of the frame's beauty, with the parameters of ``depict score``
+    (:func:`service.compare.score_frame`: the shape flow of the normals); ``shading_norm``
+    puts the shading strength on another rendering's scale (the input's, for a result)."""
+    params = dict(DEFAULT_PARAMS["congruence"])
+    if shading_norm is not None:
+        params["shading_norm"] = shading_norm
+    return score_image(
         np.asarray(frame.buffers["beauty"], np.float32),
         np.asarray(frame.buffers["depth"], np.float32),
         frame.mask,
-        image_height=int(frame.image_height),
-        **DEFAULT_PARAMS["congruence"],
+        frame.buffers.get("normal"),
+        int(frame.image_height),
+        **params,
     )
 
 
@@ -300,6 +306,7 @@ class Reference:
     albedo: F32 | None
     congruence: float
     congruence_objects: float
+    shading_norm: float
 
 
 def reference(frame: Frame) -> Reference:
@@ -307,7 +314,14 @@ def reference(frame: Frame) -> Reference:
     regs = regions(frame)
     result = frame_congruence(frame)
     albedo = file_luminance(frame, "DiffCol")
-    return Reference(frame, regs, albedo, result.score, masked_score(result, regs.objects))
+    return Reference(
+        frame,
+        regs,
+        albedo,
+        result.score,
+        masked_score(result, regs.objects),
+        result.shading_norm,
+    )
 
 
 def figures(ref: Reference, after: Frame) -> Figures:
@@ -318,7 +332,7 @@ def figures(ref: Reference, after: Frame) -> Figures:
     height = int(ref.frame.image_height)
     negatives, nonfinite = bad_pixels(a)
     clean = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)  # NaN would poison every mean
-    scored = frame_congruence(_with_beauty(after, clean))
+    scored = frame_congruence(_with_beauty(after, clean), ref.shading_norm)
     return Figures(
         lum_objects=luminance_ratio(b, clean, regs.objects),
         lum_covered=luminance_ratio(b, clean, regs.covered),

@@ -101,9 +101,10 @@ def kept_lighting_gain(
 ) -> np.ndarray:
     """:func:`ops.lighting.lighting_gain` of an operator's change on ``frame``: the factor per
     pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
-    ``scale`` (relative to the image height)."""
+    ``scale`` (relative to the image height). Only the pixels the operator changed are
+    corrected (the gain is 1 elsewhere), so what it left alone stays bit for bit."""
     pixel_size = relative_pixel_sizes(frame, why)
-    return lighting_gain(
+    gain = lighting_gain(
         before,
         after,
         frame.need("depth", why),
@@ -112,6 +113,9 @@ def kept_lighting_gain(
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
     )
+    unchanged = np.all(np.asarray(before) == np.asarray(after), axis=-1)
+    gain[unchanged] = 1.0
+    return gain
 
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:

@@ -48,7 +48,12 @@ PAPER_SIGMAS = [0.5, 0.3, 0.1, 0.2, 0.2]
 DEFAULT_SIGMAS = [0.1, 0.3, 0.3, 0.2, 0.2]
 _SIGMA_ITEMS = {"min_length": 1, "max_length": 7}
 #: Fig. 7's scales, the ratio as is and no lighting kept (``preset: "paper"``).
-PAPER = {"sigmas": PAPER_SIGMAS, "ratio_max": 8.0, "keep_lighting": False}
+PAPER = {
+    "sigmas": PAPER_SIGMAS,
+    "ratio_max": 8.0,
+    "keep_lighting": False,
+    "components": ["diffuse", "specular"],
+}
 
 
 class LightAlignmentParams(LightsParams):
@@ -75,9 +80,10 @@ class LightAlignmentParams(LightsParams):
         None, **_SIGMA_ITEMS, description="σ_i of the transmission component (default: `sigmas`)"
     )
     components: list[Component] = Field(
-        default_factory=lambda: ["diffuse", "specular"],
+        default_factory=lambda: ["diffuse", "specular", "transmission"],
         min_length=1,
-        description="components whose light is aligned (others keep the original light)",
+        description="components whose light is aligned (others keep the original light; "
+        "transmission only changes frames with a transmission lobe)",
     )
     gamma: float = Field(DEFAULT_GAMMA, ge=0.0, le=20.0, description="γ of W_γ (Eq. 1)")
     base: float = Field(

@@ -34,11 +34,11 @@ from pydantic import Field, model_validator
 from gbuffer.frame import Frame
 from ops import color
 from ops import curvature as curv_ops
-from ops.masked import masked_gaussian
 from ops.scaling import luminance
-from ops.unsharp import depth_unsharp_masking, unsharp_masking
+from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
 from service.operators.common import (
     Auto,
+    kept_lighting_gain,
     layer_plane,
     pixel_sizes,
     relative_pixel_sizes,
@@ -53,7 +53,7 @@ Signal = Literal["beauty", "ambient", "diffuse", "specular", "transmission", "sh
 
 
 #: §4 as printed: every pixel's own lightness, enhanced everywhere (``preset: "paper"``).
-PAPER = {"relief_only": False, "fine_scale": 0.0}
+PAPER = {"relief_only": False, "fine_scale": 0.0, "keep_lighting": False}
 
 
 class UnsharpParams(Params):
@@ -109,6 +109,11 @@ class UnsharpParams(Params):
         "(at least a pixel): Monte-Carlo noise finer than it is not amplified (0: each pixel's "
         "own, as the paper)",
     )
+    keep_lighting: bool = Field(
+        True,
+        description="divide the result by its low-frequency gain along the surfaces at 4σ, so "
+        "the lightness curve of CIELAB does not brighten a region on the whole (false: as is)",
+    )
     relief_only: bool = Field(
         True,
         description="gain × the surface's relief, tanh(0.03·(|κ1|+|κ2|)) of the normals' "
@@ -133,15 +138,26 @@ def _pixel_sizes(frame: Frame, p: UnsharpParams) -> np.ndarray:
     return relative_pixel_sizes(frame, "unsharp_masking")
 
 
-def _relief(frame: Frame, p: UnsharpParams, sigma_px: float) -> np.ndarray | None:
+def _relief(
+    frame: Frame, p: UnsharpParams, sigma: float, pixel_size: np.ndarray
+) -> np.ndarray | None:
     """tanh(s·(|κ1| + |κ2|)) · weight of the normals' curvature at the default scale (RS §4,
-    the default gain s), averaged over the surface at ``sigma_px`` / 2; None without normals."""
+    the default gain s), smoothed along the surfaces over σ / 2 (scene units): it reaches as far
+    as the contrast it lets in, without crossing onto another surface; None without normals."""
     if not p.relief_only or "normal" not in frame.buffers:
         return None
     curv = frame_curvature(frame, CurvatureParams())
     trace = np.abs(curv.k1) + np.abs(curv.k2)
-    relief = np.tanh(np.float32(curv_ops.DEFAULT_GAIN) * trace) * curv.weight
-    return masked_gaussian(relief.astype(np.float32), frame.mask, 0.5 * sigma_px)
+    relief = (np.tanh(np.float32(curv_ops.DEFAULT_GAIN) * trace) * curv.weight).astype(np.float32)
+    normal = frame.buffers["normal"]
+    return surface_blur(
+        relief,
+        frame.buffers["depth"],
+        normal,
+        frame.mask,
+        sigma_scene=0.5 * sigma,
+        pixel_size=pixel_size,
+    )
 
 
 def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
@@ -193,8 +209,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             lambda: color.auto_white(signal, covered),
         )
     gain = _gain_map(frame, p, ctx)
-    typical = float(np.median(pixel_size[covered])) if covered.any() else 1.0
-    relief = _relief(frame, p, sigma / max(typical, 1e-30))
+    relief = _relief(frame, p, sigma, pixel_size)
     if relief is not None:
         gain = relief if gain is None else gain * relief
     out = unsharp_masking(
@@ -213,6 +228,13 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
         normal_sigma=p.normal_sigma,
         fine_px=scale_px(frame, p.fine_scale) if p.fine_scale > 0 else 0.0,
     )
+    if p.keep_lighting and p.signal != "shadows":
+        typical = float(np.median(pixel_size[covered])) if covered.any() else 1.0
+        scale = 4.0 * sigma / max(typical, 1e-30) / frame.image_height
+        kept = kept_lighting_gain(frame, signal, out, scale, "unsharp_masking")
+        if relief is not None:  # as far as the contrast was let in: 1 on flat surfaces
+            kept = 1.0 + np.clip(relief, 0.0, 1.0) * (kept - 1.0)
+        out = np.asarray(out * kept[..., None], np.float32)
     if p.signal == "shadows":
         factor = out[..., :1] / np.maximum(signal[..., :1], np.float32(1e-6))
         frame.buffers["beauty"] = np.where(signal > 0, beauty * factor, beauty).astype(
