@@ -41,6 +41,10 @@ class Score(BaseModel):
     """The answer of ``POST /v1/score`` (the JSON of ``depict score --json``)."""
 
     score: float = Field(description="congruence score (LLA Eq. 2) in [0, 1]")
+    shading_norm: float = Field(
+        description="the shading strength mapped to 1: pass it as `shading_norm` to score "
+        "another rendering of this frame (a result) on this one's scale"
+    )
     analysis_shape: list[int] = Field(description="(h, w) at which the score was evaluated")
     image_shape: list[int] = Field(description="(h, w) of the frame")
     params: dict[str, float | str] = Field(description="the congruence parameters used")
@@ -164,7 +168,8 @@ def install(
             jobs.score_job,
             lambda src, read: (str(src), spec_json, read, options, settings.max_pixels),
         )
-        return {k: out[k] for k in ("score", "analysis_shape", "image_shape", "params")}
+        keys = ("score", "shading_norm", "analysis_shape", "image_shape", "params")
+        return {k: out[k] for k in keys}
 
     @app.post(
         "/v1/compare",

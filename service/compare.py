@@ -702,8 +702,10 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
 
     Returns
     -------
-    dict with ``score``, ``analysis_shape``, ``image_shape``, ``params`` (the congruence
-    parameters used) and, with ``maps``, ``layers``.
+    dict with ``score``, ``shading_norm`` (the shading strength mapped to 1: pass it as
+    ``shading_norm`` to score another rendering of the frame on this one's scale),
+    ``analysis_shape``, ``image_shape``, ``params`` (the congruence parameters used) and, with
+    ``maps``, ``layers``.
     """
     cong = {**DEFAULT_PARAMS["congruence"], **params}
     beauty = np.asarray(frame.need("beauty", "the image to score"), np.float32)
@@ -714,6 +716,7 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     res = score_image(beauty, depth, frame.mask, normal, int(frame.image_height), **dict(cong))
     out: dict[str, Any] = {
         "score": res.score,
+        "shading_norm": float(res.shading_norm),
         "analysis_shape": list(res.analysis_shape),
         "image_shape": list(depth.shape),
         "params": cong,

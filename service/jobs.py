@@ -251,6 +251,7 @@ def score_job(
     out = score_frame(frame, maps=False, **options)
     return {
         "score": float(out["score"]),
+        "shading_norm": float(out["shading_norm"]),
         "analysis_shape": [int(v) for v in out["analysis_shape"]],
         "image_shape": [int(v) for v in out["image_shape"]],
         "params": {k: v if isinstance(v, str) else float(v) for k, v in out["params"].items()},
