@@ -478,6 +478,9 @@ def _http_handler(request: Request, exc: Exception) -> Response:
         detail = f"no route {request.method} {request.url.path}; see /openapi.json"
     elif exc.status_code == 405:
         detail = f"{request.url.path} does not accept {request.method}; see /openapi.json"
+    elif exc.status_code == 400 and "exceeded maximum size" in detail:  # the multipart parser
+        detail = "a form field is over 1 MiB (the limit of a field that is not a file)"
+        return Problem("limit", detail).response(request.url.path, REQUEST_ID.get())
     problem = Problem(
         kind_for_status(exc.status_code),
         detail,

@@ -134,6 +134,8 @@ def from_exception(exc: BaseException) -> Problem:
 
 def kind_for_status(status: int) -> str:
     """The problem kind used for a plain HTTP status (404, 405, ...)."""
+    if status == 400:
+        return "bad-request"
     for kind, (code, _) in KINDS.items():
         if code == status:
             return kind
