@@ -1,15 +1,18 @@
 """What C and C++ libraries print on the terminal, captured instead of shown.
 
 The OpenEXR library reports a damaged file by printing to the process's file descriptors 1 and 2
-directly (``std::cout``, ``std::cerr``), below Python's ``sys.stdout``. :func:`captured_output`
-points both descriptors at a temporary file around a call and gives back the lines written, so
-the caller can put them in its one-line error (or its warnings) instead of the terminal.
+directly (``std::cout``, ``std::cerr``, below Python's ``sys.stdout``) and through Python's
+``sys.stdout`` (its binding's warnings). :func:`captured_output` points both descriptors at a
+temporary file, and both Python streams at a buffer, around a call and gives back the lines
+written, so the caller can put them in its one-line error (or its warnings) instead of the
+terminal.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import io
 import os
 import sys
 import tempfile
@@ -44,11 +47,13 @@ def captured_output() -> Iterator[list[str]]:
     except OSError:
         yield lines
         return
+    python = io.StringIO()
     with tempfile.TemporaryFile() as sink:
         try:
             os.dup2(sink.fileno(), 1)
             os.dup2(sink.fileno(), 2)
-            yield lines
+            with contextlib.redirect_stdout(python), contextlib.redirect_stderr(python):
+                yield lines
         finally:
             _flush()
             os.dup2(saved[0], 1)
@@ -57,4 +62,5 @@ def captured_output() -> Iterator[list[str]]:
             os.close(saved[1])
             sink.seek(0)
             text = sink.read(MAX_CAPTURED).decode("utf-8", "replace")
+            text += "\n" + python.getvalue()[:MAX_CAPTURED]
             lines.extend(line.strip() for line in text.splitlines() if line.strip())

@@ -385,8 +385,10 @@ def print_summary(summary: Summary, total: int) -> None:
     if summary.pinned:
         pins = ", ".join(f"{k}={v:.6g}" for k, v in sorted(summary.pinned.items()))
         print(f"  pinned: {pins}")
+    from service.cli_common import printable
+
     for frame, error in summary.failed.items():
-        print(f"  frame {frame} failed: {error}")
+        print(f"  frame {frame} failed: {printable(error)}")
 
 
 def cmd_batch(args: Any) -> int:

@@ -372,8 +372,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _fail(message: str) -> int:
     """One line on stderr, control characters escaped; the exit code of bad input."""
-    text = " ".join(message.split("\n")) if "\n" in message else message
-    print(f"depict: error: {printable(text)}", file=sys.stderr)
+    print(f"depict: error: {printable(message)}", file=sys.stderr)
     return EXIT_USAGE
 
 
