@@ -471,3 +471,20 @@ def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
     order = list(range(count))
     path.write_bytes(exr._assemble([attrs], [chunks], [order], ["scanlineimage"], False))
     return path
+
+
+def write_corrupt(path: Path) -> Path:
+    """A ZIP EXR whose last compressed chunk bytes are flipped: the header reads, the pixels
+    do not decode. (Smooth data, so the chunks are really compressed: incompressible chunks are
+    stored raw, and EXR has no checksum to notice a corruption of those.)"""
+    ramp = np.tile(np.linspace(0, 1, 64, dtype=np.float32), (64, 1))
+    smooth = path.with_suffix(".smooth.exr")
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"R": ramp, "G": ramp}).write(
+        str(smooth)
+    )
+    data = bytearray(smooth.read_bytes())
+    smooth.unlink()
+    for i in range(len(data) - 200, len(data) - 8):
+        data[i] ^= 0x5A
+    path.write_bytes(bytes(data))
+    return path

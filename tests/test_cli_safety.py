@@ -18,7 +18,7 @@ import trimesh
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from service.cli import main
-from tests.exr_factory import write_decode_bomb, write_raw_exr
+from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
 
 
 def depict(*argv: str | Path) -> int:
@@ -92,7 +92,7 @@ def test_batch_frame_ranges_are_bounded(copy: Path, capfd: pytest.CaptureFixture
     one_error(capfd, "more than 100000 frames")
 
 
-# -- special files and links as outputs ---------------------------------------------------------------
+# -- special files and links as outputs ------------------------------------------------------------
 
 
 def test_fifo_and_device_outputs_are_refused(
@@ -139,20 +139,13 @@ def test_unwritable_places_and_bad_values_are_one_line(
     assert not (tmp_path / "p.png").exists()
 
 
-# -- one clean line per error ---------------------------------------------------------------------------
+# -- one clean line per error ----------------------------------------------------------------------
 
 
 def test_corrupt_pixels_give_one_line_with_the_library_words(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    ramp = np.tile(np.linspace(0, 1, 64, dtype=np.float32), (64, 1))
-    src = tmp_path / "smooth.exr"
-    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"R": ramp, "G": ramp}).write(str(src))
-    data = bytearray(src.read_bytes())
-    for i in range(len(data) - 200, len(data) - 8):
-        data[i] ^= 0x5A
-    bad = tmp_path / "corrupt.exr"
-    bad.write_bytes(bytes(data))
+    bad = write_corrupt(tmp_path / "corrupt.exr")
     assert depict("enhance", bad, "-o", tmp_path / "o.exr") == 2
     line = one_error(capfd, "corrupt pixel data")
     assert "OpenEXR: (EXR_ERR_CORRUPT_CHUNK)" in line
@@ -205,22 +198,30 @@ def test_missing_buffer_names_the_buffer(tmp_path: Path, capfd: pytest.CaptureFi
     assert "{name}" not in line
 
 
-# -- fireflies ----------------------------------------------------------------------------------------
+# -- fireflies -------------------------------------------------------------------------------------
+
+
+def render_with_nan(path: Path, size: tuple[int, int], pixels: dict[str, list[tuple]]) -> Path:
+    """A canonical render with NaN/Inf put at ``pixels``: buffer -> [(y, x, component, value)]."""
+    frame = render(trimesh.creation.icosphere(subdivisions=3), *size)
+    for name, changes in pixels.items():
+        arr = frame.buffers[name].copy()
+        for y, x, k, value in changes:
+            arr[y, x, k] = value
+        frame.buffers[name] = arr
+    frame.outputs = {}  # written from the buffers
+    write_exr(frame, path)
+    return path
 
 
 def test_nan_and_inf_radiance_are_holes_passed_through(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    frame = render(trimesh.creation.icosphere(subdivisions=3), 96, 72)
-    beauty = frame.buffers["beauty"].copy()
-    beauty[36, 48, 0] = np.nan
-    beauty[30, 40, 1] = np.inf
-    diffuse = frame.buffers["diffuse"].copy()
-    diffuse[40, 50, 2] = np.nan
-    frame.buffers.update(beauty=beauty, diffuse=diffuse)
-    frame.outputs = {}  # written from the buffers
-    src = tmp_path / "fireflies.exr"
-    write_exr(frame, src)
+    holes = {
+        "beauty": [(36, 48, 0, np.nan), (30, 40, 1, np.inf)],
+        "diffuse": [(40, 50, 2, np.nan)],
+    }
+    src = render_with_nan(tmp_path / "fireflies.exr", (96, 72), holes)
     with OpenEXR.File(str(src), separate_channels=True) as f:
         original = {n: c.pixels.copy() for n, c in f.channels().items()}
     out = tmp_path / "out.exr"
@@ -246,13 +247,7 @@ def test_nan_and_inf_radiance_are_holes_passed_through(
 def test_nan_in_normals_is_refused_by_enhance_but_described_by_inspect(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    frame = render(trimesh.creation.icosphere(subdivisions=2), 64, 48)
-    normal = frame.buffers["normal"].copy()
-    normal[24, 32, 0] = np.nan
-    frame.buffers["normal"] = normal
-    frame.outputs = {}
-    src = tmp_path / "nan_normals.exr"
-    write_exr(frame, src)
+    src = render_with_nan(tmp_path / "nan.exr", (64, 48), {"normal": [(24, 32, 0, np.nan)]})
     assert depict("enhance", src, "-o", tmp_path / "o.exr") == 2
     one_error(capfd, "channel 'N.X' has 1 NaN/Inf value(s) on covered pixels")
     assert depict("inspect", src) == 0

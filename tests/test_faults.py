@@ -24,8 +24,8 @@ import trimesh
 
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
-from tests.exr_factory import write_decode_bomb, write_raw_exr
-from tests.live_server import Server, start_server, stop_server, wait_ready
+from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
+from tests.live_server import Server, live_servers, wait_ready
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -89,15 +89,9 @@ def servers() -> Iterator[dict[str, Server]]:
     """``main``: one worker, 60 s jobs; ``quick``: one worker, jobs killed after 4 s; both
     close uploads after 2 s. Started together so their start-ups overlap."""
     common = {"DEPICT_WORKERS": "1", "DEPICT_QUEUE": "4", "DEPICT_UPLOAD_TIMEOUT_S": "2"}
-    main = start_server({**common, "DEPICT_TIMEOUT_S": "60", "DEPICT_MAX_CHANNELS": "100"})
-    quick = start_server({**common, "DEPICT_TIMEOUT_S": "4"})
-    try:
-        wait_ready(main)
-        wait_ready(quick)
-        yield {"main": main, "quick": quick}
-    finally:
-        stop_server(main)
-        stop_server(quick)
+    main = {**common, "DEPICT_TIMEOUT_S": "60", "DEPICT_MAX_CHANNELS": "100"}
+    with live_servers({"main": main, "quick": {**common, "DEPICT_TIMEOUT_S": "4"}}) as servers:
+        yield servers
 
 
 @pytest.fixture(scope="module")
@@ -320,16 +314,7 @@ def test_bad_map_is_422_and_names_the_form_field(server: Server, files: dict[str
 def test_corrupt_pixels_400_with_the_library_words_in_one_line(
     server: Server, tmp_path: Path
 ) -> None:
-    import OpenEXR
-
-    ramp = np.tile(np.linspace(0, 1, 64, dtype=np.float32), (64, 1))
-    src = tmp_path / "smooth.exr"
-    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"R": ramp, "G": ramp}).write(str(src))
-    data = bytearray(src.read_bytes())
-    for i in range(len(data) - 200, len(data) - 8):
-        data[i] ^= 0x5A
-    bad = tmp_path / "corrupt.exr"
-    bad.write_bytes(bytes(data))
+    bad = write_corrupt(tmp_path / "corrupt.exr")
     body = assert_problem(enhance(server, bad), 400, "corrupt.exr: corrupt pixel data")
     assert "OpenEXR:" in body["detail"] and "\n" not in body["detail"]
     assert "/tmp" not in body["detail"]
