@@ -1,40 +1,112 @@
-"""Write files under a temporary name and rename them into place, so no reader ever sees half."""
+"""Write files under a temporary name and rename them into place, so no reader ever sees half,
+and never destroy what an output path names: an input, a special file, a symbolic link."""
 
 from __future__ import annotations
 
 import contextlib
 import os
+import stat
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
+
+from gbuffer.errors import OutputError
 
 # The process umask, read once at import (os.umask can only be read by setting it).
 _UMASK = os.umask(0o022)
 os.umask(_UMASK)
 
+_KINDS = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def output_target(path: str | Path) -> Path:
+    """The file an output ``path`` will replace: a symbolic link's target (the link stays, the
+    file it points to gets the new content), the path itself otherwise.
+
+    Raises :class:`OutputError` when that file exists and is not a regular file (a FIFO, a
+    device such as ``/dev/null``, a socket, a directory): replacing it would destroy it.
+    """
+    given = Path(path)
+    target = Path(os.path.realpath(given)) if given.is_symlink() else given
+    try:
+        mode = target.stat().st_mode
+    except FileNotFoundError:
+        return target
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
+    for test, kind in _KINDS:
+        if test(mode):
+            raise OutputError(
+                f"cannot write {path}: it is {kind}, not a regular file; choose a file name"
+            )
+    return target
+
+
+def same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether two paths name one file: the same resolved path, or the same inode (hard links)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet)
+        return False
+
+
+def check_outputs(
+    outputs: Iterable[str | Path | None], inputs: Iterable[str | Path | None]
+) -> None:
+    """:class:`OutputError` when an output names an input (or another output), or a file that
+    cannot be replaced (see :func:`output_target`). ``None`` entries are skipped."""
+    ins = [Path(p) for p in inputs if p]
+    seen: list[Path] = []
+    for out in (Path(p) for p in outputs if p):
+        output_target(out)
+        for other in ins:
+            if same_file(out, other):
+                raise OutputError(
+                    f"output {out} is the input {other}: it would be overwritten; write elsewhere"
+                )
+        for other in seen:
+            if same_file(out, other):
+                raise OutputError(f"two outputs name the same file {out}; give distinct names")
+        seen.append(out)
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; on success rename it to ``path``, else remove it.
+    """Yield a temporary path beside the output; on success rename it over the output, else
+    remove it.
 
-    The temporary name keeps the suffix of ``path`` (libraries choose formats by suffix). The
-    file gets the mode of the file it replaces, else the usual ``0o666 & ~umask`` (not the
-    private 0600 of a temporary file).
+    The output is :func:`output_target` of ``path`` (through symbolic links; special files are
+    refused). The temporary name keeps the suffix of ``path`` (libraries choose formats by
+    suffix). The file gets the mode of the file it replaces, else the usual ``0o666 & ~umask``
+    (not the private 0600 of a temporary file). An :class:`OSError` (a folder that cannot be
+    written, a full disk) becomes an :class:`OutputError` naming ``path``.
     """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(
-        prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-    )
-    os.close(fd)
-    tmp_path = Path(tmp)
+    target = output_target(path)
+    tmp_path: Path | None = None
     try:
-        mode = target.stat().st_mode & 0o777
-    except OSError:
-        mode = 0o666 & ~_UMASK
-    os.chmod(tmp_path, mode)
-    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(
+            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
+        )
+        os.close(fd)
+        tmp_path = Path(tmp)
+        try:
+            mode = target.stat().st_mode & 0o777
+        except OSError:
+            mode = 0o666 & ~_UMASK
+        os.chmod(tmp_path, mode)
         yield tmp_path
         os.replace(tmp_path, target)
+    except OSError as exc:
+        raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
     finally:
-        tmp_path.unlink(missing_ok=True)
+        if tmp_path is not None:
+            tmp_path.unlink(missing_ok=True)

@@ -19,3 +19,13 @@ class MissingCameraError(FrameError):
 
 class LimitError(FrameError):
     """The file is over a configured limit (pixel count, size); refused before decoding pixels."""
+
+
+class OptionError(FrameError):
+    """A read option that does not fit the file (a mapping to channels it lacks, an unknown
+    buffer name): the request is wrong, not the file."""
+
+
+class OutputError(FrameError):
+    """An output path that cannot be written safely: it names an input, a special file (FIFO,
+    device, socket, directory), or a place that cannot be written."""

@@ -3,11 +3,13 @@
 Reading (:func:`read_parts`) first parses the headers itself, without the library: the magic
 number, every part's attributes (as raw bytes), the data windows and the chunk offset tables.
 That refuses, before any pixel is decoded, a file that is not an EXR, is truncated, holds deep
-data or a channel of an unknown pixel type, or whose data window is over ``max_pixels``
-(:class:`LimitError`; a header claiming 100000 x 100000 allocates nothing). Only then does
-``OpenEXR.File(path, separate_channels=True)`` decode the pixels. (``OpenEXR.setMaxImageSize``
-exists but is process-global, so it would change every other read and write in the process;
-the header scan does the same job locally.)
+data or a channel of an unknown pixel type, or that is over a :class:`Limits` (pixels of a data
+window, decoded bytes, channels: :class:`LimitError`; a header claiming 100000 x 100000, or 83
+float channels of 2000 x 2000 in a 1 MB ZIP file, allocates nothing). Only then does
+``OpenEXR.File(path, separate_channels=True)`` decode the pixels, with what the library prints on
+the terminal captured (:func:`gbuffer.capture.captured_output`) and put in the error or the
+warnings instead. (``OpenEXR.setMaxImageSize`` exists but is process-global, so it would change
+every other read and write in the process; the header scan does the same job locally.)
 
 Writing (:func:`write_parts`) gives back every part, channel (pixel type, x/y sampling,
 pLinear) and header attribute:
@@ -32,6 +34,7 @@ level (a warning says so).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -44,8 +47,10 @@ import numpy as np
 import OpenEXR
 
 from gbuffer.atomic import atomic_path
-from gbuffer.errors import FrameError, LimitError
+from gbuffer.capture import captured_output
+from gbuffer.errors import FrameError
 from gbuffer.frame import Passthrough
+from gbuffer.limits import HARD_MAX_PIXELS, Limits
 
 MAGIC = b"\x76\x2f\x31\x01"
 
@@ -85,8 +90,6 @@ LOSSY_COMPRESSIONS = frozenset({5, 6, 7, 8, 9})
 
 STORAGES = ("scanlineimage", "tiledimage", "deepscanline", "deeptile")
 
-#: Without a configured ``max_pixels``, a data window over this many pixels is still refused.
-HARD_MAX_PIXELS = 1 << 30
 
 _MAX_HEADER_BYTES = 64 << 20
 _MAX_ATTRIBUTE_BYTES = 16 << 20
@@ -424,7 +427,9 @@ def _same_value(a: Any, b: Any) -> bool:
         return False
 
 
-def read_parts(path: str | Path, max_pixels: int | None = None) -> ExrPassthrough:
+def read_parts(
+    path: str | Path, max_pixels: int | None = None, *, limits: Limits | None = None
+) -> ExrPassthrough:
     """Read every part of an EXR file, pixels in their original types, for passthrough.
 
     Parameters
@@ -432,42 +437,59 @@ def read_parts(path: str | Path, max_pixels: int | None = None) -> ExrPassthroug
     path : the EXR file (single- or multi-part, scanline or tiled, any pixel type and
         compression the OpenEXR library decodes).
     max_pixels : refuse (:class:`LimitError`) any part whose data window holds more pixels,
-        before decoding anything. ``None``: no configured limit (a hard ceiling of
-        :data:`HARD_MAX_PIXELS` still applies).
+        before decoding anything (overrides ``limits.max_pixels``).
+    limits : pixels, decoded bytes and channels the header may claim
+        (:class:`gbuffer.limits.Limits`); default: :meth:`Limits.from_env`.
 
     Returns
     -------
     ExrPassthrough whose ``parts`` are ``(header, channels)``: ``header`` maps the attributes
     stored in the file (minus the structural ``channels`` and ``chunkCount``) to the binding's
     Python values; ``channels`` maps names to ``OpenEXR.Channel`` (read-only pixel arrays of
-    shape (H, W) for full-resolution channels, dtype float16/float32/uint32).
+    shape (H, W) for full-resolution channels, dtype float16/float32/uint32). What the library
+    printed while decoding a file it could decode is in ``warnings``.
 
     Raises
     ------
     FrameError
         Not an EXR, truncated, corrupt, deep data, or a channel of an unknown pixel type; one
-        line naming the problem and the file.
+        line naming the problem and the file (with the library's own words when it gave any).
     LimitError
-        A data window over ``max_pixels``.
+        A header over ``limits`` (or ``max_pixels``).
     """
     where = str(path)
     if max_pixels is not None and (not isinstance(max_pixels, int) or max_pixels < 1):
         raise ValueError(f"max_pixels must be a positive integer or None, got {max_pixels!r}")
+    limits = limits or Limits.from_env()
+    if max_pixels is not None:
+        limits = dataclasses.replace(limits, max_pixels=max_pixels)
     try:
         st = os.stat(path)
     except OSError as exc:
         raise FrameError(f"{where}: cannot read ({exc.strerror or exc})") from None
     layout = read_layout(path)
+    _check_layout(layout, where)
+    limits.check(layout, where)
+    out = ExrPassthrough(path=where, layout=layout, source_stat=(st.st_size, st.st_mtime_ns))
+    with captured_output() as printed:
+        try:
+            _decode(out, where)
+        except FrameError as exc:
+            error: FrameError | None = exc
+        else:
+            error = None
+    if error is not None:
+        said = f" ({_library_words(printed, where)})" if printed else ""
+        raise FrameError(f"{error}{said}") from error.__cause__
+    out.warnings += [f"OpenEXR: {line}" for line in printed[:3]]
+    return out
+
+
+def _check_layout(layout: FileLayout, where: str) -> None:
+    """FrameError for what the binding cannot read: empty windows, deep data, bad types."""
     for i, part in enumerate(layout.parts):
-        w, h = part.width, part.height
-        if w < 1 or h < 1:
+        if part.width < 1 or part.height < 1:
             raise FrameError(f"{where}: part {i} has an empty data window {part.data_window}")
-        limit = HARD_MAX_PIXELS if max_pixels is None else max_pixels
-        if w * h > limit:
-            raise LimitError(
-                f"{where}: part {i} is {w}x{h} = {w * h} pixels, over the limit of {limit} "
-                "pixels; refused before decoding"
-            )
         if part.storage.startswith("deep"):
             raise FrameError(
                 f"{where}: part {i} holds deep data ({part.storage}); Depict reads "
@@ -486,15 +508,19 @@ def read_parts(path: str | Path, max_pixels: int | None = None) -> ExrPassthroug
                     f"{where}: attribute '{name}' of type deepImageState (deep data) cannot be "
                     "read by the OpenEXR binding; flatten the file first"
                 )
+
+
+def _decode(out: ExrPassthrough, where: str) -> None:
+    """Decode every part with the binding into ``out`` (pixels made read-only)."""
+    assert out.layout is not None
+    layout = out.layout
     try:
-        exr = OpenEXR.File(str(path), separate_channels=True)
-        parts = list(exr.parts)
+        parts = list(OpenEXR.File(where, separate_channels=True).parts)
         if len(parts) != len(layout.parts):
             raise FrameError(
                 f"{where}: corrupt pixel data (the OpenEXR library could not decode part "
                 f"{len(parts)} of {len(layout.parts)})"
             )
-        out = ExrPassthrough(path=where, layout=layout, source_stat=(st.st_size, st.st_mtime_ns))
         for i, (part, lay) in enumerate(zip(parts, layout.parts, strict=True)):
             decoded = dict(part.header)
             header = {
@@ -523,7 +549,15 @@ def read_parts(path: str | Path, max_pixels: int | None = None) -> ExrPassthroug
         raise
     except Exception as exc:  # the binding raises RuntimeError/ValueError with C++ messages
         raise FrameError(f"{where}: cannot decode ({_one_line(exc)})") from exc
-    return out
+
+
+def _library_words(printed: list[str], where: str) -> str:
+    """The most telling line the OpenEXR library printed: its last error, without the path."""
+    errors = [line for line in printed if "ERR" in line or "rror" in line] or printed
+    text = errors[-1].replace(f"{where}: ", "")
+    for prefix in ("Warning:", "Error:"):
+        text = text.removeprefix(prefix).strip()
+    return f"OpenEXR: {text}"
 
 
 def _one_line(exc: BaseException) -> str:
@@ -888,6 +922,7 @@ __all__ = [
     "PIXEL_TYPES",
     "ExrPassthrough",
     "FileLayout",
+    "Limits",
     "PartLayout",
     "RawAttribute",
     "box2i",

@@ -82,6 +82,8 @@ class Frame:
     outputs : EXR channel name -> (H, W) float32 array, written over the passthrough.
     attributes : header attributes to add or replace in the primary part on write.
     passthrough : the file as read (empty for frames built in memory).
+    holes : (H, W) bool, pixels whose radiance was NaN/Inf (:mod:`gbuffer.holes`), or None.
+    hole_beauty : the beauty read in the holes, (N, 3), given back after the operators.
     """
 
     buffers: dict[str, np.ndarray]
@@ -93,6 +95,8 @@ class Frame:
     outputs: dict[str, np.ndarray] = field(default_factory=dict)
     attributes: dict[str, Any] = field(default_factory=dict)
     passthrough: Passthrough = field(default_factory=Passthrough)
+    holes: np.ndarray | None = None
+    hole_beauty: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         shapes = {b.shape[:2] for b in self.buffers.values()}
@@ -129,7 +133,7 @@ class Frame:
             reason = f" ({why})" if why else ""
             raise MissingBufferError(
                 f"the frame has no '{name}' buffer{reason}; buffers found: {have}. "
-                "Pass --preset or map the channel explicitly (--map {name}=LAYER)"
+                f"Pass --preset or map the channel explicitly (--map {name}=LAYER)"
             ) from None
 
     def need_camera(self, why: str) -> Camera:
@@ -207,6 +211,8 @@ class Frame:
             outputs=dict(self.outputs),
             attributes=dict(self.attributes),
             passthrough=self.passthrough,
+            holes=self.holes,
+            hole_beauty=self.hole_beauty,
         )
 
     def layer(self, name: str) -> dict[str, np.ndarray]:

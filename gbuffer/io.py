@@ -25,6 +25,7 @@ FLOAT, ZIP compression, the camera as ``worldToCamera``/``worldToNDC`` + ``depic
 from __future__ import annotations
 
 import dataclasses
+import struct
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +64,7 @@ def read(
     camera: Camera | dict[str, Any] | str | Path | None = None,
     options: ReadOptions | dict[str, Any] | None = None,
     max_pixels: int | None = None,
+    limits: exr.Limits | None = None,
 ) -> Frame:
     """Read an EXR G-buffer into a :class:`Frame`.
 
@@ -76,13 +78,15 @@ def read(
     options : :class:`gbuffer.presets.ReadOptions` (or its dict): mapping and convention
         overrides.
     max_pixels : refuse (LimitError) a part whose data window is larger, before decoding.
+    limits : pixels, decoded bytes and channels the header may claim
+        (:class:`gbuffer.limits.Limits`; default: the ``DEPICT_MAX_*`` variables when set).
 
     Raises
     ------
     FrameError (and its subclasses LimitError, MissingCameraError) with a one-line message.
     """
     cam = _camera_arg(camera)
-    passthrough = exr.read_parts(path, max_pixels)
+    passthrough = exr.read_parts(path, max_pixels, limits=limits)
     return to_frame(passthrough, preset, cam, options)
 
 
@@ -272,4 +276,34 @@ def describe(frame: Frame) -> dict[str, Any]:
         "buffers": buffers,
         "camera": None if frame.camera is None else frame.camera.to_dict(),
         "warnings": list(getattr(pt, "warnings", [])),
+    }
+
+
+def describe_layout(layout: exr.FileLayout) -> dict[str, Any]:
+    """:func:`describe`'s form for a file whose header reads but whose pixels could not be
+    decoded: windows and parts from the header, no buffers, no camera."""
+    parts = []
+    for i, part in enumerate(layout.parts):
+        parts.append(
+            {
+                "name": part.name or (f"part{i}" if len(layout.parts) > 1 else None),
+                "channels": sorted(name for name, *_ in part.channels),
+                "type": part.storage,
+                "compression": exr.COMPRESSION_NAMES.get(part.compression, str(part.compression)),
+                "tiled": part.storage == "tiledimage",
+            }
+        )
+    first = layout.parts[0]
+    display = first.attributes.get("displayWindow")
+    return {
+        "file": None,
+        "preset": "none",
+        "preset_reason": "the pixels could not be decoded",
+        "size": [first.width, first.height],
+        "display_window": list(struct.unpack("<4i", display.data)) if display else None,
+        "data_window": list(first.data_window),
+        "parts": parts,
+        "buffers": {},
+        "camera": None,
+        "warnings": [],
     }

@@ -27,8 +27,10 @@ coverage) or a non-unit one lowers the trust in the pixel; alpha < 1 does too, a
 does not count the same edge twice. A file's own ``coverage`` channel (canonical) is used as
 is. Background pixels (alpha 0, a depth that is not finite, <= 0 or >= the preset's background
 value) get depth +inf, normal 0 and coverage 0. NaN/Inf elsewhere in a data channel is a
-:class:`FrameError` naming the channel. When lobes are found, ``remainder`` = beauty minus their
-sum (emission, environment, coat, SSS, ...: what passes through unchanged).
+:class:`FrameError` naming the channel; in radiance (beauty, lobes, albedo: the fireflies of a
+path tracer) it makes the pixel a hole (:mod:`gbuffer.holes`). When lobes are found,
+``remainder`` = beauty minus their sum (emission, environment, coat, SSS, ...: what passes
+through unchanged).
 """
 
 from __future__ import annotations
@@ -42,9 +44,10 @@ import cv2
 import numpy as np
 
 from gbuffer.camera import Camera
-from gbuffer.errors import FrameError, MissingCameraError
+from gbuffer.errors import FrameError, MissingCameraError, OptionError
 from gbuffer.exr import ExrPassthrough, window
 from gbuffer.frame import BUFFERS, LOBES, Frame, Passthrough
+from gbuffer.holes import hole_warnings, mark_holes
 
 Space = Literal["world", "camera", "camera-lh"]
 DepthKind = Literal["planar", "distance"]
@@ -309,6 +312,10 @@ class ReadOptions:
     normal_tolerance : |n| within 1 +- this is trusted fully (see the coverage formula).
     require_camera : world-space normals without a camera raise :class:`MissingCameraError`
         when True; when False they are left out with a warning (e.g. for inspection).
+    strict : NaN/Inf in a data channel (normals, depth, position, AO, ...) on covered pixels
+        raise :class:`FrameError` when True; when False (inspection) those pixels become holes
+        with a warning. Radiance (beauty, lobes, albedo) is never refused: see
+        :mod:`gbuffer.holes`.
     """
 
     mapping: dict[str, str | list[str]] = field(default_factory=dict)
@@ -320,11 +327,12 @@ class ReadOptions:
     normal_encoding: str = "signed"
     normal_tolerance: float = 0.1
     require_camera: bool = True
+    strict: bool = True
 
     def __post_init__(self) -> None:
         for key in self.mapping:
             if key not in _MAPPABLE:
-                raise FrameError(
+                raise OptionError(
                     f"mapping key '{key}' is not a buffer; valid keys: {', '.join(_MAPPABLE)}"
                 )
         for name in ("normal_space", "position_space"):
@@ -497,12 +505,25 @@ def detect(parts: Any) -> tuple[str, str]:
 class _Reader:
     """Loads channels of a passthrough as float32 arrays on the primary part's grid."""
 
-    def __init__(self, pt: Passthrough, flat: dict[str, tuple[int, str]], where: str) -> None:
+    def __init__(
+        self, pt: Passthrough, flat: dict[str, tuple[int, str]], where: str, strict: bool = True
+    ) -> None:
         self.pt = pt
         self.flat = flat
         self.where = where
+        self.strict = strict
         self.primary = 0
         self.grid = (0, 0, 0, 0)
+        #: pixels with NaN/Inf radiance (or, when not strict, data): holes of the frame
+        self.holes: np.ndarray | None = None
+        self.hole_channels: dict[str, int] = {}  # channel -> non-finite values there
+        self.masked_channels: dict[str, int] = {}  # data channels, when not strict
+
+    def add_holes(self, name: str, bad: np.ndarray, radiance: bool) -> None:
+        """Make ``bad`` pixels holes; count the channel's non-finite values."""
+        self.holes = bad.copy() if self.holes is None else self.holes | bad
+        counts = self.hole_channels if radiance else self.masked_channels
+        counts[name] = counts.get(name, 0) + int(bad.sum())
 
     def set_primary(self, index: int) -> None:
         self.primary = index
@@ -585,14 +606,14 @@ def _find(
         if len(names) == 1 and (n > 1 or names[0] not in flat):
             found = _resolve(flat, names[0], n)
             if found is None:
-                raise FrameError(
+                raise OptionError(
                     f"{reader.where}: --map {buffer}={names[0]}: no layer '{names[0]}' with {n} "
                     f"component(s); channels: {_channel_list(flat)}"
                 )
             return found
         missing = [c for c in names if c not in flat]
         if missing or len(names) != n:
-            raise FrameError(
+            raise OptionError(
                 f"{reader.where}: --map {buffer}: needs {n} existing channel(s), got {names}; "
                 f"channels: {_channel_list(flat)}"
             )
@@ -635,9 +656,14 @@ def _blender_prefix(flat: Mapping[str, Any], opts: ReadOptions, warnings: list[s
 
 
 def _check_finite(
-    reader: _Reader, names: Sequence[str], arr: np.ndarray, background: np.ndarray | None
+    reader: _Reader,
+    names: Sequence[str],
+    arr: np.ndarray,
+    background: np.ndarray | None,
+    radiance: bool = False,
 ) -> None:
-    """NaN/Inf on covered pixels -> FrameError naming the channel; on background -> 0."""
+    """NaN/Inf on covered pixels: a hole for radiance (and, when the reader is not strict, for
+    data), else a FrameError naming the channel; the values become 0 either way."""
     if np.isfinite(arr).all():
         return
     bad = ~np.isfinite(arr)
@@ -645,12 +671,16 @@ def _check_finite(
         bad_k = bad if arr.ndim == 2 else bad[..., k]
         if background is not None:
             bad_k = bad_k & ~background
-        if bad_k.any():
-            ys, xs = np.nonzero(bad_k)
-            raise FrameError(
-                f"{reader.where}: channel '{name}' has {len(ys)} NaN/Inf value(s) on covered "
-                f"pixels (first at x={xs[0]}, y={ys[0]} of the data window)"
-            )
+        if not bad_k.any():
+            continue
+        if radiance or not reader.strict:
+            reader.add_holes(name, bad_k, radiance)
+            continue
+        ys, xs = np.nonzero(bad_k)
+        raise FrameError(
+            f"{reader.where}: channel '{name}' has {len(ys)} NaN/Inf value(s) on covered "
+            f"pixels (first at x={xs[0]}, y={ys[0]} of the data window)"
+        )
     arr[bad] = 0.0
 
 
@@ -766,7 +796,7 @@ def to_frame(
         passthrough.preset_reason = reason
 
     flat = flat_channels(passthrough.parts)
-    reader = _Reader(passthrough, flat, where)
+    reader = _Reader(passthrough, flat, where, strict=opts.strict)
     prefix = opts.layer or ""
     if p.view_layer:
         prefix = _blender_prefix(flat, opts, warnings)
@@ -833,7 +863,9 @@ def to_frame(
     if "depth" in found:
         depth = reader.stack(found["depth"], "depth", fill=np.inf)
         nan = np.isnan(depth)
-        if nan.any() and (nan & ~background).any():
+        if nan.any() and (nan & ~background).any() and not opts.strict:
+            reader.add_holes(found["depth"][0], nan & ~background, radiance=False)
+        elif nan.any() and (nan & ~background).any():
             ys, xs = np.nonzero(nan & ~background)
             raise FrameError(
                 f"{where}: channel '{found['depth'][0]}' has {len(ys)} NaN value(s) on covered "
@@ -844,7 +876,7 @@ def to_frame(
 
     def load_checked(buffer: str, names: list[str]) -> np.ndarray:
         arr = reader.stack(names, buffer)
-        _check_finite(reader, names, arr, background)
+        _check_finite(reader, names, arr, background, radiance=buffer in ("beauty", "albedo"))
         return arr
 
     any_bg = bool(background.any())
@@ -989,7 +1021,7 @@ def to_frame(
             "no buffer recognised with preset "
             f"'{p.name}'; channels: {_channel_list(flat)} (choose --preset or --map)"
         )
-    return Frame(
+    frame = Frame(
         buffers=buffers,
         camera=camera,
         display_size=display_size,
@@ -998,6 +1030,11 @@ def to_frame(
         sources=sources,
         passthrough=passthrough,
     )
+    if reader.holes is not None:
+        original = reader.stack(found["beauty"], "beauty") if "beauty" in found else None
+        notes = mark_holes(frame, reader.holes, original)
+        warnings += hole_warnings(reader.hole_channels, reader.masked_channels, notes)
+    return frame
 
 
 def _lobe_part(
@@ -1016,7 +1053,7 @@ def _lobe_part(
         if names is None:
             return None
         arr = reader.stack(names, key)
-        _check_finite(reader, names, arr, background)
+        _check_finite(reader, names, arr, background, radiance=True)
         sources[key] = _describe(names)
         return arr
     for alt in alternatives:
@@ -1030,7 +1067,7 @@ def _lobe_part(
         total = []
         for names in layers:
             arr = reader.stack(names, key)
-            _check_finite(reader, names, arr, background)
+            _check_finite(reader, names, arr, background, radiance=True)
             total.append(arr)
         sources[key] = " + ".join(_describe(n) for n in layers)
         if single:

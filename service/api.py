@@ -25,9 +25,7 @@ The analysis routes live in :mod:`service.api_analysis`.
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
-import contextvars
 import hmac
 import json
 import logging
@@ -53,6 +51,7 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from gbuffer.errors import FrameError
 from service import jobs
+from service.logs import REQUEST_ID, configure_logging
 from service.metrics import Metrics
 from service.problems import (
     PROBLEM_SCHEMA,
@@ -69,51 +68,22 @@ EXR_MAGIC = b"\x76\x2f\x31\x01"
 EXR_MEDIA_TYPE = "image/x-exr"
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 #: Routes that take an upload: multipart/form-data only.
-UPLOAD_PATHS = ("/v1/enhance", "/v1/render", "/v1/score")
+UPLOAD_PATHS = ("/v1/enhance", "/v1/render", "/v1/score", "/v1/compare", "/v1/relief/pick")
 #: Routes open without the API key.
 PUBLIC_PATHS = ("/healthz", "/readyz", "/openapi.json", "/docs", "/docs/oauth2-redirect")
 
-REQUEST_ID: contextvars.ContextVar[str] = contextvars.ContextVar("request_id", default="-")
 _REQUEST_ID_RE = re.compile(r"^[A-Za-z0-9._:/+=-]{1,128}$")
+#: The command-line flags that messages shared with the CLI name, as the form fields that do
+#: the same over HTTP.
+HTTP_WORDS = (
+    ("--camera CAM.json", "a camera field (JSON)"),
+    ("--normal-space", "the normal_space field"),
+    ("--preset", "the preset field"),
+    ("--map ", "map field "),
+    ("--map", "the map field"),
+)
 
 log = logging.getLogger("depict.http")
-
-
-# -- structured logs ---------------------------------------------------------------------------
-
-
-class JsonFormatter(logging.Formatter):
-    """One JSON object per line: time, level, logger, message, request id and extra fields."""
-
-    FIELDS = ("method", "path", "route", "status", "duration_ms", "bytes_in", "bytes_out", "client")
-
-    def format(self, record: logging.LogRecord) -> str:
-        out: dict[str, Any] = {
-            "ts": time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(record.created))
-            + f".{int(record.msecs):03d}Z",
-            "level": record.levelname.lower(),
-            "logger": record.name,
-            "msg": record.getMessage(),
-            "request_id": getattr(record, "request_id", None) or REQUEST_ID.get(),
-        }
-        for name in self.FIELDS:
-            if hasattr(record, name):
-                out[name] = getattr(record, name)
-        if record.exc_info:
-            out["exc"] = self.formatException(record.exc_info)
-        return json.dumps(out, default=str)
-
-
-def configure_logging(level: str = "info") -> None:
-    """JSON logs on stderr for Depict's and uvicorn's loggers."""
-    handler = logging.StreamHandler()
-    handler.setFormatter(JsonFormatter())
-    for name in ("depict", "uvicorn", "uvicorn.error"):
-        logger = logging.getLogger(name)
-        logger.handlers = [handler]
-        logger.setLevel(level.upper())
-        logger.propagate = False
-    logging.getLogger("uvicorn.access").disabled = True  # one line per request is ours
 
 
 # -- request models ----------------------------------------------------------------------------
@@ -157,13 +127,15 @@ class Ready(BaseModel):
 
 
 def _json_field(name: str, text: str | None, expected: type | tuple[type, ...]) -> Any:
-    """A form field holding JSON, or a 422 problem naming the field."""
+    """A form field holding JSON (size and nesting bounded), or a 422 problem naming it."""
+    from service.pipeline import loads
+
     if text is None or text == "":
         return None
     try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise Problem("invalid-request", f"form field {name!r} is not valid JSON: {exc}") from None
+        value = loads(text, f"form field {name!r}")
+    except PipelineError as exc:
+        raise Problem("invalid-request", str(exc)) from None
     if not isinstance(value, expected):
         raise Problem("invalid-request", f"form field {name!r} must be a JSON {_kind(expected)}")
     return value
@@ -248,6 +220,12 @@ class Gate:
             f"{self.settings.max_upload_mb:g} MiB; send a smaller file"
         )
 
+    def _too_slow(self) -> str:
+        return (
+            f"the request was not received within DEPICT_UPLOAD_TIMEOUT_S="
+            f"{self.settings.upload_timeout_s:g} s; the connection is closed"
+        )
+
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
@@ -279,12 +257,22 @@ class Gate:
                 counts["out"] += len(message.get("body", b""))
             await send(message)
 
+        body_deadline = start + self.settings.upload_timeout_s
+        body_done = False
+
         async def receive_wrapper() -> Message:
-            message = await receive()
+            nonlocal body_done
+            if body_done:
+                return await receive()
+            with anyio.move_on_after(body_deadline - time.perf_counter()) as waited:
+                message = await receive()
+            if waited.cancelled_caught:  # a stalled or trickling upload: answer, then close
+                raise HTTPException(408, self._too_slow(), headers={"Connection": "close"})
             if message["type"] == "http.request":
                 counts["in"] += len(message.get("body", b""))
                 if counts["in"] > limit:
                     raise HTTPException(413, self._too_large(None))
+                body_done = not message.get("more_body", False)
             return message
 
         self.metrics.in_flight.inc()
@@ -373,37 +361,52 @@ async def _save_upload(upload: UploadFile, target: Path) -> int:
     return await anyio.to_thread.run_sync(copy)
 
 
-async def _check_exr(path: Path, max_pixels: int) -> None:
-    """400 when the file is not an EXR or is truncated, 413 when a data window is over
-    ``max_pixels``: header and offset tables only, no pixel decoded, no worker used."""
+async def _check_exr(path: Path, limits: dict[str, int]) -> None:
+    """400 when the file is not an EXR or is truncated, 413 when its header is over the limits
+    (pixels, decoded bytes, channels): header and offset tables only, no pixel decoded, no
+    worker used."""
 
     def check() -> None:
-        from gbuffer.errors import LimitError
         from gbuffer.exr import read_layout
+        from gbuffer.limits import Limits
 
         with open(path, "rb") as f:
             magic = f.read(4)
         if magic != EXR_MAGIC:
             what = "an empty file" if not magic else f"a file starting with {magic.hex(' ')}"
             raise Problem("bad-file", f"{path} is not an OpenEXR file ({what}); send an .exr")
-        for i, part in enumerate(read_layout(path).parts):
-            w, h = part.width, part.height
-            if w * h > max_pixels:
-                raise LimitError(
-                    f"part {i} of the upload is {w}x{h} = {w * h} pixels, over "
-                    f"DEPICT_MAX_PIXELS={max_pixels}; refused before decoding"
-                )
+        Limits(**limits).check(read_layout(path), str(path))
 
     await anyio.to_thread.run_sync(check)
 
 
-def _read_fields(
+async def checked_pipeline(text: str | None) -> str | None:
+    """The ``pipeline`` form field validated off the event loop (a large one takes a while, and
+    other requests must not wait for it): its JSON, or None when absent (422 when invalid)."""
+    if not text:
+        return None
+    from service import pipeline
+
+    def check() -> str:
+        return pipeline.checked(text).model_dump_json()
+
+    return await anyio.to_thread.run_sync(check)
+
+
+async def _read_fields(
     preset: str,
     camera: str | None,
     map: str | None = None,
     normal_space: str | None = None,
 ) -> dict[str, Any]:
-    """The form fields saying how to read the frame, checked (422 naming the bad one)."""
+    """The form fields saying how to read the frame, checked off the event loop (422 naming
+    the bad one)."""
+    return await anyio.to_thread.run_sync(_check_read_fields, preset, camera, map, normal_space)
+
+
+def _check_read_fields(
+    preset: str, camera: str | None, map: str | None, normal_space: str | None
+) -> dict[str, Any]:
     _check_preset(preset)
     camera_value = _json_field("camera", camera, dict)
     _check_camera("camera", camera_value)
@@ -431,11 +434,11 @@ def mesh_suffix(upload: UploadFile) -> str:
 
 
 async def _receive_frame(
-    upload: UploadFile, src: Path, fields: dict[str, Any], max_pixels: int
+    upload: UploadFile, src: Path, fields: dict[str, Any], limits: dict[str, int]
 ) -> dict[str, Any]:
     """Save and check the uploaded EXR (header only); the job's read options."""
     await _save_upload(upload, src)
-    await _check_exr(src, max_pixels)
+    await _check_exr(src, limits)
     camera = fields["camera"]
     path = None if camera is None else jobs.dump_json(camera, src.parent / "camera.json")
     return {**fields, "camera": path}
@@ -454,6 +457,8 @@ def _scrubbed(work: Path, names: dict[Path, str]) -> Iterator[None]:
         for path, name in names.items():
             detail = detail.replace(str(path), name)
         detail = detail.replace(f"{work}/", "").replace(str(work), "")
+        for flag, field in HTTP_WORDS:
+            detail = detail.replace(flag, field)
         raise Problem(
             problem.kind, detail, headers=problem.headers, status=problem.status, **problem.extra
         ) from None
@@ -473,6 +478,9 @@ def _http_handler(request: Request, exc: Exception) -> Response:
         detail = f"no route {request.method} {request.url.path}; see /openapi.json"
     elif exc.status_code == 405:
         detail = f"{request.url.path} does not accept {request.method}; see /openapi.json"
+    elif exc.status_code == 400 and "exceeded maximum size" in detail:  # the multipart parser
+        detail = "a form field is over 1 MiB (the limit of a field that is not a file)"
+        return Problem("limit", detail).response(request.url.path, REQUEST_ID.get())
     problem = Problem(
         kind_for_status(exc.status_code),
         detail,
@@ -501,14 +509,15 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         root = Path(tempfile.mkdtemp(prefix="depict-"))
-        pool = jobs.JobPool(settings.workers, settings.queue, settings.timeout_s, metrics)
+        pool = jobs.JobPool(
+            settings.workers, settings.queue, settings.timeout_s, metrics, settings.log_level
+        )
         state.update(pool=pool, root=root)
-        probe = asyncio.create_task(pool.check_ready())  # start the workers, check OSMesa
+        pool.start()  # the workers warm up in the background; /readyz says when one is ready
         try:
             yield
         finally:
-            probe.cancel()
-            await anyio.to_thread.run_sync(pool.shutdown)
+            await pool.shutdown()
             shutil.rmtree(root, ignore_errors=True)
 
     app = FastAPI(
@@ -543,12 +552,10 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             raise Problem("unavailable", "the server is starting or stopping; retry shortly")
         return _workdir(state["root"])
 
-    async def run_job(
-        kind: str, work: Path, fn: Callable[..., dict[str, Any]], *args: Any
-    ) -> dict[str, Any]:
-        return await pool().submit(kind, fn, *args, on_abandon=lambda: _cleanup(work))
+    async def run_job(kind: str, fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
+        return await pool().submit(kind, fn, *args)
 
-    common = (400, 401, 413, 415, 422, 429, 504)
+    common = (400, 401, 408, 413, 415, 422, 429, 503, 504)
 
     # -- enhance -------------------------------------------------------------------------------
 
@@ -604,13 +611,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     ) -> Response:
         from service import pipeline as pipelines
 
-        spec = pipelines.checked(pipeline) if pipeline else pipelines.DEFAULT_PIPELINE
-        fields = _read_fields(preset, camera, map, normal_space)
+        spec_json = await checked_pipeline(pipeline) or pipelines.DEFAULT_PIPELINE.model_dump_json()
+        fields = await _read_fields(preset, camera, map, normal_space)
         work = new_work()
         src = work / "in.exr"
         try:
             with _scrubbed(work, {src: file.filename or "upload.exr"}):
-                read = await _receive_frame(file, src, fields, settings.max_pixels)
+                read = await _receive_frame(file, src, fields, settings.limits)
                 write = {
                     "debug_layers": debug_layers,
                     "output_layer": output_layer,
@@ -620,14 +627,13 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 out = work / ("out.png" if preview == "png" else "out.exr")
                 await run_job(
                     "enhance",
-                    work,
                     jobs.enhance_job,
                     str(src),
                     str(out),
-                    spec.model_dump_json(),
+                    spec_json,
                     read,
                     write,
-                    settings.max_pixels,
+                    settings.limits,
                 )
         except BaseException:
             _cleanup(work)
@@ -690,7 +696,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
                 out = work / "render.exr"
                 await run_job(
                     "render",
-                    work,
                     jobs.render_job,
                     str(src),
                     str(out),
@@ -721,8 +726,17 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
         return [op.schema() for op in operators().values()]
 
-    @app.get("/healthz", tags=["health"], summary="Alive", response_model=Health)
+    @app.get(
+        "/healthz",
+        tags=["health"],
+        summary="Alive and able to work (503: restart the service)",
+        response_model=Health,
+        responses=openapi_responses(503),
+    )
     async def healthz() -> dict[str, str]:
+        healthy, why = pool().pool.health()
+        if not healthy:
+            raise Problem("unavailable", f"{why}; restart the service")
         return {"status": "ok"}
 
     @app.get(
@@ -733,10 +747,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         responses=openapi_responses(503),
     )
     async def readyz() -> Any:
-        p = pool()
-        if getattr(p.executor, "_broken", False):
-            raise Problem("unavailable", "the worker pool is broken; restart the server")
-        info = await p.check_ready()
+        info = pool().ready()
         if not info.get("osmesa"):
             raise Problem("unavailable", str(info.get("detail", "not ready")))
         return {
@@ -820,6 +831,9 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
     schemas = components.setdefault("schemas", {})
     schemas["Problem"] = PROBLEM_SCHEMA
     schemas["Scene"] = Scene.model_json_schema()
+    from service.api_analysis import CompareOptions
+
+    schemas["CompareOptions"] = CompareOptions.model_json_schema()
     schemas.update(pipeline_schemas())
     components["securitySchemes"] = {
         "bearer": {
@@ -840,6 +854,41 @@ def _openapi(app: FastAPI) -> dict[str, Any]:
 # -- serve -------------------------------------------------------------------------------------
 
 
+def slow_client_guard(timeout_s: float) -> type:
+    """uvicorn's h11 protocol, closing a connection whose request headers have not all arrived
+    ``timeout_s`` after it opened or after its previous answer (the gate times the body)."""
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    class SlowClientGuard(H11Protocol):
+        _guard: Any = None
+
+        def connection_made(self, transport: Any) -> None:
+            super().connection_made(transport)
+            self._arm()
+
+        def on_response_complete(self) -> None:
+            super().on_response_complete()
+            self._arm()
+
+        def connection_lost(self, exc: Exception | None) -> None:
+            if self._guard is not None:
+                self._guard.cancel()
+            super().connection_lost(exc)
+
+        def _arm(self) -> None:
+            if self._guard is not None:
+                self._guard.cancel()
+            self._guard = self.loop.call_later(timeout_s, self._headers_overdue)
+
+        def _headers_overdue(self) -> None:
+            waiting = self.cycle is None or self.cycle.response_complete
+            if waiting and not self.transport.is_closing():
+                log.info("closed a connection whose request did not arrive in time")
+                self.transport.close()
+
+    return SlowClientGuard
+
+
 def serve(settings: Settings | None = None) -> None:
     """Run the service with uvicorn (``depict serve``): JSON logs, one event loop."""
     import uvicorn
@@ -854,6 +903,7 @@ def serve(settings: Settings | None = None) -> None:
         create_app(settings),
         host=settings.host,
         port=settings.port,
+        http=slow_client_guard(settings.upload_timeout_s),
         log_config=None,
         access_log=False,
         timeout_graceful_shutdown=10,

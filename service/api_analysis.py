@@ -10,7 +10,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import FastAPI, File, Form, UploadFile
-from pydantic import BaseModel, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from service import jobs
 from service.api import (
@@ -20,9 +20,10 @@ from service.api import (
     _receive_frame,
     _save_upload,
     _scrubbed,
+    checked_pipeline,
     mesh_suffix,
 )
-from service.problems import openapi_responses
+from service.problems import Problem, openapi_responses
 from service.settings import Settings
 
 RunJob = Callable[..., Awaitable[dict[str, Any]]]
@@ -69,6 +70,39 @@ class Comparison(BaseModel):
     sheet_png: str | None = Field(None, description="the contact sheet, base64 PNG (sheet=true)")
 
 
+class CompareOptions(BaseModel):
+    """The ``options`` form field of ``POST /v1/compare`` (JSON); unknown keys are refused."""
+
+    model_config = ConfigDict(extra="forbid")
+    methods: list[str] | None = Field(None, max_length=16, description="methods to compare")
+    directions: int | list[int] = Field(
+        21, description="the first N directions of the sweep (1-21), or their numbers"
+    )
+    params: dict[str, dict[str, Any]] | None = Field(
+        None, description='per-section overrides, e.g. {"light_alignment": {"gamma": 2}}'
+    )
+    albedo: Literal["white", "frame"] = "white"
+    label: str = Field("", max_length=200)
+    shading_norm: Literal["reference", "per_image"] | float = "reference"
+    width: int = Field(512, ge=1, le=16384, description="mesh render width")
+    height: int = Field(512, ge=1, le=16384, description="mesh render height")
+    azimuth: float = Field(30.0, ge=-360, le=360, description="mesh framing azimuth, degrees")
+    elevation: float = Field(20.0, ge=-90, le=90, description="mesh framing elevation, degrees")
+
+
+def compare_options(text: str) -> dict[str, Any]:
+    """The ``options`` field checked (422 naming the bad key), as :func:`service.jobs.compare_job`
+    takes it."""
+    value = _json_field("options", text, dict) or {}
+    try:
+        opts = CompareOptions.model_validate(value)
+    except ValidationError as exc:
+        first = exc.errors()[0]
+        loc = ".".join(str(p) for p in first["loc"]) or "options"
+        raise Problem("invalid-request", f"options.{loc}: {first['msg']}") from None
+    return opts.model_dump(exclude_unset=True)
+
+
 class Pick(BaseModel):
     """The answer of ``POST /v1/relief/pick`` (the JSON of ``depict relief-pick --json``)."""
 
@@ -105,8 +139,8 @@ def install(
                     await _save_upload(file, src)
                     read = None
                 else:
-                    read = await _receive_frame(file, src, fields, settings.max_pixels)
-                return await run_job(kind, work, fn, *args(src, read))
+                    read = await _receive_frame(file, src, fields, settings.limits)
+                return await run_job(kind, fn, *args(src, read))
         finally:
             _cleanup(work)
 
@@ -149,9 +183,7 @@ def install(
             Form(description="shape flow from the normals' gradients (default) or the log depth's"),
         ] = None,
     ) -> dict[str, Any]:
-        from service import pipeline as pipelines
-
-        spec_json = pipelines.checked(pipeline).model_dump_json() if pipeline else None
+        spec_json = await checked_pipeline(pipeline)
         given = {
             "gradient_scale": gradient_scale,
             "integration_scale": integration_scale,
@@ -164,9 +196,9 @@ def install(
         out = await upload_job(
             "score",
             file,
-            _read_fields(preset, camera, map, normal_space),
+            await _read_fields(preset, camera, map, normal_space),
             jobs.score_job,
-            lambda src, read: (str(src), spec_json, read, options, settings.max_pixels),
+            lambda src, read: (str(src), spec_json, read, options, settings.limits),
         )
         keys = ("score", "shading_norm", "analysis_shape", "image_shape", "params")
         return {k: out[k] for k in keys}
@@ -186,21 +218,22 @@ def install(
         options: Annotated[
             str,
             Form(
-                description="JSON: methods, directions, params, albedo, label; for a mesh "
-                "width, height, azimuth, elevation"
+                description="JSON (components/schemas/CompareOptions): methods, directions, "
+                "params, albedo, label, shading_norm; for a mesh width, height, azimuth, "
+                "elevation"
             ),
         ] = "{}",
         sheet: Annotated[bool, Form(description="also answer the contact sheet")] = False,
         preset: Preset = "auto",
         camera: CameraField = None,
     ) -> dict[str, Any]:
-        opts = _json_field("options", options, dict) or {}
+        opts = compare_options(options)
         return await upload_job(
             "compare",
             file,
-            _read_fields(preset, camera) if kind == "exr" else None,
+            await _read_fields(preset, camera) if kind == "exr" else None,
             jobs.compare_job,
-            lambda src, read: (str(src), read, opts, sheet, settings.max_pixels),
+            lambda src, read: (str(src), read, opts, sheet, settings.limits),
         )
 
     @app.post(
@@ -227,7 +260,7 @@ def install(
         return await upload_job(
             "pick",
             file,
-            _read_fields(preset, camera),
+            await _read_fields(preset, camera),
             jobs.pick_job,
-            lambda src, read: (str(src), read, x, y, values, settings.max_pixels),
+            lambda src, read: (str(src), read, x, y, values, settings.limits),
         )

@@ -48,9 +48,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from gbuffer.atomic import atomic_path
+from gbuffer.atomic import atomic_path, output_target
+from gbuffer.errors import OutputError
 
 _TOKEN = re.compile(r"#+|@+|%(0?)(\d*)d")
+
+#: Most frames one ``depict batch`` run takes (``--frames`` is checked before it is expanded).
+MAX_FRAMES = 100_000
 
 
 class BatchError(ValueError):
@@ -87,6 +91,7 @@ def expand(pattern: str, frame: int) -> str:
 def parse_frames(text: str) -> list[int]:
     """Frames of ``1-100x2,120,130-140``: ranges (inclusive) with an optional step, in order."""
     frames: list[int] = []
+    count = 0
     for raw in text.split(","):
         part = raw.strip()
         m = re.fullmatch(r"(-?\d+)(?:\s*-\s*(-?\d+)(?:\s*[x:by]+\s*(\d+))?)?", part)
@@ -101,6 +106,11 @@ def parse_frames(text: str) -> list[int]:
             raise BatchError(f"--frames {text!r}: step must be >= 1, got {step}")
         if last < first:
             raise BatchError(f"--frames {text!r}: range {part!r} ends before it starts")
+        count += (last - first) // step + 1
+        if count > MAX_FRAMES:
+            raise BatchError(
+                f"--frames {text!r} names more than {MAX_FRAMES} frames; split the sequence"
+            )
         frames.extend(range(first, last + 1, step))
     return list(dict.fromkeys(frames))  # first occurrence of each frame, in order
 
@@ -116,6 +126,42 @@ def find_frames(pattern: str) -> list[int]:
         if hit and expand(pattern, int(hit.group(1))) == path:
             found.add(int(hit.group(1)))
     return sorted(found)
+
+
+def check_sequence_outputs(
+    in_pattern: str, out_pattern: str, frames: Sequence[int], pinned: str | Path | None = None
+) -> None:
+    """BatchError when an output frame (or the pinned statistics file) would replace an input
+    frame of the sequence (same path after resolving links, or the same inode), or a special
+    file; compared as files, whatever the patterns' spelling."""
+    inputs = [expand(in_pattern, f) for f in frames]
+    names = {os.path.realpath(p) for p in inputs}
+    inodes = set()
+    for path in inputs:
+        try:
+            st = os.stat(path)
+        except OSError:
+            continue
+        inodes.add((st.st_dev, st.st_ino))
+    outputs = [(f, expand(out_pattern, f)) for f in frames]
+    if pinned:
+        outputs.append((None, str(pinned)))
+    for frame, path in outputs:
+        try:
+            output_target(path)
+        except OutputError as exc:
+            raise BatchError(str(exc)) from None
+        try:
+            st = os.stat(path)
+            same_inode = (st.st_dev, st.st_ino) in inodes
+        except OSError:
+            same_inode = False
+        if os.path.realpath(path) in names or same_inode:
+            what = f"frame {frame}'s output" if frame is not None else "--pinned"
+            raise BatchError(
+                f"{what} {path} is an input frame of {in_pattern}: it would be overwritten; "
+                "write elsewhere"
+            )
 
 
 # -- one frame, on a worker --------------------------------------------------------------------
@@ -236,6 +282,7 @@ def run_batch(
     frame_list = list(frames) if frames is not None else find_frames(in_pattern)
     if not frame_list:
         raise BatchError(f"no frames: no file matches {in_pattern!r} (or pass --frames)")
+    check_sequence_outputs(in_pattern, out_pattern, frame_list, pinned_file)
     read, write = dict(read or {}), dict(write or {})
     summary = Summary()
     t_start = time.perf_counter()
@@ -338,8 +385,10 @@ def print_summary(summary: Summary, total: int) -> None:
     if summary.pinned:
         pins = ", ".join(f"{k}={v:.6g}" for k, v in sorted(summary.pinned.items()))
         print(f"  pinned: {pins}")
+    from service.cli_common import printable
+
     for frame, error in summary.failed.items():
-        print(f"  frame {frame} failed: {error}")
+        print(f"  frame {frame} failed: {printable(error)}")
 
 
 def cmd_batch(args: Any) -> int:

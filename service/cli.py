@@ -20,7 +20,9 @@ from service.cli_common import (
     add_pipeline_options,
     add_read_options,
     add_server_option,
+    bounded,
     pipeline_spec,
+    printable,
     read_options,
 )
 from service.client import DepictError
@@ -28,16 +30,30 @@ from service.client import DepictError
 EXIT_USAGE = 2
 
 
-def read_frame(args: argparse.Namespace, path: str) -> Any:
+def read_frame(args: argparse.Namespace, path: str, strict: bool = True) -> Any:
     from service.jobs import read_frame as read
 
-    return read(path, read_options(args))
+    return read(path, {**read_options(args), "strict": strict})
+
+
+def check_outputs(outputs: list[str | None], inputs: list[str | None]) -> None:
+    """Refuse outputs that name an input, each other or a special file (before any work)."""
+    from gbuffer.atomic import check_outputs as check
+
+    check(outputs, inputs)
+
+
+def warn(messages: list[str]) -> None:
+    """Notes for the user (e.g. NaN/Inf pixels read as holes), one line each on stderr."""
+    for message in messages:
+        print(f"depict: warning: {printable(message)}", file=sys.stderr)
 
 
 # -- commands ----------------------------------------------------------------------------------
 
 
 def cmd_render(args: argparse.Namespace) -> int:
+    check_outputs([args.output], [args.mesh, args.camera])
     if args.server:
         from service.client import Client
 
@@ -92,34 +108,58 @@ def cmd_warmup(args: argparse.Namespace) -> int:
 
 
 def cmd_inspect(args: argparse.Namespace) -> int:
-    from gbuffer.io import describe
+    from gbuffer.errors import FrameError, LimitError
 
-    frame = read_frame(args, args.file)
-    info = describe(frame)
+    try:  # NaN/Inf data pixels are described as holes, not refused (strict=False)
+        info = _describe(read_frame(args, args.file, strict=False))
+    except LimitError:
+        raise
+    except FrameError as exc:  # the pixels cannot be decoded: describe the header alone
+        info = _describe_header(args.file, exc)
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}")
-    print(f"  preset: {info['preset_reason']}")
-    print(f"  display window {info['display_window']}, data window {info['data_window']}")
+    lines = [f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}"]
+    lines.append(f"  preset: {info['preset_reason']}")
+    lines.append(f"  display window {info['display_window']}, data window {info['data_window']}")
     for part in info["parts"]:
-        print(
+        lines.append(
             f"  part {part['name'] or '(unnamed)'}: {len(part['channels'])} channels, "
             f"{part['compression']}{', tiled' if part['tiled'] else ''}"
         )
-    print("  buffers:")
+    lines.append("  buffers:")
     for name, buf in info["buffers"].items():
-        print(f"    {name:<20s} <- {buf['source']}")
+        lines.append(f"    {name:<20s} <- {buf['source']}")
     cam = info["camera"]
-    print(f"  camera: {json.dumps(cam) if cam else 'none (pass --camera CAM.json if needed)'}")
-    for warning in info.get("warnings", []):
-        print(f"  warning: {warning}")
+    lines.append(
+        f"  camera: {json.dumps(cam) if cam else 'none (pass --camera CAM.json if needed)'}"
+    )
+    lines += [f"  warning: {warning}" for warning in info.get("warnings", [])]
+    print("\n".join(printable(line) for line in lines))
     return 0
+
+
+def _describe(frame: Any) -> dict[str, Any]:
+    from gbuffer.io import describe
+
+    return describe(frame)
+
+
+def _describe_header(path: str, error: Exception) -> dict[str, Any]:
+    """What ``inspect`` says of a file whose header reads but whose pixels do not."""
+    from gbuffer.exr import read_layout
+    from gbuffer.io import describe_layout
+
+    info = describe_layout(read_layout(path))
+    info["file"] = path
+    info["warnings"].append(f"pixels not described: {error}")
+    return info
 
 
 def cmd_preview(args: argparse.Namespace) -> int:
     from gbuffer.preview import picture, write_png
 
+    check_outputs([args.output], [args.file, args.camera])
     frame = read_frame(args, args.file)
     write_png(picture(frame, args.layer, exposure=args.exposure), args.output)
     print(f"wrote {args.output} ({args.layer})")
@@ -146,6 +186,7 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     import gbuffer
     from service import pipeline
 
+    check_outputs([args.output], [args.input, args.camera, args.pipeline])
     if args.server:
         from service.client import Client
 
@@ -169,7 +210,7 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     out = pipeline.finish(
         pipeline.run(frame, spec, debug_layers=args.debug_layers), args.output_layer
     )
-    gbuffer.write(out, args.output)
+    warn(getattr(frame.passthrough, "warnings", []) + gbuffer.write(out, args.output))
     print(f"wrote {args.output}")
     return 0
 
@@ -276,7 +317,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="output PNG")
     p.add_argument("--layer", default="beauty", help="buffer or layer (beauty, normal, ...)")
-    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops (radiance)")
+    p.add_argument(
+        "--exposure",
+        type=bounded(float, -20.0, 20.0),
+        default=0.0,
+        help="exposure in stops (radiance), -20 to 20",
+    )
     add_read_options(p)
     p.set_defaults(func=cmd_preview)
 
@@ -312,13 +358,22 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except (ValueError, DepictError) as exc:  # bad input, or a server that refused or is down
         # ValueError: FrameError, PipelineError, UsageError, and ops/' bad values
-        print(f"depict: error: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return _fail(str(exc))
     except FileNotFoundError as exc:
-        print(f"depict: error: no such file: {exc.filename or exc}", file=sys.stderr)
-        return EXIT_USAGE
+        return _fail(f"no such file: {exc.filename or exc}")
+    except OSError as exc:  # a file that cannot be read or written
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _fail(f"{where}{exc.strerror or exc}")
+    except RecursionError:
+        return _fail("input nested too deeply")
     except KeyboardInterrupt:
         return 130
+
+
+def _fail(message: str) -> int:
+    """One line on stderr, control characters escaped; the exit code of bad input."""
+    print(f"depict: error: {printable(message)}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 if __name__ == "__main__":

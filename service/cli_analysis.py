@@ -90,7 +90,10 @@ def _shading_norm(text: str) -> str | float:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    from gbuffer.atomic import check_outputs
     from service.compare import ComparisonResult, plot
+
+    check_outputs([args.plot, args.sheet], [args.input, args.camera])
 
     is_mesh = Path(args.input).suffix.lower() in MESH_SUFFIXES
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
@@ -189,9 +192,10 @@ def cmd_arm(args: argparse.Namespace) -> int:
     import cv2
     import numpy as np
 
-    from gbuffer.atomic import atomic_path
+    from gbuffer.atomic import atomic_path, check_outputs
     from ops import relief as rl
 
+    check_outputs([args.output], [args.base if args.base not in rl.SHIPPED_ARMS else None])
     if args.paint:
         if args.base in rl.SHIPPED_ARMS:
             base = rl.make_arm(args.base, args.size)

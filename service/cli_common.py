@@ -5,11 +5,36 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 from typing import Any
 
 
 class UsageError(ValueError):
     """A command line that cannot be honoured (bad flag value, missing file, ...)."""
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def printable(text: str) -> str:
+    """``text`` with control characters (ESC, newlines, ...) escaped as ``\\xNN``, so what a
+    file names cannot move the cursor, recolour the terminal or add lines."""
+    return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
+
+
+def bounded(kind: type, low: float, high: float) -> Any:
+    """An argparse ``type``: a number of ``kind`` within [low, high], or a one-line error."""
+
+    def parse(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {kind.__name__}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"{text} is not within [{low:g}, {high:g}]")
+        return value
+
+    return parse
 
 
 def parse_value(text: str) -> Any:

@@ -772,15 +772,16 @@ def plot(result: ComparisonResult, path: str | Path, title: str | None = None) -
     """Scores vs direction number, one line per method, means dashed (like LLA Fig. 13).
 
     Grazing directions (θ = 90°) are shaded light grey, those behind the object (θ > 90°)
-    darker. Written with matplotlib's Agg backend; returns the path.
+    darker. Written with matplotlib's Agg backend, atomically; returns the path.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from gbuffer.atomic import atomic_path
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     n = result.n_directions
     x = np.arange(1, n + 1)
     fig, ax = plt.subplots(figsize=(10, 4.8), dpi=110)
@@ -814,8 +815,11 @@ def plot(result: ComparisonResult, path: str | Path, title: str | None = None) -
     ax.legend(loc="lower left", fontsize=8, framealpha=0.9)
     ax.set_title(title or f"Congruence scores{' - ' + result.label if result.label else ''}")
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    try:
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp)
+    finally:
+        plt.close(fig)
     return path
 
 

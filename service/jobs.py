@@ -4,10 +4,10 @@ Requests never decode pixels on the event loop: a route saves the upload to a te
 submits a job (:func:`enhance_job`, :func:`render_job`, ...) that receives *paths*, reads, runs
 and writes to another temporary path, and returns a small dict. :class:`JobPool` admits at most
 ``workers + queue`` jobs at a time (one more is refused: 429 with ``Retry-After``) and gives each a
-deadline of ``timeout_s`` from its submission (queue wait included): the worker stops the job at
-the deadline (``SIGALRM`` between two Python steps) and the route answers 504; a job stuck inside
-one C call is still answered 504 at the deadline, and its worker slot stays counted until the
-call returns, so the queue limit stays honest.
+deadline of ``timeout_s`` from its submission (queue wait included). The processes are those of
+:class:`service.workers.WorkerPool`: warmed up before their first job, killed and replaced when a
+job passes its deadline (504), replaced when they die (503 ``worker-lost`` for the job that was on
+it); the next requests go to the fresh worker.
 
 Job functions return ``{"ok": True, ...}`` or ``{"ok": False, "kind": KIND, "detail": TEXT}``
 (:mod:`service.problems` kinds), so no exception has to survive pickling.
@@ -15,64 +15,51 @@ Job functions return ``{"ok": True, ...}`` or ``{"ok": False, "kind": KIND, "det
 
 from __future__ import annotations
 
-import asyncio
 import contextlib
 import ctypes
 import gc
 import json
 import logging
 import math
-import multiprocessing
 import os
-import signal
 import time
-import traceback
-from collections.abc import Callable, Iterator
-from concurrent.futures import Future, ProcessPoolExecutor
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from service import allocator
 from service.problems import Problem, from_exception
+from service.workers import WorkerPool
 
 log = logging.getLogger("depict.jobs")
-
-#: A worker answers 504 at the deadline; the server waits this much longer for it before
-#: answering 504 itself (a job stuck in one long C call).
-GRACE_S = 2.0
-
-
-class JobTimeout(Exception):
-    """Raised inside a worker when its job passes its deadline."""
 
 
 # -- inside the worker processes ---------------------------------------------------------------
 
 
-def init_worker() -> None:
-    """Worker start: OSMesa for rendering; ^C is for the server, which stops the pool; the
-    allocator settings of :mod:`service.allocator`."""
+def warm_worker() -> dict[str, Any]:
+    """A worker's start, before its first job: allocator settings (:mod:`service.allocator`),
+    every module a job imports, the operator registry, and a tiny OSMesa render.
+
+    Returns ``{"osmesa": bool, "detail": ...}`` for ``/readyz``.
+    """
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
     allocator.tune()
+    import trimesh
 
+    import gbuffer.io
+    import gbuffer.preview  # noqa: F401
+    import service.compare
+    import service.pipeline  # noqa: F401
+    from gbuffer.render import render
+    from service.registry import operators
 
-def _on_alarm(signum: int, frame: Any) -> None:
-    raise JobTimeout
-
-
-@contextlib.contextmanager
-def _deadline(deadline: float) -> Iterator[None]:
-    remaining = deadline - time.time()
-    if remaining <= 0:
-        raise JobTimeout
-    previous = signal.signal(signal.SIGALRM, _on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, remaining)
+    operators()
     try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        render(trimesh.creation.icosahedron(), 8, 8)
+    except Exception as exc:
+        return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
+    return {"osmesa": True}
 
 
 def _trim_memory() -> None:
@@ -82,22 +69,19 @@ def _trim_memory() -> None:
         ctypes.CDLL("libc.so.6").malloc_trim(0)
 
 
-def run_job(fn: Callable[..., dict[str, Any]], deadline: float, *args: Any) -> dict[str, Any]:
-    """Run ``fn(*args)`` in a worker under ``deadline``; errors become problem kinds."""
+def run_job(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
+    """Run ``fn(*args)`` in a worker; errors become problem kinds (tracebacks go to the log)."""
     t0 = time.perf_counter()
     try:
-        with _deadline(deadline):
-            out = fn(*args)
+        out = fn(*args)
         out["ok"] = True
-    except JobTimeout:
-        out = {"ok": False, "kind": "timeout", "detail": "job passed its time limit"}
     except Exception as exc:  # every error leaves the worker as data, never as a crash
         problem = from_exception(exc)
         if problem.kind == "internal" and type(exc) is ValueError:
             # the project's convention: a plain ValueError names a bad parameter or input
             problem = Problem("invalid-request", str(exc))
         if problem.kind == "internal":
-            log.error("job failed: %s", "".join(traceback.format_exception(exc)))
+            log.error("job failed", exc_info=exc)
         out = {"ok": False, "kind": problem.kind, "detail": problem.detail}
     finally:
         _trim_memory()
@@ -105,36 +89,30 @@ def run_job(fn: Callable[..., dict[str, Any]], deadline: float, *args: Any) -> d
     return out
 
 
-def probe_job() -> dict[str, Any]:
-    """Readiness: render a tiny mesh through OSMesa (and import everything a job needs)."""
-    import trimesh
-
-    import gbuffer.io  # noqa: F401  (import the frame I/O once, off the request path)
-    from gbuffer.render import render
-
-    try:
-        render(trimesh.creation.icosahedron(), 8, 8)
-    except Exception as exc:
-        return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
-    return {"osmesa": True}
-
-
-def read_frame(path: str, read: dict[str, Any], max_pixels: int | None = None) -> Any:
+def read_frame(path: str, read: dict[str, Any], limits: dict[str, int] | None = None) -> Any:
     """Read a frame exactly as the CLI does (same preset, camera, mapping).
 
     ``read``: ``preset``, ``camera`` (path of a camera JSON file), ``mapping`` (buffer ->
-    channels), ``normal_space``.
+    channels), ``normal_space``, ``strict`` (False: non-finite data pixels are masked with a
+    warning instead of refused, for ``inspect``). ``limits``: the keyword arguments of
+    :class:`gbuffer.limits.Limits` (default: the ``DEPICT_MAX_*`` variables when set).
     """
     from gbuffer.io import ReadOptions
     from gbuffer.io import read as read_exr
+    from gbuffer.limits import Limits
 
-    options = ReadOptions(mapping=read.get("mapping") or {}, normal_space=read.get("normal_space"))
+    options = ReadOptions(
+        mapping=read.get("mapping") or {},
+        normal_space=read.get("normal_space"),
+        strict=read.get("strict", True),
+        require_camera=read.get("strict", True),
+    )
     return read_exr(
         path,
         preset=read.get("preset") or "auto",
         camera=read.get("camera"),
         options=options,
-        max_pixels=max_pixels,
+        limits=Limits(**limits) if limits else None,
     )
 
 
@@ -156,7 +134,7 @@ def enhance_file(
     spec_json: str,
     read: dict[str, Any],
     write: dict[str, Any],
-    max_pixels: int | None = None,
+    limits: dict[str, int] | None = None,
     pinned: dict[str, float] | None = None,
     files: bool = True,
 ) -> dict[str, Any]:
@@ -173,7 +151,7 @@ def enhance_file(
     from service.registry import Context
 
     spec = pipeline.checked(spec_json)
-    frame = read_frame(in_path, read, max_pixels)
+    frame = read_frame(in_path, read, limits)
     context = Context(
         debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}), files=files
     )
@@ -195,11 +173,11 @@ def enhance_job(
     spec_json: str,
     read: dict[str, Any],
     write: dict[str, Any],
-    max_pixels: int,
+    limits: dict[str, int],
 ) -> dict[str, Any]:
     """``POST /v1/enhance`` on a worker: :func:`enhance_file` under the pixel limit, with no
     file named by a parameter read."""
-    return enhance_file(in_path, out_path, spec_json, read, write, max_pixels, files=False)
+    return enhance_file(in_path, out_path, spec_json, read, write, limits, files=False)
 
 
 def render_job(mesh_path: str, out_path: str, scene: dict[str, Any]) -> dict[str, Any]:
@@ -235,7 +213,7 @@ def score_job(
     spec_json: str | None,
     read: dict[str, Any],
     options: dict[str, Any],
-    max_pixels: int | None = None,
+    limits: dict[str, int] | None = None,
     files: bool = False,
 ) -> dict[str, Any]:
     """``depict score``: the congruence score (LLA Eq. 2) of the frame's beauty
@@ -244,7 +222,7 @@ def score_job(
     from service.compare import score_frame
     from service.registry import Context
 
-    frame = read_frame(in_path, read, max_pixels)
+    frame = read_frame(in_path, read, limits)
     op_s: list[tuple[str, float]] = []
     if spec_json:
         frame, op_s = run_steps(frame, pipeline.checked(spec_json), Context(files=files))
@@ -264,7 +242,7 @@ def compare_job(
     read: dict[str, Any] | None,
     options: dict[str, Any],
     sheet: bool = False,
-    max_pixels: int | None = None,
+    limits: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     """``depict compare``: the comparison bench (LLA §7) on an EXR frame (``read`` given) or a
     mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``).
@@ -282,10 +260,13 @@ def compare_job(
     opts = dict(options)
     if read is None:
         width, height = int(opts.pop("width", 512)), int(opts.pop("height", 512))
+        max_pixels = (limits or {}).get("max_pixels")
         if max_pixels is not None and width * height > max_pixels:
             from gbuffer.errors import LimitError
 
-            raise LimitError(f"{width}x{height} is over the limit of {max_pixels} pixels")
+            raise LimitError(
+                f"{width}x{height} is over the limit of {max_pixels} pixels (DEPICT_MAX_PIXELS)"
+            )
         frame = frame_from_mesh(
             in_path,
             width,
@@ -294,7 +275,7 @@ def compare_job(
             elevation_deg=float(opts.pop("elevation", 20.0)),
         )
     else:
-        frame = read_frame(in_path, read, max_pixels)
+        frame = read_frame(in_path, read, limits)
     result = compare(
         frame,
         methods=opts.get("methods") or METHODS,
@@ -319,7 +300,7 @@ def pick_job(
     x: int,
     y: int,
     params: dict[str, Any],
-    max_pixels: int | None = None,
+    limits: dict[str, int] | None = None,
 ) -> dict[str, Any]:
     """``depict relief-pick``: the Apparent Relief descriptor S under pixel (x, y) with the
     ``apparent_relief`` parameters ``params``, its ARM texture coordinates and its region."""
@@ -329,7 +310,7 @@ def pick_job(
     from service import pipeline
     from service.registry import Context
 
-    frame = read_frame(in_path, read, max_pixels)
+    frame = read_frame(in_path, read, limits)
     step = {"op": "apparent_relief", "params": {**params, "style": "cel"}}
     context = Context(files=False)
     out = pipeline.run(frame, [step], context=context)
@@ -354,36 +335,35 @@ def pick_job(
 class JobPool:
     """Worker processes with admission control: ``workers`` running + ``queue`` waiting."""
 
-    def __init__(self, workers: int, queue: int, timeout_s: float, metrics: Any = None) -> None:
+    def __init__(
+        self,
+        workers: int,
+        queue: int,
+        timeout_s: float,
+        metrics: Any = None,
+        log_level: str = "info",
+    ) -> None:
         self.workers = workers
         self.capacity = workers + queue
         self.timeout_s = timeout_s
         self.metrics = metrics
-        self.active = 0  # admitted jobs not finished on their worker (waiting or running)
+        self.active = 0  # admitted jobs not finished (waiting or running)
         self.recent_s = 1.0  # running mean of job times, for Retry-After
-        self.executor = ProcessPoolExecutor(
-            max_workers=workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=init_worker,
-        )
-        self._loop: asyncio.AbstractEventLoop | None = None
-        self.ready: dict[str, Any] | None = None
-        self._probe_lock: asyncio.Lock | None = None
+        self.pool = WorkerPool(workers, warm_worker, log_level, on_replace=self._replaced)
+
+    def _replaced(self, cause: str) -> None:
+        if self.metrics is not None:
+            self.metrics.workers_replaced.labels(cause).inc()
+
+    def start(self) -> None:
+        """Start the workers; they take jobs once warmed up."""
+        self.pool.start()
 
     def _gauges(self) -> None:
         if self.metrics is not None:
             self.metrics.running.set(min(self.active, self.workers))
             self.metrics.queued.set(max(0, self.active - self.workers))
-
-    def _release(self, _: Future[Any]) -> None:
-        assert self._loop is not None
-
-        def done() -> None:
-            self.active -= 1
-            self._gauges()
-
-        with contextlib.suppress(RuntimeError):  # loop closed at shutdown
-            self._loop.call_soon_threadsafe(done)
+            self.metrics.workers_ready.set(self.pool.ready_workers)
 
     def retry_after(self) -> int:
         """Seconds a refused client should wait: the queue ahead divided by the throughput."""
@@ -391,18 +371,9 @@ class JobPool:
         return max(1, min(60, math.ceil(waits)))
 
     async def submit(
-        self,
-        kind: str,
-        fn: Callable[..., dict[str, Any]],
-        *args: Any,
-        on_abandon: Callable[[], None] | None = None,
+        self, kind: str, fn: Callable[..., dict[str, Any]], *args: Any
     ) -> dict[str, Any]:
-        """Run ``fn(*args)`` on a worker; :class:`Problem` 429 / 504 / 4xx on failure.
-
-        ``on_abandon`` runs when a job the request gave up on (504) finally leaves its worker
-        (to remove its files only then).
-        """
-        self._loop = asyncio.get_running_loop()
+        """Run ``fn(*args)`` on a worker; :class:`Problem` 429 / 503 / 504 / 4xx on failure."""
         if self.active >= self.capacity:
             if self.metrics is not None:
                 self.metrics.jobs.labels(kind, "refused").inc()
@@ -416,56 +387,60 @@ class JobPool:
         self.active += 1
         self._gauges()
         try:
-            future = self.executor.submit(run_job, fn, deadline, *args)
-        except Exception:
+            outcome = await self.pool.run(run_job, (fn, *args), deadline)
+        finally:
             self.active -= 1
             self._gauges()
-            raise
-        future.add_done_callback(self._release)
-        try:
-            out = await asyncio.wait_for(
-                asyncio.shield(asyncio.wrap_future(future)), self.timeout_s + GRACE_S
-            )
-        except TimeoutError:
-            out = {"ok": False, "kind": "timeout", "detail": "job passed its time limit"}
-            if on_abandon is not None:
-                future.add_done_callback(lambda _: on_abandon())
+        out = self._answer(outcome)
         if "job_s" in out:
             self.recent_s = 0.8 * self.recent_s + 0.2 * float(out["job_s"])
-        if self.metrics is not None:
-            self.metrics.jobs.labels(kind, "ok" if out["ok"] else out["kind"]).inc()
-            if "job_s" in out:
-                self.metrics.job_time.labels(kind).observe(out["job_s"])
-            for op, seconds in out.get("op_s", []):
-                self.metrics.operator_time.labels(op).observe(seconds)
+        self._count(kind, out)
         if not out["ok"]:
-            detail = out["detail"]
-            if out["kind"] == "timeout":
-                detail = (
-                    f"the job did not finish within DEPICT_TIMEOUT_S={self.timeout_s:g} s "
-                    "(queue wait included); retry later, or send a smaller frame"
-                )
-            raise Problem(out["kind"], detail)
+            raise Problem(out["kind"], out["detail"], headers=out.get("headers"))
         return out
 
-    async def check_ready(self) -> dict[str, Any]:
-        """Run :func:`probe_job` once on a worker and cache its answer (either way)."""
-        if self._probe_lock is None:
-            self._probe_lock = asyncio.Lock()
-        async with self._probe_lock:
-            if self.ready is None:
-                loop = asyncio.get_running_loop()
-                try:
-                    result = await asyncio.wait_for(
-                        loop.run_in_executor(self.executor, probe_job), 120.0
-                    )
-                except Exception as exc:  # a broken pool is "not ready", with the reason
-                    return {"osmesa": False, "detail": f"worker pool is not up: {exc!r}"}
-                self.ready = result
-            return self.ready
+    def _answer(self, outcome: Any) -> dict[str, Any]:
+        """The job's dict, or the problem a timeout, a dead worker or no pool stands for."""
+        if outcome.status == "result":
+            return dict(outcome.result)
+        if outcome.status == "timeout":
+            detail = (
+                f"the job did not finish within DEPICT_TIMEOUT_S={self.timeout_s:g} s "
+                "(queue wait included); retry later, or send a smaller frame"
+            )
+            return {"ok": False, "kind": "timeout", "detail": detail}
+        if outcome.status == "died":
+            detail = (
+                f"the worker process running this job {outcome.detail}; a fresh worker replaces "
+                "it: retry, or send a smaller frame if it ran out of memory"
+            )
+            return {
+                "ok": False,
+                "kind": "worker-lost",
+                "detail": detail,
+                "headers": {"Retry-After": "1"},
+            }
+        return {"ok": False, "kind": "unavailable", "detail": outcome.detail}
 
-    def shutdown(self) -> None:
-        self.executor.shutdown(wait=True, cancel_futures=True)
+    def _count(self, kind: str, out: dict[str, Any]) -> None:
+        if self.metrics is None:
+            return
+        self.metrics.jobs.labels(kind, "ok" if out["ok"] else out["kind"]).inc()
+        if "job_s" in out:
+            self.metrics.job_time.labels(kind).observe(out["job_s"])
+        for op, seconds in out.get("op_s", []):
+            self.metrics.operator_time.labels(op).observe(seconds)
+
+    def ready(self) -> dict[str, Any]:
+        """``/readyz``: a warmed-up worker exists and could render with OSMesa."""
+        info = self.pool.ready_info
+        if self.pool.ready_workers == 0 or info is None:
+            why = self.pool.last_failure or "the workers are starting"
+            return {"osmesa": False, "detail": f"no worker is ready: {why}"}
+        return info
+
+    async def shutdown(self) -> None:
+        await self.pool.shutdown()
 
 
 def dump_json(value: Any, path: Path) -> str:

@@ -13,6 +13,9 @@ metric                                        type       labels
 ``depict_jobs_total``                         counter    ``kind``, ``outcome``
 ``depict_job_duration_seconds``               histogram  ``kind`` (on the worker)
 ``depict_operator_duration_seconds``          histogram  ``op``
+``depict_workers_ready``                      gauge      warmed-up worker processes alive
+``depict_workers_replaced_total``             counter    ``cause``: timeout, died, idle-died,
+                                                         error
 ============================================  =========  ======================================
 
 ``route`` is the route template (``/v1/enhance``), ``other`` for unknown paths, so a scan of
@@ -80,6 +83,16 @@ class Metrics:
             "time spent in each operator",
             ["op"],
             buckets=LATENCY_BUCKETS,
+            registry=r,
+        )
+
+        self.workers_ready = Gauge(
+            "depict_workers_ready", "warmed-up worker processes alive", registry=r
+        )
+        self.workers_replaced = Counter(
+            "depict_workers_replaced",
+            "worker processes replaced, by cause (timeout, died, idle-died, error)",
+            ["cause"],
             registry=r,
         )
 

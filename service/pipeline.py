@@ -14,6 +14,7 @@ Python API::
 from __future__ import annotations
 
 import json
+import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -21,9 +22,57 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from gbuffer import holes
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from service.registry import Context, Operator, Params, PipelineError, get
+
+#: Most steps in a pipeline.
+MAX_STEPS = 64
+#: Deepest nesting of JSON arrays and objects in a pipeline (or any JSON field of a request).
+MAX_DEPTH = 20
+#: Largest pipeline, in characters of JSON.
+MAX_CHARS = 1 << 20
+
+_JSON_STRING = re.compile(r'"(?:[^"\\]|\\.)*"')
+
+
+def json_depth(text: str) -> int:
+    """How deeply arrays and objects nest in JSON ``text`` (counted without parsing it, so
+    a document nested 100000 deep costs no recursion)."""
+    code = np.frombuffer(_JSON_STRING.sub("", text).encode("utf-8", "replace"), np.uint8)
+    steps = (code == ord("[")).astype(np.int32) + (code == ord("{"))
+    steps -= (code == ord("]")).astype(np.int32) + (code == ord("}"))
+    return int(np.cumsum(steps).max(initial=0))
+
+
+def value_depth(value: Any, limit: int = MAX_DEPTH) -> int:
+    """How deeply lists and dicts nest in ``value`` (walked without recursion, up to
+    ``limit + 1``)."""
+    deepest = 0
+    todo = [(value, 1)]
+    while todo:
+        item, depth = todo.pop()
+        if isinstance(item, dict | list | tuple):
+            deepest = max(deepest, depth)
+            if depth > limit:
+                break
+            children = item.values() if isinstance(item, dict) else item
+            todo.extend((child, depth + 1) for child in children)
+    return deepest
+
+
+def loads(text: str, what: str, max_chars: int = MAX_CHARS) -> Any:
+    """JSON ``text`` parsed, with its size and nesting bounded; PipelineError naming ``what``."""
+    if len(text) > max_chars:
+        raise PipelineError(f"{what} is {len(text)} characters long; at most {max_chars}")
+    depth = json_depth(text)
+    if depth > MAX_DEPTH:
+        raise PipelineError(f"{what} nests {depth} levels deep; at most {MAX_DEPTH}")
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PipelineError(f"{what} is not valid JSON: {exc}") from None
 
 
 class Step(BaseModel):
@@ -38,7 +87,7 @@ class PipelineSpec(BaseModel):
     """A pipeline: steps applied in order."""
 
     model_config = ConfigDict(extra="forbid")
-    steps: list[Step] = Field(min_length=1)
+    steps: list[Step] = Field(min_length=1, max_length=MAX_STEPS)
 
 
 DEFAULT_PIPELINE = PipelineSpec(steps=[Step(op="radiance_scaling")])
@@ -48,10 +97,13 @@ def parse(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> Pipeline
     """A pipeline from a model, a dict, a list of steps or JSON text; PipelineError if invalid."""
     if isinstance(spec, PipelineSpec):
         return spec
-    try:
-        data = json.loads(spec) if isinstance(spec, str) else spec
-    except json.JSONDecodeError as exc:
-        raise PipelineError(f"pipeline is not valid JSON: {exc}") from None
+    if isinstance(spec, str):
+        data = loads(spec, "pipeline")
+    else:
+        data = spec
+        depth = value_depth(data)
+        if depth > MAX_DEPTH:
+            raise PipelineError(f"pipeline nests more than {MAX_DEPTH} levels deep")
     if isinstance(data, list):
         data = {"steps": data}
     try:
@@ -102,6 +154,7 @@ def run(
     steps = compile_steps(parse(spec))
     ctx = context or Context(debug_layers=debug_layers)
     out = frame.copy()
+    holes.fill(out)  # pixels of NaN/Inf radiance: uncovered for the operators (gbuffer.holes)
     for op, params in steps:
         for buffer in op.needs:
             out.need(buffer, f"needed by {op.name}")
@@ -113,6 +166,7 @@ def run(
             raise
         except ValueError as exc:  # ops/ names a bad value in a ValueError
             raise PipelineError(f"{op.name}: {exc}") from None
+    holes.restore(out)  # and given back unchanged
     return out
 
 

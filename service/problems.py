@@ -14,12 +14,16 @@ exception                                               status   type
 ======================================================  =======  ======================
 :class:`gbuffer.errors.FrameError` (bad / corrupt file)  400      ``bad-file``
 missing or wrong API key                                 401      ``unauthorized``
+request body not received within DEPICT_UPLOAD_TIMEOUT_S 408      ``request-timeout``
 :class:`gbuffer.errors.LimitError`, body too large       413      ``limit``
 wrong ``Content-Type``, unknown mesh format              415      ``unsupported-media-type``
 :class:`service.registry.PipelineError`, bad form field  422      ``invalid-request``
+:class:`gbuffer.errors.OptionError` (map, camera given)  422      ``invalid-request``
 :class:`gbuffer.errors.MissingBufferError`               422      ``missing-buffer``
 :class:`gbuffer.errors.MissingCameraError`               422      ``missing-camera``
 queue full                                               429      ``busy`` (``Retry-After``)
+the service cannot work (no worker can start)            503      ``unavailable``
+the worker running the job died (signal, out of memory)  503      ``worker-lost``
 job over ``DEPICT_TIMEOUT_S``                            504      ``timeout``
 ======================================================  =======  ======================
 """
@@ -32,7 +36,13 @@ from typing import Any
 
 from starlette.responses import Response
 
-from gbuffer.errors import FrameError, LimitError, MissingBufferError, MissingCameraError
+from gbuffer.errors import (
+    FrameError,
+    LimitError,
+    MissingBufferError,
+    MissingCameraError,
+    OptionError,
+)
 from service.registry import PipelineError
 
 MEDIA_TYPE = "application/problem+json"
@@ -44,6 +54,7 @@ KINDS: dict[str, tuple[int, str]] = {
     "unauthorized": (401, "Unauthorized"),
     "not-found": (404, "Not Found"),
     "method-not-allowed": (405, "Method Not Allowed"),
+    "request-timeout": (408, "Request Timeout"),
     "limit": (413, "Content Too Large"),
     "unsupported-media-type": (415, "Unsupported Media Type"),
     "invalid-request": (422, "Invalid Request"),
@@ -52,6 +63,7 @@ KINDS: dict[str, tuple[int, str]] = {
     "busy": (429, "Too Many Requests"),
     "internal": (500, "Internal Server Error"),
     "unavailable": (503, "Service Unavailable"),
+    "worker-lost": (503, "Worker Lost"),
     "timeout": (504, "Job Timed Out"),
 }
 
@@ -113,7 +125,7 @@ def from_exception(exc: BaseException) -> Problem:
         return Problem("missing-buffer", str(exc))
     if isinstance(exc, MissingCameraError):
         return Problem("missing-camera", str(exc))
-    if isinstance(exc, PipelineError):
+    if isinstance(exc, PipelineError | OptionError):
         return Problem("invalid-request", str(exc))
     if isinstance(exc, FrameError):
         return Problem("bad-file", str(exc))
@@ -122,6 +134,8 @@ def from_exception(exc: BaseException) -> Problem:
 
 def kind_for_status(status: int) -> str:
     """The problem kind used for a plain HTTP status (404, 405, ...)."""
+    if status == 400:
+        return "bad-request"
     for kind, (code, _) in KINDS.items():
         if code == status:
             return kind

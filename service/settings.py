@@ -1,22 +1,32 @@
 """Service settings, read from ``DEPICT_*`` environment variables (pydantic-settings).
 
-=========================  =============  ==========================================================
-variable                   default        meaning
-=========================  =============  ==========================================================
-``DEPICT_HOST``            ``127.0.0.1``  address ``depict serve`` binds (``0.0.0.0`` in Docker)
-``DEPICT_PORT``            ``8000``       port ``depict serve`` binds
-``DEPICT_API_KEY``         unset          when set, every route except ``/healthz`` and
-                                          ``/readyz`` needs ``Authorization: Bearer <key>``
-``DEPICT_METRICS_PUBLIC``  ``false``      ``true``: ``/metrics`` needs no key even when one is set
-``DEPICT_MAX_UPLOAD_MB``   ``512``        largest request body, MiB (413 above)
-``DEPICT_MAX_PIXELS``      ``67108864``   largest frame, width x height of the EXR data window or
-                                          of a render (413 above; checked on the header)
-``DEPICT_WORKERS``         ``2``          jobs processed in parallel (worker processes)
-``DEPICT_QUEUE``           ``8``          jobs waiting for a worker; one more answers 429
-``DEPICT_TIMEOUT_S``       ``120``        time limit of a job, queue wait included (504 after)
-``DEPICT_LOG_LEVEL``       ``info``       ``debug``, ``info``, ``warning`` or ``error``
-``DEPICT_EXR_THREADS``     cores          OpenEXR's (de)compression threads (read by gbuffer.exr)
-=========================  =============  ==========================================================
+=============================  =============  ======================================================
+variable                       default        meaning
+=============================  =============  ======================================================
+``DEPICT_HOST``                ``127.0.0.1``  address ``depict serve`` binds (``0.0.0.0`` in
+                                              Docker)
+``DEPICT_PORT``                ``8000``       port ``depict serve`` binds
+``DEPICT_API_KEY``             unset          when set, every route except ``/healthz`` and
+                                              ``/readyz`` needs ``Authorization: Bearer <key>``
+``DEPICT_METRICS_PUBLIC``      ``false``      ``true``: ``/metrics`` needs no key even when one is
+                                              set
+``DEPICT_MAX_UPLOAD_MB``       ``512``        largest request body, MiB (413 above)
+``DEPICT_MAX_PIXELS``          ``67108864``   largest frame, width x height of the EXR data
+                                              window or of a render (413 above; checked on the
+                                              header)
+``DEPICT_MAX_DECODED_MB``      ``1024``       largest decoded EXR, MiB: the sum over channels of
+                                              width x height x bytes per sample (413 above; checked
+                                              on the header)
+``DEPICT_MAX_CHANNELS``        ``512``        most channels in an EXR, all parts together (413)
+``DEPICT_UPLOAD_TIMEOUT_S``    ``300``        time a client has to send a request, headers and body
+                                              (408 and the connection closed after)
+``DEPICT_WORKERS``             ``2``          jobs processed in parallel (worker processes)
+``DEPICT_QUEUE``               ``8``          jobs waiting for a worker; one more answers 429
+``DEPICT_TIMEOUT_S``           ``120``        time limit of a job, queue wait included (504
+                                              after)
+``DEPICT_LOG_LEVEL``           ``info``       ``debug``, ``info``, ``warning`` or ``error``
+``DEPICT_EXR_THREADS``         cores          OpenEXR's (de)compression threads (gbuffer.exr)
+=============================  =============  ======================================================
 """
 
 from __future__ import annotations
@@ -44,6 +54,15 @@ class Settings(BaseSettings):
         ge=1,
         description="largest frame (width x height), checked on the header",
     )
+    max_decoded_mb: float = Field(
+        default=1024.0,
+        gt=0,
+        description="largest decoded EXR (sum of channels x width x height x bytes), MiB",
+    )
+    max_channels: int = Field(default=512, ge=1, description="most channels in an EXR")
+    upload_timeout_s: float = Field(
+        default=300.0, gt=0, description="time a client has to send a whole request"
+    )
     workers: int = Field(default=2, ge=1, le=256, description="jobs processed in parallel")
     queue: int = Field(default=8, ge=0, le=10_000, description="jobs waiting for a worker")
     timeout_s: float = Field(
@@ -56,6 +75,15 @@ class Settings(BaseSettings):
     @property
     def max_upload_bytes(self) -> int:
         return int(self.max_upload_mb * 1024 * 1024)
+
+    @property
+    def limits(self) -> dict[str, int]:
+        """The decode limits, as :func:`gbuffer.exr.check_limits` takes them."""
+        return {
+            "max_pixels": self.max_pixels,
+            "max_bytes": int(self.max_decoded_mb * 1024 * 1024),
+            "max_channels": self.max_channels,
+        }
 
     @property
     def key(self) -> str | None:

@@ -11,6 +11,7 @@ cannot write (double attributes, bad pixel types, ...).
 
 from __future__ import annotations
 
+import io
 import math
 import struct
 from dataclasses import dataclass
@@ -438,5 +439,52 @@ def patch_data_window(path: Path, window: tuple[int, int, int, int]) -> Path:
     key = b"dataWindow\0box2i\0" + struct.pack("<i", 16)
     at = data.index(key) + len(key)
     data[at : at + 16] = struct.pack("<4i", *window)
+    path.write_bytes(bytes(data))
+    return path
+
+
+def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
+    """A real ZIP-compressed EXR of ``channels`` float channels of ``size`` x ``size`` zeros:
+    about 1.3 MB on disk for 83 x 2000 x 2000 (1.3 GB once decoded).
+
+    The library encodes one 16-line chunk of zeros; the file repeats that chunk (with each
+    chunk's own first line) down the whole image, so it is valid and decodable.
+    """
+    from gbuffer import exr
+
+    assert size % 16 == 0, "whole chunks only"
+    names = [f"L{i:03d}.X" for i in range(channels)]
+    strip = {n: np.zeros((16, size), np.float32) for n in names}
+    probe = path.with_suffix(".strip.exr")
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, strip).write(str(probe))
+    data = probe.read_bytes()
+    probe.unlink()
+    layout = exr._read_layout(io.BytesIO(data), len(data), str(path))
+    exr._read_offsets(io.BytesIO(data), layout, str(path))
+    (chunk,) = exr._extract_chunks(data, layout, 0)
+    attrs = dict(layout.parts[0].attributes)
+    window = struct.pack("<4i", 0, 0, size - 1, size - 1)
+    attrs["dataWindow"] = exr.RawAttribute("box2i", window)
+    attrs["displayWindow"] = exr.RawAttribute("box2i", window)
+    count = (size + 15) // 16
+    chunks = [struct.pack("<i", 16 * k) + chunk[4:] for k in range(count)]
+    order = list(range(count))
+    path.write_bytes(exr._assemble([attrs], [chunks], [order], ["scanlineimage"], False))
+    return path
+
+
+def write_corrupt(path: Path) -> Path:
+    """A ZIP EXR whose last compressed chunk bytes are flipped: the header reads, the pixels
+    do not decode. (Smooth data, so the chunks are really compressed: incompressible chunks are
+    stored raw, and EXR has no checksum to notice a corruption of those.)"""
+    ramp = np.tile(np.linspace(0, 1, 64, dtype=np.float32), (64, 1))
+    smooth = path.with_suffix(".smooth.exr")
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"R": ramp, "G": ramp}).write(
+        str(smooth)
+    )
+    data = bytearray(smooth.read_bytes())
+    smooth.unlink()
+    for i in range(len(data) - 200, len(data) - 8):
+        data[i] ^= 0x5A
     path.write_bytes(bytes(data))
     return path

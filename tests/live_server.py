@@ -96,3 +96,18 @@ def live_server(env: dict[str, str], ready_timeout: float = 120.0) -> Iterator[S
         yield server
     finally:
         stop_server(server)
+
+
+@contextlib.contextmanager
+def live_servers(envs: dict[str, dict[str, str]]) -> Iterator[dict[str, Server]]:
+    """Several servers, by name, started at once (their start-ups overlap) and all ready."""
+    servers: dict[str, Server] = {}
+    try:
+        for name, env in envs.items():
+            servers[name] = start_server(env)
+        for server in servers.values():
+            wait_ready(server)
+        yield servers
+    finally:
+        for server in servers.values():
+            stop_server(server)

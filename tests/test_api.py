@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -17,7 +18,8 @@ from pydantic import ValidationError
 
 from gbuffer.errors import FrameError, LimitError, MissingBufferError, MissingCameraError
 from service import problems
-from service.api import Gate, JsonFormatter, create_app
+from service.api import Gate, create_app
+from service.logs import JsonFormatter
 from service.metrics import Metrics
 from service.openapi import DEFAULT_PATH, dumps
 from service.registry import PipelineError, operators
@@ -35,6 +37,10 @@ def client() -> Iterator[Any]:
 
     app = create_app(Settings(api_key=KEY, workers=1, queue=1, max_pixels=640 * 480))
     with TestClient(app, raise_server_exceptions=False) as c:
+        deadline = time.monotonic() + 120
+        while c.get("/readyz").status_code != 200:  # the worker warms up in the background
+            assert time.monotonic() < deadline, c.get("/readyz").text
+            time.sleep(0.2)
         yield c
 
 

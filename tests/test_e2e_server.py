@@ -27,7 +27,7 @@ from service.cli import main as cli
 from service.client import Client, DepictError
 from service.compare import score_frame
 from tests import exr_factory
-from tests.live_server import Server, free_port, start_server, stop_server, wait_ready
+from tests.live_server import Server, free_port, live_servers
 
 KEY = "e2e-secret"
 AUTH = {"Authorization": f"Bearer {KEY}"}
@@ -40,24 +40,17 @@ MAX_UPLOAD_MB = 16
 def servers() -> Iterator[dict[str, Server]]:
     """The server under test, and one whose jobs always pass their time limit (504); both
     start at once, so their start-up times overlap."""
-    main = start_server(
-        {
-            "DEPICT_API_KEY": KEY,
-            "DEPICT_WORKERS": "2",
-            "DEPICT_QUEUE": "2",
-            "DEPICT_MAX_PIXELS": str(MAX_PIXELS),
-            "DEPICT_MAX_UPLOAD_MB": str(MAX_UPLOAD_MB),
-            "DEPICT_TIMEOUT_S": "120",
-        }
-    )
-    slow = start_server({"DEPICT_WORKERS": "1", "DEPICT_QUEUE": "1", "DEPICT_TIMEOUT_S": "0.001"})
-    try:
-        wait_ready(main)
-        wait_ready(slow)
-        yield {"main": main, "slow": slow}
-    finally:
-        stop_server(main)
-        stop_server(slow)
+    main = {
+        "DEPICT_API_KEY": KEY,
+        "DEPICT_WORKERS": "2",
+        "DEPICT_QUEUE": "2",
+        "DEPICT_MAX_PIXELS": str(MAX_PIXELS),
+        "DEPICT_MAX_UPLOAD_MB": str(MAX_UPLOAD_MB),
+        "DEPICT_TIMEOUT_S": "120",
+    }
+    slow = {"DEPICT_WORKERS": "1", "DEPICT_QUEUE": "1", "DEPICT_TIMEOUT_S": "0.001"}
+    with live_servers({"main": main, "slow": slow}) as servers:
+        yield servers
 
 
 @pytest.fixture(scope="module")

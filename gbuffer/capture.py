@@ -1,0 +1,66 @@
+"""What C and C++ libraries print on the terminal, captured instead of shown.
+
+The OpenEXR library reports a damaged file by printing to the process's file descriptors 1 and 2
+directly (``std::cout``, ``std::cerr``, below Python's ``sys.stdout``) and through Python's
+``sys.stdout`` (its binding's warnings). :func:`captured_output` points both descriptors at a
+temporary file, and both Python streams at a buffer, around a call and gives back the lines
+written, so the caller can put them in its one-line error (or its warnings) instead of the
+terminal.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import io
+import os
+import sys
+import tempfile
+from collections.abc import Iterator
+
+#: Most bytes of captured output kept.
+MAX_CAPTURED = 64 << 10
+
+try:
+    _LIBC: ctypes.CDLL | None = ctypes.CDLL(None)
+except OSError:  # no C library to flush: only Python's streams are flushed
+    _LIBC = None
+
+
+def _flush() -> None:
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    if _LIBC is not None:
+        _LIBC.fflush(None)  # C stdio buffers (std::cout writes through them)
+
+
+@contextlib.contextmanager
+def captured_output() -> Iterator[list[str]]:
+    """Run the block with descriptors 1 and 2 sent to a temporary file; the non-empty lines
+    written there are in the yielded list once the block ends (at most :data:`MAX_CAPTURED`
+    bytes). Where the descriptors cannot be duplicated the block runs uncaptured."""
+    lines: list[str] = []
+    _flush()
+    try:
+        saved = (os.dup(1), os.dup(2))
+    except OSError:
+        yield lines
+        return
+    python = io.StringIO()
+    with tempfile.TemporaryFile() as sink:
+        try:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+            with contextlib.redirect_stdout(python), contextlib.redirect_stderr(python):
+                yield lines
+        finally:
+            _flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+            sink.seek(0)
+            text = sink.read(MAX_CAPTURED).decode("utf-8", "replace")
+            text += "\n" + python.getvalue()[:MAX_CAPTURED]
+            lines.extend(line.strip() for line in text.splitlines() if line.strip())

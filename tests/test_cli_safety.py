@@ -1,0 +1,255 @@
+"""The command line never loses data and fails in one line: outputs that name inputs, FIFOs,
+device nodes and symbolic links, unwritable places, absurd values, library chatter, control
+bytes, NaN/Inf fireflies, decode bombs and deep pipelines. Real files, FIFOs, links and
+devices; the CLI runs in process with its file descriptors watched (capfd)."""
+
+from __future__ import annotations
+
+import json
+import os
+import stat
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+import trimesh
+
+from gbuffer.io import write as write_exr
+from gbuffer.render import render
+from service.cli import main
+from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
+
+
+def depict(*argv: str | Path) -> int:
+    try:
+        return main([str(a) for a in argv])
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+
+def one_error(capfd: pytest.CaptureFixture[str], words: str) -> str:
+    """Exactly one line on stderr (fd 2, C++ output included), ``depict: error: ...``."""
+    out, err = capfd.readouterr()
+    lines = err.splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("depict: error: ") and words in lines[0], lines[0]
+    assert "Traceback" not in out + err and "Warning:" not in out
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def frame(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    path = tmp_path_factory.mktemp("safety") / "frame.exr"
+    write_exr(render(trimesh.creation.icosphere(subdivisions=2), 64, 48), path)
+    return path
+
+
+@pytest.fixture
+def copy(frame: Path, tmp_path: Path) -> Path:
+    path = tmp_path / "shot.exr"
+    path.write_bytes(frame.read_bytes())
+    return path
+
+
+# -- outputs that name inputs ---------------------------------------------------------------------
+
+
+def test_enhance_refuses_to_overwrite_its_input(
+    copy: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    before = copy.read_bytes()
+    link = tmp_path / "link.exr"
+    link.symlink_to(copy)
+    hard = tmp_path / "hard.exr"
+    os.link(copy, hard)
+    for output in (copy, link, hard, tmp_path / "." / "shot.exr"):
+        assert depict("enhance", copy, "-o", output) == 2
+        one_error(capfd, "would be overwritten")
+    assert depict("preview", copy, "-o", copy) == 2
+    one_error(capfd, "would be overwritten")
+    assert copy.read_bytes() == before
+
+
+def test_batch_refuses_an_output_pattern_that_names_the_inputs(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    for f in (1, 2, 3):
+        (tmp_path / f"shot.{f:04d}.exr").write_bytes(frame.read_bytes())
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    for pattern in ("shot.%04d.exr", "./shot.@@@@.exr", "shot.####.exr"):
+        code = depict(
+            "batch", tmp_path / "shot.####.exr", "-o", tmp_path / pattern, "--no-progress"
+        )
+        assert code == 2
+        one_error(capfd, "overwritten" if "%" in pattern or "@" in pattern else "input pattern")
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+
+
+def test_batch_frame_ranges_are_bounded(copy: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    args = ("batch", copy.parent / "s.####.exr", "-o", copy.parent / "o.####.exr")
+    assert depict(*args, "--frames", "1-1000000000") == 2
+    one_error(capfd, "more than 100000 frames")
+
+
+# -- special files and links as outputs ------------------------------------------------------------
+
+
+def test_fifo_and_device_outputs_are_refused(
+    copy: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    fifo = tmp_path / "pipe.exr"
+    os.mkfifo(fifo)
+    assert depict("enhance", copy, "-o", fifo) == 2
+    one_error(capfd, "FIFO")
+    assert stat.S_ISFIFO(fifo.stat().st_mode)
+    assert depict("preview", copy, "-o", tmp_path) == 2
+    one_error(capfd, "a directory")
+    if os.geteuid() == 0:  # a character device like /dev/null, made here
+        null = tmp_path / "null.exr"
+        os.mknod(null, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+        assert depict("enhance", copy, "-o", null) == 2
+        one_error(capfd, "character device")
+        assert stat.S_ISCHR(null.stat().st_mode)
+
+
+def test_symlinked_output_is_written_through(copy: Path, tmp_path: Path) -> None:
+    real = tmp_path / "renders" / "out.exr"
+    real.parent.mkdir()
+    real.write_bytes(b"old")
+    link = tmp_path / "latest.exr"
+    link.symlink_to(real)
+    assert depict("enhance", copy, "-o", link) == 0
+    assert link.is_symlink() and link.resolve() == real.resolve()
+    assert real.read_bytes()[:4] == b"\x76\x2f\x31\x01"
+
+
+def test_unwritable_places_and_bad_values_are_one_line(
+    copy: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    blocked = copy  # a file: nothing can be created "inside" it, even by root
+    assert depict("preview", copy, "-o", blocked / "p.png") == 2
+    one_error(capfd, "cannot write")
+    assert depict("arm", "-o", blocked / "arm.png", "--size", "64") == 2
+    one_error(capfd, "cannot write")
+    assert depict("compare", copy, "--directions", "1", "--plot", blocked / "plot.png") == 2
+    one_error(capfd, "cannot write")
+    assert depict("preview", copy, "-o", tmp_path / "p.png", "--exposure", "1e308") == 2
+    one_error(capfd, "--exposure")
+    assert not (tmp_path / "p.png").exists()
+
+
+# -- one clean line per error ----------------------------------------------------------------------
+
+
+def test_corrupt_pixels_give_one_line_with_the_library_words(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    bad = write_corrupt(tmp_path / "corrupt.exr")
+    assert depict("enhance", bad, "-o", tmp_path / "o.exr") == 2
+    line = one_error(capfd, "corrupt pixel data")
+    assert "OpenEXR: (EXR_ERR_CORRUPT_CHUNK)" in line
+    # inspect still describes what the header says
+    assert depict("inspect", bad, "--json") == 0
+    info = json.loads(capfd.readouterr().out)
+    assert info["parts"][0]["channels"] == ["G", "R"]
+    assert "pixels not described" in info["warnings"][0]
+
+
+def test_control_bytes_in_names_are_escaped(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    name = "N\x1b[2J\n.X"
+    src = write_raw_exr(
+        tmp_path / "ctl.exr", {name: np.zeros((4, 4), np.float32)}, pixel_types={name: 7}
+    )
+    assert depict("enhance", src, "-o", tmp_path / "o.exr") == 2
+    line = one_error(capfd, "pixel type 7")
+    assert "\x1b" not in line and "N\\x1b[2J\\x0a.X" in line
+    assert depict("inspect", src) == 0  # the header is described, escaped
+    out = capfd.readouterr().out
+    assert "\x1b" not in out and "N\\x1b[2J\\x0a.X" in out
+
+
+def test_decode_bomb_is_refused_on_the_header(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    bomb = write_decode_bomb(tmp_path / "bomb.exr")
+    monkeypatch.setenv("DEPICT_MAX_DECODED_MB", "1024")
+    assert depict("enhance", bomb, "-o", tmp_path / "o.exr") == 2
+    one_error(capfd, "decode to 1266 MiB, over the limit of 1024 MiB (DEPICT_MAX_DECODED_MB)")
+
+
+def test_deep_pipeline_file_is_one_line(
+    copy: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    deep = tmp_path / "deep.json"
+    effect = '{"op": "x", "params": {"effect": ' * 4000 + "1" + "}}" * 4000
+    deep.write_text('[{"op": "apparent_relief", "params": {"effect": ' + effect + "}}]")
+    assert depict("enhance", copy, "-o", tmp_path / "o.exr", "--pipeline", deep) == 2
+    one_error(capfd, "levels deep")
+
+
+def test_missing_buffer_names_the_buffer(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
+    src = write_raw_exr(tmp_path / "depth.exr", {"depth.Z": np.ones((8, 8), np.float32)})
+    assert depict("enhance", src, "-o", tmp_path / "o.exr") == 2
+    line = one_error(capfd, "the frame has no 'normal' buffer")
+    assert "(--map normal=LAYER)" in line
+    assert "{name}" not in line
+
+
+# -- fireflies -------------------------------------------------------------------------------------
+
+
+def render_with_nan(path: Path, size: tuple[int, int], pixels: dict[str, list[tuple]]) -> Path:
+    """A canonical render with NaN/Inf put at ``pixels``: buffer -> [(y, x, component, value)]."""
+    frame = render(trimesh.creation.icosphere(subdivisions=3), *size)
+    for name, changes in pixels.items():
+        arr = frame.buffers[name].copy()
+        for y, x, k, value in changes:
+            arr[y, x, k] = value
+        frame.buffers[name] = arr
+    frame.outputs = {}  # written from the buffers
+    write_exr(frame, path)
+    return path
+
+
+def test_nan_and_inf_radiance_are_holes_passed_through(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    holes = {
+        "beauty": [(36, 48, 0, np.nan), (30, 40, 1, np.inf)],
+        "diffuse": [(40, 50, 2, np.nan)],
+    }
+    src = render_with_nan(tmp_path / "fireflies.exr", (96, 72), holes)
+    with OpenEXR.File(str(src), separate_channels=True) as f:
+        original = {n: c.pixels.copy() for n, c in f.channels().items()}
+    out = tmp_path / "out.exr"
+    assert depict("enhance", src, "-o", out, "--op", "unsharp_masking") == 0
+    err = capfd.readouterr().err.splitlines()
+    assert err == [
+        "depict: warning: 3 pixel(s) with NaN/Inf radiance (G: 1, R: 1, diffuse.B: 1) treated "
+        "as holes: left out of the operators and written back unchanged"
+    ]
+    with OpenEXR.File(str(out), separate_channels=True) as f:
+        result = {n: c.pixels for n, c in f.channels().items()}
+    rgb = np.dstack([result[c] for c in "RGB"])
+    assert np.isnan(rgb[36, 48, 0]) and np.isposinf(rgb[30, 40, 1])
+    assert np.isfinite(
+        np.delete(rgb.reshape(-1), [(36 * 96 + 48) * 3, (30 * 96 + 40) * 3 + 1])
+    ).all()
+    for y, x in ((36, 48), (30, 40), (40, 50)):  # the holes: every channel as it was
+        for c in "RGB":
+            assert result[c][y, x].tobytes() == original[c][y, x].tobytes()
+    assert not np.array_equal(result["R"], original["R"])  # the operator did work elsewhere
+
+
+def test_nan_in_normals_is_refused_by_enhance_but_described_by_inspect(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    src = render_with_nan(tmp_path / "nan.exr", (64, 48), {"normal": [(24, 32, 0, np.nan)]})
+    assert depict("enhance", src, "-o", tmp_path / "o.exr") == 2
+    one_error(capfd, "channel 'N.X' has 1 NaN/Inf value(s) on covered pixels")
+    assert depict("inspect", src) == 0
+    out = capfd.readouterr().out
+    assert "warning: NaN/Inf in data channels on covered pixels (N.X: 1): masked here" in out
