@@ -106,7 +106,7 @@ def find_frames(folder: Path, names: Iterable[str] = ()) -> list[CorpusFrame]:
     """The frames of ``folder`` (sorted), or only those whose name contains one of ``names``."""
     wanted = tuple(names)
     out = []
-    for exr in sorted(folder.glob("*.exr")):
+    for exr in sorted(p for p in folder.glob("*.exr") if not p.name.startswith(".")):
         if wanted and not any(w in exr.stem for w in wanted):
             continue
         camera = exr.with_suffix(".camera.json")
@@ -141,12 +141,17 @@ def blender_path() -> str:
     return found
 
 
-def render_scene(
-    scene: str, size: str, samples: int, out: Path, threads: int = 0, name: str | None = None
-) -> Path:
-    """Render one frame of ``scene`` with Blender into ``out``; returns the EXR's path."""
+#: What a frame is made of: the EXR and its two sidecars.
+FRAME_SUFFIXES = (".exr", ".camera.json", ".lights.json")
+
+
+def render_scene(scene: str, size: str, samples: int, out: Path, threads: int = 0) -> Path:
+    """Render one frame of ``scene`` with Blender into ``out``; returns the EXR's path. Blender
+    writes under a temporary name; the three files get their names once all are written, so an
+    interrupted render leaves no frame behind."""
     width, height = SIZES[size]
-    name = name or stem(scene, size, samples)
+    name = stem(scene, size, samples)
+    partial = f".{name}.partial"
     cmd = [
         blender_path(),
         "-b",
@@ -156,16 +161,21 @@ def render_scene(
         "--python",
         str(SCENES_DIR / f"{scene}.py"),
         "--",
-        *("--out", str(out), "--name", name),
+        *("--out", str(out), "--name", partial),
         *("--width", str(width), "--height", str(height)),
         *("--samples", str(samples), "--threads", str(threads)),
     ]
     t0 = time.perf_counter()
     run = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    exr = out / f"{name}.exr"
-    if run.returncode != 0 or not exr.is_file():
+    written = [out / (partial + suffix) for suffix in FRAME_SUFFIXES]
+    if run.returncode != 0 or not all(p.is_file() for p in written):
+        for p in written:
+            p.unlink(missing_ok=True)
         tail = "\n".join((run.stdout + run.stderr).splitlines()[-15:])
         raise SystemExit(f"corpus: blender failed on {scene} ({run.returncode}):\n{tail}")
+    for p, suffix in zip(written, FRAME_SUFFIXES, strict=True):
+        p.replace(out / (name + suffix))
+    exr = out / f"{name}.exr"
     print(f"wrote {exr} ({width}x{height}, {samples} spp, {time.perf_counter() - t0:.1f} s)")
     return exr
 

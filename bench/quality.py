@@ -38,7 +38,10 @@ Noise, details and blurs:
   floor: floor pixels facing like the floor's median normal, whose blurred direct diffuse light
   (``DiffDir``) is above :data:`LIT_FRACTION` of its 90th percentile there, eroded by
   :data:`FLOOR_MARGIN` of the image height (away from objects, silhouettes, shadow boundaries
-  and the image border). Frames without floor, direct light or albedo passes give NaN.
+  and the image border). Frames without floor, direct light or albedo passes give NaN. A
+  texture the operator leaves as it was does not count; texture edges it sharpens (halos) do,
+  as added high frequencies of a flat area: at 512 samples, where little Monte-Carlo noise is
+  left, they are most of what unsharp masking adds on the checker floor.
 - Every blur is a normalised convolution over the pixels it concerns (``G*(f·m) / G*m``), so
   background and neighbouring objects do not leak into a region: the band-pass detail is
   interior relief and texture, not silhouettes.
