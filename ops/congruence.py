@@ -414,6 +414,17 @@ def _flow(
     return en, np.multiply(a, inv_mag, out=a), np.multiply(b, inv_mag, out=b), defined, p
 
 
+def _brightness(lum: F32, cov: F32) -> float:
+    """The scale of the image's brightness for the noise floor: the 99.9th percentile of the
+    covered pixels' |luminance| (the maximum would let one firefly or sun glint, thousands of
+    times brighter than the rest, push every real gradient under the floor)."""
+    full = cov > 0.5
+    if not full.any():
+        lmin, lmax = cv2.minMaxLoc(lum)[:2]
+        return max(abs(lmin), abs(lmax)) / max(float(cv2.minMaxLoc(cov)[1]), 1e-6)
+    return float(np.percentile(np.abs(lum[full] / cov[full]), 99.9))
+
+
 def _check_scale(name: str, value: float, hi: float) -> float:
     v = float(value)
     if not np.isfinite(v) or not (0.0 < v <= hi):
@@ -524,8 +535,7 @@ def congruence(
         if np.isnan(dep).any():
             raise ValueError("depth contains NaN (use +inf for background)")
         raise ValueError("image contains NaN or infinite values")
-    lmin, lmax = cv2.minMaxLoc(lum0)[:2]
-    lref = max(abs(lmin), abs(lmax)) / max(float(cv2.minMaxLoc(cov0)[1]), 1e-6)
+    lref = _brightness(lum0, cov0)
 
     # --- integration level: area-downsample the tensor products by f2 so that sigma_i is
     # 2-4 px there.

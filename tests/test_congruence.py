@@ -87,6 +87,16 @@ def test_normals_shape_flow_follows_the_surface() -> None:
         congruence(depth, depth, normal=normal[:-1])
 
 
+def test_one_firefly_does_not_change_the_score() -> None:
+    """A sun glint thousands of times brighter than the rest sets no noise floor."""
+    normal, depth = sphere()
+    img = lambert(normal, (0.3, 0.4, 1.0))
+    ref = congruence(img, depth, normal=normal).score
+    glint = img.copy()
+    glint[64, 64] = 5000.0
+    assert congruence(glint, depth, normal=normal).score == pytest.approx(ref, abs=0.05)
+
+
 def test_constant_image_scores_zero() -> None:
     _, depth = sphere()
     res = congruence(np.full((*depth.shape, 3), 0.7, np.float32), depth)
