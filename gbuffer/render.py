@@ -32,13 +32,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Literal
 
-import cv2
 import numpy as np
 import trimesh
 
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import BUFFERS, Frame
+from gbuffer.mesh import (
+    bounding_sphere,
+    corner_colors,
+    load_mesh,
+    sample_texture,
+    texture_image,
+)
 from ops.ambient_occlusion import ssao
 from ops.shading import MODELS, Light, shade_lobes
 
@@ -46,7 +52,6 @@ if "OpenGL" not in sys.modules:  # must be set before PyOpenGL is first imported
     os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
 
 MAX_SIZE = 16384  # llvmpipe's GL_MAX_RENDERBUFFER_SIZE
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 
 #: Buffers a render produces (canonical names, see gbuffer.frame.BUFFERS).
 RENDER_BUFFERS: tuple[str, ...] = (
@@ -87,86 +92,6 @@ void main() {
 """
 
 _CHUNK = 1 << 18  # pixels per float64 batch in the exact-geometry pass
-
-
-# -- meshes -----------------------------------------------------------------------------------
-
-
-def _tristrips_to_faces(strips: np.ndarray) -> np.ndarray:
-    """Triangles of PLY ``tristrips`` (−1 restarts, alternating winding), degenerates dropped."""
-    s = np.asarray(strips, np.int64).reshape(-1)
-    if s.size < 3:
-        return np.zeros((0, 3), np.int64)
-    restart = s < 0
-    start = np.maximum.accumulate(np.where(restart, np.arange(s.size), -1))  # last restart idx
-    pos = np.arange(s.size) - start - 1  # index within its strip
-    i = np.arange(s.size - 2)
-    ok = ~(restart[i] | restart[i + 1] | restart[i + 2])
-    i = i[ok]
-    odd = (pos[i] % 2) == 1
-    a, b, c = s[i], s[i + 1], s[i + 2]
-    faces = np.stack([a, np.where(odd, c, b), np.where(odd, b, c)], axis=1)
-    keep = (
-        (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    )
-    return faces[keep]
-
-
-def _from_point_cloud(loaded: Any, path: Path) -> trimesh.Trimesh | None:
-    """A mesh from a PLY whose faces are triangle strips (trimesh reads those as points)."""
-    raw = getattr(loaded, "metadata", {}).get("_ply_raw")
-    if not raw or "tristrips" not in raw:
-        return None
-    data = raw["tristrips"]["data"]
-    # ASCII files give {name: (rows, n) array}; binary ones a structured array (count, values)
-    rows = next(iter(data.values())) if isinstance(data, dict) else data[data.dtype.names[0]]
-    strips = [np.asarray(row[row.dtype.names[-1]] if row.dtype.names else row) for row in rows]
-    faces = _tristrips_to_faces(np.concatenate([np.append(st, -1) for st in strips]))
-    vertices = np.asarray(loaded.vertices, np.float64)
-    if faces.size and (faces.max() >= len(vertices) or faces.min() < 0):
-        raise FrameError(f"mesh {path}: triangle strips index missing vertices")
-    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
-
-
-def load_mesh(path: str | Path) -> trimesh.Trimesh:
-    """Read a triangle mesh (OBJ, PLY incl. triangle strips, STL, GLB/glTF, OFF).
-
-    Scenes (glTF, multi-object OBJ) are flattened into one mesh with their node transforms
-    applied. Raises :class:`FrameError` when the file is missing, unreadable, or holds no
-    triangles.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FrameError(f"mesh file {path} does not exist")
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise FrameError(
-            f"mesh file {path} has suffix {path.suffix!r}; supported: {', '.join(MESH_SUFFIXES)}"
-        )
-    loaded: Any
-    try:
-        loaded = trimesh.load(str(path))
-        if isinstance(loaded, trimesh.Scene):
-            loaded = loaded.to_mesh() if loaded.geometry else None
-    except Exception as exc:  # trimesh raises many types on bad files
-        raise FrameError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}") from exc
-    mesh: trimesh.Trimesh | None = None
-    if isinstance(loaded, trimesh.Trimesh):
-        mesh = loaded
-    elif isinstance(loaded, trimesh.PointCloud):
-        mesh = _from_point_cloud(loaded, path)
-    if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
-        raise FrameError(f"mesh file {path} holds no triangles")
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise FrameError(f"mesh file {path} has non-finite vertex coordinates")
-    return mesh
-
-
-def bounding_sphere(mesh: trimesh.Trimesh) -> tuple[np.ndarray, float]:
-    """(centre, radius): the bounding-box centre and the farthest vertex from it."""
-    v = np.asarray(mesh.vertices, np.float64)
-    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    radius = float(np.sqrt(((v - centre) ** 2).sum(axis=1).max()))
-    return centre, max(radius, 1e-12)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: Sequence[float] = (0, 1, 0)) -> np.ndarray:
@@ -237,60 +162,6 @@ def default_lights() -> list[Light]:
         Light("directional", (-1.0, 1.0, 1.0), intensity=1.0),
         Light("directional", (1.0, -0.25, 0.6), intensity=0.25),
     ]
-
-
-# -- colours ----------------------------------------------------------------------------------
-
-_SRGB_LUT = np.array(
-    [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in np.arange(256) / 255.0],
-    np.float32,
-)
-
-
-def _srgb8_to_linear(rgb8: np.ndarray) -> np.ndarray:
-    return _SRGB_LUT[np.asarray(rgb8)[..., :3].astype(np.uint8)]
-
-
-def _is_placeholder(image: np.ndarray) -> bool:
-    """trimesh's stand-in texture (2×2, RGBA 100,100,100,255) for an OBJ without materials."""
-    return image.shape[:2] == (2, 2) and bool(
-        np.all(image.reshape(-1, image.shape[-1])[:, :3] == 100)
-    )
-
-
-def _texture_image(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    """The mesh's base-colour texture as linear float32 (h, w, 3), or None."""
-    visual = mesh.visual
-    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
-        return None
-    material = getattr(visual, "material", None)
-    image = getattr(material, "image", None)
-    if image is None:
-        image = getattr(material, "baseColorTexture", None)
-    if image is None:
-        return None
-    arr = np.asarray(image.convert("RGBA"))
-    if _is_placeholder(arr):
-        return None
-    return _srgb8_to_linear(arr)
-
-
-def _corner_colors(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    """Linear RGB per face corner (F, 3, 3) from vertex / face colours, or None."""
-    visual: Any = mesh.visual
-    kind = getattr(visual, "kind", None)
-    faces = np.asarray(mesh.faces)
-    if kind == "vertex":
-        return np.asarray(_srgb8_to_linear(visual.vertex_colors)[faces], np.float32)
-    if kind == "face":
-        fc = _srgb8_to_linear(visual.face_colors)
-        return np.repeat(fc[:, None, :], 3, axis=1).astype(np.float32)
-    if kind == "texture" and _texture_image(mesh) is None:
-        factor = getattr(getattr(visual, "material", None), "baseColorFactor", None)
-        if factor is not None:
-            rgb = _srgb8_to_linear(np.asarray(factor, np.uint8))
-            return np.broadcast_to(rgb, (len(faces), 3, 3)).astype(np.float32)
-    return None
 
 
 # -- rasteriser -------------------------------------------------------------------------------
@@ -493,7 +364,7 @@ class Rasterizer:
                 if c is not None:
                     color[pix[sel]] = c
             if geometry.texture is not None:
-                color = _sample_texture(geometry.texture, color, covered.reshape(-1))
+                color = sample_texture(geometry.texture, color, covered.reshape(-1))
             elif geometry.corner_colors is None:
                 color[pix] = constant
         shape3 = (height, width, 3)
@@ -596,14 +467,14 @@ class _MeshGeometry:
         else:
             vn = np.asarray(mesh.vertex_normals, np.float64) @ normal_mat.T
             self.vertex_normals = vn
-        self.texture = None if constant_albedo else _texture_image(mesh)
+        self.texture = None if constant_albedo else texture_image(mesh)
         self.uv = (
             np.asarray(getattr(mesh.visual, "uv", None), np.float64)
             if self.texture is not None
             else None
         )
         self.corner_colors = (
-            None if constant_albedo or self.texture is not None else _corner_colors(mesh)
+            None if constant_albedo or self.texture is not None else corner_colors(mesh)
         )
 
     def shade(
@@ -658,26 +529,6 @@ class _MeshGeometry:
             n.astype(np.float32),
             None if color is None else color.astype(np.float32),
         )
-
-
-def _sample_texture(texture: np.ndarray, uv: np.ndarray, covered: np.ndarray) -> np.ndarray:
-    """Bilinear, repeating lookup of ``texture`` at per-pixel (u, v) (v up, OpenGL style)."""
-    th, tw = texture.shape[:2]
-    map_x = (uv[:, 0] * tw - 0.5).astype(np.float32).reshape(1, -1)
-    map_y = ((1.0 - uv[:, 1]) * th - 0.5).astype(np.float32).reshape(1, -1)
-    out = np.zeros_like(uv)
-    idx = np.flatnonzero(covered)
-    for i in range(0, idx.size, 16384):  # cv2.remap maps must be narrower than 32767
-        sel = idx[i : i + 16384]
-        sampled = cv2.remap(
-            texture,
-            map_x[:, sel],
-            map_y[:, sel],
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_WRAP,
-        )
-        out[sel] = np.asarray(sampled, np.float32).reshape(-1, 3)
-    return out
 
 
 _SHARED: Rasterizer | None = None
