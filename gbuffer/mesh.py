@@ -16,6 +16,7 @@ import trimesh
 from gbuffer.errors import FrameError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+FILE_NORMALS = "depict_file_normals"  #: mesh.metadata key: its normals are the file's own
 
 
 # -- meshes -----------------------------------------------------------------------------------
@@ -87,7 +88,13 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         raise FrameError(f"mesh file {path} holds no triangles")
     if not np.all(np.isfinite(mesh.vertices)):
         raise FrameError(f"mesh file {path} has non-finite vertex coordinates")
+    mesh.metadata[FILE_NORMALS] = "vertex_normals" in mesh._cache  # read from the file
     return mesh
+
+
+def has_file_normals(mesh: trimesh.Trimesh) -> bool:
+    """Whether ``mesh`` carries the normals its file gave (OBJ ``vn``, PLY ``nx ny nz``)."""
+    return bool(mesh.metadata.get(FILE_NORMALS)) and "vertex_normals" in mesh._cache
 
 
 def bounding_sphere(mesh: trimesh.Trimesh) -> tuple[np.ndarray, float]:

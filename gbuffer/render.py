@@ -7,10 +7,13 @@ platform for the OpenGL context only and rasterises into a framebuffer object of
 that writes, at each pixel centre, the index of the visible triangle (``gl_PrimitiveID``, as two
 exact 16-bit halves) — read back with ``glReadPixels(GL_FLOAT)``.
 
-Everything else is computed on the CPU in float64 from that index: the exact intersection of the
-pixel's ray with the triangle (Möller-Trumbore), its barycentric coordinates, the interpolated
-vertex normals (trimesh's ``vertex_normals``, or the facet normal with ``flat=True``), colours and
-texture coordinates; then stored as float32. This avoids both 8-bit quantisation and the
+The triangles drawn are those of the smooth surface the mesh stands for: faces welded across UV
+seams, with a normal at each corner for the shading mode (:mod:`gbuffer.surface`), refined by Loop
+subdivision where they are coarse for the image (:mod:`gbuffer.subdivision`). Everything else is
+computed on the CPU in float64 from that index: the exact intersection of the pixel's ray with the
+triangle (Möller-Trumbore), its barycentric coordinates, the interpolated vertex normals (or the
+facet normal with ``shading="flat"``), colours and texture coordinates (through the position of
+the hit on the input face); then stored as float32. This avoids both 8-bit quantisation and the
 interpolation error of a software rasteriser on thin triangles (llvmpipe's perspective-correct
 interpolation is off by up to 2e-4 there). Pixels are sampled at their centres without
 anti-aliasing: coverage is 1 or 0, and every value belongs to exactly one surface.
@@ -45,6 +48,8 @@ from gbuffer.mesh import (
     sample_texture,
     texture_image,
 )
+from gbuffer.subdivision import View, levels_for, refine
+from gbuffer.surface import Shading, smooth_surface
 from ops.ambient_occlusion import ssao
 from ops.shading import MODELS, Light, shade_lobes
 
@@ -173,12 +178,8 @@ def _check_size(width: int, height: int) -> None:
             raise ValueError(f"{name} must be an integer in 1..{MAX_SIZE}, got {value!r}")
 
 
-def _near_far(mesh: trimesh.Trimesh, w2c: np.ndarray, orthographic: bool) -> tuple[float, float]:
-    lo, hi = np.asarray(mesh.bounds, np.float64)
-    corners = np.array(
-        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-    )
-    z = corners @ w2c[:3, :3].T[:, 2] + w2c[2, 3]
+def _near_far(z: np.ndarray, orthographic: bool) -> tuple[float, float]:
+    """Clip planes (near, far) around points at camera-space ``z`` (the camera looks down −z)."""
     depth_min, depth_max = float(-z.max()), float(-z.min())
     # a margin that survives float32 for flat meshes (zero depth range) far from the camera
     pad = 0.01 * (depth_max - depth_min) + 1e-4 * max(abs(depth_min), abs(depth_max), 1e-6)
@@ -304,16 +305,19 @@ class Rasterizer:
         width: int,
         height: int,
         *,
-        flat: bool = False,
+        shading: Shading = "auto",
         albedo: Sequence[float] | None = None,
     ) -> dict[str, np.ndarray]:
         """Geometry buffers of ``mesh`` seen by ``camera`` over a ``width`` × ``height`` window.
 
-        The GPU only resolves visibility: which triangle covers each pixel centre. Position,
-        depth, normal and albedo are then computed on the CPU in float64 from that triangle: the
-        exact intersection of the pixel's ray with the triangle's plane, its barycentric
-        coordinates, and the barycentric interpolation of the vertex normals (renormalised) or
-        the facet normal (``flat``); normals of back faces are flipped towards the camera.
+        The mesh stands for the smooth surface of :func:`gbuffer.surface.smooth_surface` (faces
+        welded across UV seams, corner normals for ``shading``), Loop-subdivided as the image
+        needs (:func:`gbuffer.subdivision.levels_for`). The GPU only resolves visibility: which
+        triangle covers each pixel centre. Position, depth, normal and albedo are then computed on
+        the CPU in float64 from that triangle: the exact intersection of the pixel's ray with it,
+        its barycentric coordinates, and the barycentric interpolation of the vertex normals
+        (renormalised) or the facet normal (``flat``); normals of back faces are flipped towards
+        the camera.
 
         Returns canonical buffers (row 0 at the top): ``coverage`` (H, W) 1/0, ``normal``
         (H, W, 3) camera-space unit (0 on background), ``depth`` (H, W) planar, +inf on
@@ -328,53 +332,23 @@ class Rasterizer:
             raise FrameError("rendering with an orthographic camera needs its ortho_height")
         if camera.projection == "perspective" and camera.fov_y_deg is None:
             raise FrameError("rendering with a perspective camera needs its fov_y_deg")
-        w2c = np.asarray(camera.world_to_camera, np.float64)
         faces = np.asarray(mesh.faces, np.int64)
         if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
             raise FrameError("mesh has no triangles")
         constant = np.asarray((0.8, 0.8, 0.8) if albedo is None else albedo, np.float64)
         if constant.shape != (3,) or not np.all(np.isfinite(constant)) or np.any(constant < 0):
             raise ValueError(f"albedo must be 3 finite values >= 0, got {albedo!r}")
-        rot, trans = w2c[:3, :3], w2c[:3, 3]
-        verts = np.asarray(mesh.vertices, np.float64) @ rot.T + trans
-        ortho = camera.projection == "orthographic"
-        near, far = _near_far(mesh, w2c, ortho)
+        rays = _PixelRays(camera, width, height)
+        geometry = _MeshGeometry(mesh, shading, camera, rays, albedo is not None)
+        near, far = _near_far(geometry.verts[:, 2], rays.ortho)
         proj = camera.projection_matrix(width / height, near, far).astype(np.float32)
-        corners = verts[faces].reshape(-1, 3).astype(np.float32)
+        corners = geometry.verts.astype(np.float32)[geometry.drawn.faces].reshape(-1, 3)
         with self._lock:
             ids = self._draw(corners, proj, width, height)
-
-        covered = ids >= 0
-        pix = np.flatnonzero(covered)
-        coverage = covered.astype(np.float32)
-        position = np.zeros((height * width, 3), np.float32)
-        normal = np.zeros((height * width, 3), np.float32)
-        depth = np.full(height * width, np.inf, np.float32)
-        color = np.zeros((height * width, 3), np.float32)
-        if pix.size:
-            geometry = _MeshGeometry(mesh, faces, verts, rot, flat, albedo is not None)
-            rays = _PixelRays(camera, width, height)
-            fid = ids.reshape(-1)[pix]
-            for i in range(0, pix.size, _CHUNK):
-                sel = slice(i, i + _CHUNK)
-                p, n, c = geometry.shade(fid[sel], *rays.at(pix[sel]))
-                position[pix[sel]] = p
-                normal[pix[sel]] = n
-                depth[pix[sel]] = -p[:, 2]
-                if c is not None:
-                    color[pix[sel]] = c
-            if geometry.texture is not None:
-                color = sample_texture(geometry.texture, color, covered.reshape(-1))
-            elif geometry.corner_colors is None:
-                color[pix] = constant
-        shape3 = (height, width, 3)
-        return {
-            "coverage": coverage,
-            "normal": normal.reshape(shape3),
-            "depth": depth.reshape(height, width),
-            "position": position.reshape(shape3),
-            "albedo": color.reshape(shape3),
-        }
+        buffers = geometry.buffers(ids, rays)
+        if geometry.texture is None and geometry.corner_colors is None:
+            buffers["albedo"][buffers["coverage"] > 0] = constant
+        return buffers
 
     def _draw(self, corners: np.ndarray, proj: np.ndarray, width: int, height: int) -> np.ndarray:
         """(H, W) int64 index of the triangle at each pixel centre (row 0 at the top), −1 = none."""
@@ -420,7 +394,7 @@ class _PixelRays:
     """Camera rays through pixel centres: origin and direction, camera space, float64."""
 
     def __init__(self, camera: Camera, width: int, height: int) -> None:
-        self.width = width
+        self.width, self.height = width, height
         self.ortho = camera.projection == "orthographic"
         if self.ortho:
             assert camera.ortho_height is not None
@@ -445,28 +419,37 @@ class _PixelRays:
             direction[:, 0], direction[:, 1] = x, y
         return origin, direction
 
+    def view(self, near: float) -> View:
+        """What :func:`gbuffer.subdivision.levels_for` needs to size triangles in pixels."""
+        return View(self.scale, self.ortho, self.width, self.height, near)
+
 
 class _MeshGeometry:
-    """Per-face data of a mesh in camera space, and the exact per-pixel evaluation."""
+    """A mesh's surface in camera space, the triangles drawn for it, and the exact per-pixel
+    evaluation."""
 
     def __init__(
         self,
         mesh: trimesh.Trimesh,
-        faces: np.ndarray,
-        verts: np.ndarray,
-        rot: np.ndarray,
-        flat: bool,
+        shading: Shading,
+        camera: Camera,
+        rays: _PixelRays,
         constant_albedo: bool,
     ) -> None:
-        self.faces = faces
-        self.verts = verts
-        normal_mat = np.linalg.inv(rot).T
-        self.flat = flat
-        if flat:
-            self.vertex_normals = None
-        else:
-            vn = np.asarray(mesh.vertex_normals, np.float64) @ normal_mat.T
-            self.vertex_normals = vn
+        assert camera.world_to_camera is not None
+        w2c = np.asarray(camera.world_to_camera, np.float64)
+        rot = w2c[:3, :3]
+        surface = smooth_surface(mesh, shading)
+        self.faces = np.asarray(mesh.faces, np.int64)  # for texture coordinates and colours
+        verts = surface.vertices @ rot.T + w2c[:3, 3]
+        near = _near_far(verts[:, 2], rays.ortho)[0]
+        self.drawn = refine(surface, levels_for(surface, verts, rays.view(near)))
+        self.verts = self.drawn.vertices @ rot.T + w2c[:3, 3]
+        self.normals: np.ndarray | None = None  # (S, 3) at the drawn vertices
+        if self.drawn.normals is not None:
+            normals = self.drawn.normals @ np.linalg.inv(rot)  # (R⁻¹)ᵀ n, as row vectors
+            length = np.linalg.norm(normals, axis=1, keepdims=True)
+            self.normals = normals / np.maximum(length, 1e-300)
         self.texture = None if constant_albedo else texture_image(mesh)
         self.uv = (
             np.asarray(getattr(mesh.visual, "uv", None), np.float64)
@@ -477,19 +460,50 @@ class _MeshGeometry:
             None if constant_albedo or self.texture is not None else corner_colors(mesh)
         )
 
+    def buffers(self, ids: np.ndarray, rays: _PixelRays) -> dict[str, np.ndarray]:
+        """Canonical geometry buffers from the drawn triangle at each pixel (``ids``, −1: none);
+        albedo holds the colours (0 where the mesh has none)."""
+        height, width = ids.shape
+        covered = ids >= 0
+        pix = np.flatnonzero(covered)
+        position = np.zeros((height * width, 3), np.float32)
+        normal = np.zeros((height * width, 3), np.float32)
+        depth = np.full(height * width, np.inf, np.float32)
+        color = np.zeros((height * width, 3), np.float32)
+        tri = ids.reshape(-1)[pix]
+        for i in range(0, pix.size, _CHUNK):
+            sel = slice(i, i + _CHUNK)
+            p, n, c = self.shade(tri[sel], *rays.at(pix[sel]))
+            position[pix[sel]] = p
+            normal[pix[sel]] = n
+            depth[pix[sel]] = -p[:, 2]
+            if c is not None:
+                color[pix[sel]] = c
+        if self.texture is not None and pix.size:
+            color = sample_texture(self.texture, color, covered.reshape(-1))
+        shape3 = (height, width, 3)
+        return {
+            "coverage": covered.astype(np.float32),
+            "normal": normal.reshape(shape3),
+            "depth": depth.reshape(height, width),
+            "position": position.reshape(shape3),
+            "albedo": color.reshape(shape3),
+        }
+
     def shade(
-        self, fid: np.ndarray, origin: np.ndarray, direction: np.ndarray
+        self, tri: np.ndarray, origin: np.ndarray, direction: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Position, normal and colour (or uv for textures) at the rays' hits on faces ``fid``.
+        """Position, normal and colour (or uv for textures) at the rays' hits on drawn
+        triangles ``tri``.
 
         Möller-Trumbore: with e1 = B − A, e2 = C − A, s = o − A, the hit o + t d has barycentric
         coordinates (1 − u − v, u, v), u = (s·(d × e2))/det, v = (d·(s × e1))/det,
         t = (e2·(s × e1))/det, det = e1·(d × e2), all in float64.
         """
-        tri = self.faces[fid]
-        a = self.verts[tri[:, 0]]
-        e1 = self.verts[tri[:, 1]] - a
-        e2 = self.verts[tri[:, 2]] - a
+        corners = self.verts[self.drawn.faces[tri]]
+        a = corners[:, 0]
+        e1 = corners[:, 1] - a
+        e2 = corners[:, 2] - a
         pvec = np.cross(direction, e2)
         det = np.einsum("ij,ij->i", e1, pvec)
         ok = np.abs(det) > 1e-300
@@ -507,23 +521,25 @@ class _MeshGeometry:
         position = origin + t[:, None] * direction
         w = np.stack([1.0 - u - v, u, v], axis=1)
         face_n = np.cross(e1, e2)
-        if self.vertex_normals is None:
+        if self.normals is None:
             n = face_n
         else:
-            n = np.einsum("ij,ijk->ik", w, self.vertex_normals[tri])
+            n = np.einsum("ij,ijk->ik", w, self.normals[self.drawn.faces[tri]])
             weak = np.einsum("ij,ij->i", n, n) < 1e-24
             n[weak] = face_n[weak]
         # seen from behind (the ray runs along the facet normal): flip towards the camera
         back = np.einsum("ij,ij->i", face_n, direction) > 0.0
         n[back] = -n[back]
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        face = self.drawn.parent[tri]
+        if self.drawn.bary is not None:  # on the input face
+            w = np.einsum("ij,ijk->ik", w, self.drawn.bary[tri])
         color: np.ndarray | None = None
         if self.uv is not None:
-            uv = np.einsum("ij,ijk->ik", w, self.uv[tri])
-            color = np.zeros((len(fid), 3))
-            color[:, :2] = uv
+            color = np.zeros((len(tri), 3))
+            color[:, :2] = np.einsum("ij,ijk->ik", w, self.uv[self.faces[face]])
         elif self.corner_colors is not None:
-            color = np.einsum("ij,ijk->ik", w, self.corner_colors[fid])
+            color = np.einsum("ij,ijk->ik", w, self.corner_colors[face])
         return (
             position.astype(np.float32),
             n.astype(np.float32),
@@ -571,7 +587,7 @@ def render(
     albedo: Sequence[float] | None = None,
     ao: Literal["ssao", "none"] = "ssao",
     *,
-    flat: bool = False,
+    shading: Shading = "auto",
     model: str = "blinn_phong",
     ambient: float = 0.1,
     specular: float | Sequence[float] = 0.3,
@@ -593,7 +609,8 @@ def render(
     albedo : linear RGB; default the mesh's texture / vertex / face colours, else 0.8 grey.
     ao : ``"ssao"`` (:func:`ops.ambient_occlusion.ssao`, multiplied into the ambient lobe) or
         ``"none"`` (AO = 1).
-    flat : facet normals instead of smooth vertex normals.
+    shading : ``"auto"`` (the file's normals, else smooth with the creases of a creased mesh),
+        ``"smooth"`` or ``"flat"`` (facet normals); see :mod:`gbuffer.surface`.
     model, ambient, specular, shininess : shading, see :func:`ops.shading.shade_lobes`.
     ao_radius : SSAO radius in scene units; default 0.2 × the bounding-sphere radius.
     ao_directions, ao_steps : SSAO sampling.
@@ -625,7 +642,7 @@ def render(
                 f"lights must be ops.shading.Light objects, got {type(light).__name__}"
             )
     raster = rasterizer if rasterizer is not None else shared_rasterizer()
-    geo = raster.rasterize(mesh, camera, width, height, flat=flat, albedo=albedo)
+    geo = raster.rasterize(mesh, camera, width, height, shading=shading, albedo=albedo)
     display = (width, height)
     view = camera.view_vectors((height, width), display)
     if ao == "ssao":

@@ -199,7 +199,7 @@ def test_ssao_darkens_a_concave_corner() -> None:
     wall.apply_translation((0.0, 1.0, -1.0))
     mesh = trimesh.util.concatenate([floor, wall])
     cam = Camera(world_to_camera=look_at([0.0, 2.5, 3.0], [0.0, 0.3, -0.5]), fov_y_deg=45.0)
-    frame = render(mesh, W, H, camera=cam, ao_radius=0.4, flat=True)
+    frame = render(mesh, W, H, camera=cam, ao_radius=0.4, shading="flat")
     b = frame.buffers
     ao = b["ao"]
     assert cam.world_to_camera is not None
@@ -215,7 +215,7 @@ def test_ssao_darkens_a_concave_corner() -> None:
     assert ao[open_floor].mean() > 0.97
     # AO multiplies the ambient lobe
     np.testing.assert_allclose(b["ambient.light"][..., 0], 0.1 * ao * b["coverage"], atol=1e-6)
-    none = render(mesh, W, H, camera=cam, ao="none", flat=True, outputs=False)
+    none = render(mesh, W, H, camera=cam, ao="none", shading="flat", outputs=False)
     assert np.all(none.buffers["ao"] == 1.0)
     assert none.outputs == {}
 
@@ -229,7 +229,7 @@ def test_flat_normals_on_a_cube() -> None:
     rot = cam.world_to_camera[:3, :3]
     axes = np.concatenate([np.eye(3), -np.eye(3)]) @ rot.T  # world axes in camera space
     for flat in (True, False):
-        n = render(cube, W, H, camera=cam, ao="none", flat=flat).buffers["normal"]
+        n = render(cube, W, H, camera=cam, ao="none", shading="flat" if flat else "smooth").buffers["normal"]
         cover = np.linalg.norm(n, axis=2) > 0.5
         best = np.max(n[cover] @ axes.T, axis=1)
         if flat:
