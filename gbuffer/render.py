@@ -445,7 +445,7 @@ class _MeshGeometry:
         near = _near_far(verts[:, 2], rays.ortho)[0]
         self.drawn = refine(surface, levels_for(surface, verts, rays.view(near)))
         self.verts = self.drawn.vertices @ rot.T + w2c[:3, 3]
-        self.normals: np.ndarray | None = None  # (S, 3) at the drawn vertices
+        self.normals: np.ndarray | None = None  # camera space, indexed by drawn.normal_faces
         if self.drawn.normals is not None:
             normals = self.drawn.normals @ np.linalg.inv(rot)  # (R⁻¹)ᵀ n, as row vectors
             length = np.linalg.norm(normals, axis=1, keepdims=True)
@@ -521,30 +521,40 @@ class _MeshGeometry:
         position = origin + t[:, None] * direction
         w = np.stack([1.0 - u - v, u, v], axis=1)
         face_n = np.cross(e1, e2)
-        if self.normals is None:
+        if self.normals is None or self.drawn.normal_faces is None:
             n = face_n
         else:
-            n = np.einsum("ij,ijk->ik", w, self.normals[self.drawn.faces[tri]])
+            n = np.einsum("ij,ijk->ik", w, self.normals[self.drawn.normal_faces[tri]])
             weak = np.einsum("ij,ij->i", n, n) < 1e-24
             n[weak] = face_n[weak]
         # seen from behind (the ray runs along the facet normal): flip towards the camera
         back = np.einsum("ij,ij->i", face_n, direction) > 0.0
         n[back] = -n[back]
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        face = self.drawn.parent[tri]
-        if self.drawn.bary is not None:  # on the input face
-            w = np.einsum("ij,ijk->ik", w, self.drawn.bary[tri])
         color: np.ndarray | None = None
-        if self.uv is not None:
-            color = np.zeros((len(tri), 3))
-            color[:, :2] = np.einsum("ij,ijk->ik", w, self.uv[self.faces[face]])
-        elif self.corner_colors is not None:
-            color = np.einsum("ij,ijk->ik", w, self.corner_colors[face])
+        if self.uv is not None or self.corner_colors is not None:
+            color = self._color(tri, w)
         return (
             position.astype(np.float32),
             n.astype(np.float32),
             None if color is None else color.astype(np.float32),
         )
+
+    def _color(self, tri: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Colours (or texture coordinates, in the first two channels) at barycentric
+        coordinates ``w`` on drawn triangles ``tri``: those of the input face under them."""
+        face = self.drawn.parent[tri]
+        if self.drawn.bary is not None:
+            w = np.einsum("ij,ijk->ik", w, self.drawn.bary[tri])
+        # a hit a rounding error outside its triangle: no colour outside the corners' range
+        w = np.clip(w, 0.0, None)
+        w /= w.sum(axis=1, keepdims=True)
+        if self.uv is not None:
+            color = np.zeros((len(tri), 3))
+            color[:, :2] = np.einsum("ij,ijk->ik", w, self.uv[self.faces[face]])
+            return color
+        assert self.corner_colors is not None
+        return np.einsum("ij,ijk->ik", w, self.corner_colors[face])
 
 
 _SHARED: Rasterizer | None = None

@@ -16,7 +16,8 @@ limit-position mask (Halstead et al. 1993 solve the same system exactly). The no
 pushed: they stay the smooth field of the input's normals.
 
 :func:`levels_for` picks the level from the camera: enough for most curved edges (the 90th
-percentile of those on screen) to be at most :data:`TARGET_PX` pixels long, within
+percentile of those on screen) to be at most :data:`EDGE_HEIGHTS` of the image height long (about
+five times the derivative scale of the curvature operators, 0.003 of the height), within
 :data:`MAX_TRIANGLES`; a mesh that is already that fine is left as it is.
 """
 
@@ -30,7 +31,7 @@ import trimesh
 
 from gbuffer.surface import SmoothSurface
 
-TARGET_PX = 12.0  #: on-screen length (pixels) the curved edges are refined down to
+EDGE_HEIGHTS = 1 / 64  #: on-screen length the curved edges are refined down to, × image height
 MAX_LEVELS = 8  #: most subdivision levels
 MAX_TRIANGLES = 2_000_000  #: most triangles a refinement may produce
 PUSHES = 3  #: Jacobi iterations that make the limit surface pass through the input vertices
@@ -71,8 +72,9 @@ class Refined:
     """A mesh's surface as triangles to draw: each lies on one face of the input mesh."""
 
     vertices: np.ndarray  #: (S, 3) float64 positions
-    normals: np.ndarray | None  #: (S, 3) unit normals; None: flat shading (facet normals)
     faces: np.ndarray  #: (T, 3) int64 into ``vertices``
+    normals: np.ndarray | None  #: (N, 3) unit normals; None: flat shading (facet normals)
+    normal_faces: np.ndarray | None  #: (T, 3) int64 into ``normals``, per triangle corner
     parent: np.ndarray  #: (T,) the input face each lies on
     bary: np.ndarray | None  #: (T, 3, 3) barycentric coordinates of its corners on the parent
     #: face; None when the triangles are the faces themselves
@@ -81,7 +83,8 @@ class Refined:
 def levels_for(surface: SmoothSurface, verts: np.ndarray, view: View) -> int:
     """Subdivision levels for ``surface`` whose vertices are at camera-space ``verts``: enough
     for the 90th percentile of the on-screen lengths of its curved edges (their two corners'
-    normals differ by more than 1°) to fall to :data:`TARGET_PX`, within :data:`MAX_TRIANGLES`."""
+    normals differ by more than 1°) to fall to :data:`EDGE_HEIGHTS` of the image height, within
+    :data:`MAX_TRIANGLES`."""
     if surface.normals is None:
         return 0
     start, end = surface.faces, np.roll(surface.faces, -1, axis=1)  # edge k: corner k -> k + 1
@@ -94,7 +97,7 @@ def levels_for(surface: SmoothSurface, verts: np.ndarray, view: View) -> int:
         return 0
     depth = np.minimum(-verts[a, 2], -verts[b, 2])
     px = view.pixels(np.linalg.norm(verts[a] - verts[b], axis=1), depth)
-    wanted = float(np.percentile(px, 90)) / TARGET_PX
+    wanted = float(np.percentile(px, 90)) / (EDGE_HEIGHTS * view.height)
     levels = min(MAX_LEVELS, max(0, math.ceil(math.log2(wanted)))) if wanted > 1.0 else 0
     while levels and len(surface.faces) * 4**levels > MAX_TRIANGLES:
         levels -= 1
@@ -106,15 +109,15 @@ def refine(surface: SmoothSurface, levels: int) -> Refined:
 
     With no normals (flat shading) or no levels, the faces themselves."""
     n_faces = len(surface.faces)
+    parent = np.arange(n_faces)
     if surface.normals is None:
-        return Refined(surface.vertices, None, surface.faces, np.arange(n_faces), None)
-    if levels == 0:  # a vertex per face corner
+        return Refined(surface.vertices, surface.faces, None, None, parent, None)
+    if levels == 0:  # a normal per face corner
         corners = np.arange(3 * n_faces).reshape(-1, 3)
-        positions = surface.vertices[surface.faces].reshape(-1, 3)
-        return Refined(positions, surface.normals.reshape(-1, 3), corners, np.arange(n_faces), None)
+        normals = surface.normals.reshape(-1, 3)
+        return Refined(surface.vertices, surface.faces, normals, corners, parent, None)
     positions, normals, faces, welded = _split(surface)
     values = np.concatenate([_push(positions, faces, welded), normals], axis=1)
-    parent = np.arange(n_faces)
     bary = np.broadcast_to(np.eye(3), (n_faces, 3, 3))
     for _ in range(levels):
         values, faces, welded, parent, bary = _step(values, faces, welded, parent, bary)
@@ -122,7 +125,8 @@ def refine(surface: SmoothSurface, levels: int) -> Refined:
     normals = values[:, 3:] / np.maximum(
         np.linalg.norm(values[:, 3:], axis=1, keepdims=True), 1e-300
     )
-    return Refined(values[:, :3], normals, faces, parent, bary.astype(np.float32))  # exact: dyadic
+    bary = bary.astype(np.float32)  # exact: dyadic fractions
+    return Refined(values[:, :3], faces, normals, faces, parent, bary)
 
 
 def _split(surface: SmoothSurface) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

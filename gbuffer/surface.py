@@ -43,9 +43,22 @@ class SmoothSurface:
 
 
 def smooth_surface(mesh: trimesh.Trimesh, shading: Shading = "auto") -> SmoothSurface:
-    """The faces of ``mesh`` welded across seams and their corner normals for ``shading``."""
+    """The faces of ``mesh`` welded across seams and their corner normals for ``shading``.
+
+    Kept in the mesh's cache (dropped when its vertices or faces change): a mesh rendered again,
+    from another camera, does not pay for it twice."""
     if shading not in SHADINGS:
         raise ValueError(f"shading must be one of {', '.join(SHADINGS)}; got {shading!r}")
+    key = f"depict_smooth_surface_{shading}"
+    cached = mesh._cache[key]
+    if isinstance(cached, SmoothSurface):
+        return cached
+    surface = _smooth_surface(mesh, shading)
+    mesh._cache[key] = surface
+    return surface
+
+
+def _smooth_surface(mesh: trimesh.Trimesh, shading: Shading) -> SmoothSurface:
     welded = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False)
     welded.merge_vertices(merge_tex=True, merge_norm=True)  # keeps the faces' order
     vertices = np.asarray(welded.vertices, np.float64)
