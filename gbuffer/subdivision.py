@@ -17,8 +17,10 @@ pushed: they stay the smooth field of the input's normals.
 
 :func:`levels_for` picks the level from the camera: enough for most curved edges (the 90th
 percentile of those on screen) to be at most :data:`EDGE_HEIGHTS` of the image height long (about
-five times the derivative scale of the curvature operators, 0.003 of the height), within
-:data:`MAX_TRIANGLES`; a mesh that is already that fine is left as it is.
+three times the derivative scale of the curvature operators, 0.003 of the height; at least
+:data:`MIN_EDGE_PX` pixels), within :data:`MAX_TRIANGLES`; a mesh that is already that fine is
+left as it is. Scans are (the Stanford bunny's edges are 0.008 of the image height when it fills
+the frame, Igea's 0.006); spot.obj is not (0.03: two levels).
 """
 
 from __future__ import annotations
@@ -31,7 +33,8 @@ import trimesh
 
 from gbuffer.surface import SmoothSurface
 
-EDGE_HEIGHTS = 1 / 64  #: on-screen length the curved edges are refined down to, × image height
+EDGE_HEIGHTS = 0.01  #: on-screen length the curved edges are refined down to, × image height
+MIN_EDGE_PX = 4.0  #: ... but not below this many pixels (small images)
 MAX_LEVELS = 8  #: most subdivision levels
 MAX_TRIANGLES = 2_000_000  #: most triangles a refinement may produce
 PUSHES = 3  #: Jacobi iterations that make the limit surface pass through the input vertices
@@ -83,8 +86,8 @@ class Refined:
 def levels_for(surface: SmoothSurface, verts: np.ndarray, view: View) -> int:
     """Subdivision levels for ``surface`` whose vertices are at camera-space ``verts``: enough
     for the 90th percentile of the on-screen lengths of its curved edges (their two corners'
-    normals differ by more than 1°) to fall to :data:`EDGE_HEIGHTS` of the image height, within
-    :data:`MAX_TRIANGLES`."""
+    normals differ by more than 1°) to fall to :data:`EDGE_HEIGHTS` of the image height (or
+    :data:`MIN_EDGE_PX`), within :data:`MAX_TRIANGLES`."""
     if surface.normals is None:
         return 0
     start, end = surface.faces, np.roll(surface.faces, -1, axis=1)  # edge k: corner k -> k + 1
@@ -97,7 +100,7 @@ def levels_for(surface: SmoothSurface, verts: np.ndarray, view: View) -> int:
         return 0
     depth = np.minimum(-verts[a, 2], -verts[b, 2])
     px = view.pixels(np.linalg.norm(verts[a] - verts[b], axis=1), depth)
-    wanted = float(np.percentile(px, 90)) / (EDGE_HEIGHTS * view.height)
+    wanted = float(np.percentile(px, 90)) / max(EDGE_HEIGHTS * view.height, MIN_EDGE_PX)
     levels = min(MAX_LEVELS, max(0, math.ceil(math.log2(wanted)))) if wanted > 1.0 else 0
     while levels and len(surface.faces) * 4**levels > MAX_TRIANGLES:
         levels -= 1
