@@ -1,16 +1,17 @@
 """Render float32 G-buffers from a mesh: OSMesa visibility, exact float64 geometry on the CPU.
 
 pyrender's OSMesa context renders into an 8-bit colour buffer, and 8-bit normals add 11-31 %
-noise to curvature (DESIGN.md), so Depict reads no colour from it. It borrows pyrender's OSMesa
-platform for the OpenGL context only and rasterises into a framebuffer object of its own (a
-``GL_RGBA32F`` colour attachment and a ``GL_DEPTH_COMPONENT32F`` depth buffer) with a tiny shader
-that writes, at each pixel centre, the index of the visible triangle (``gl_PrimitiveID``, as two
-exact 16-bit halves) — read back with ``glReadPixels(GL_FLOAT)``.
+noise to curvature (DESIGN.md), so Depict reads no colour from it: the GPU only tells which
+triangle covers each pixel centre (:class:`gbuffer.osmesa.TriangleIds`, a float32 framebuffer of
+its own in pyrender's OSMesa context).
 
-Everything else is computed on the CPU in float64 from that index: the exact intersection of the
-pixel's ray with the triangle (Möller-Trumbore), its barycentric coordinates, the interpolated
-vertex normals (trimesh's ``vertex_normals``, or the facet normal with ``flat=True``), colours and
-texture coordinates; then stored as float32. This avoids both 8-bit quantisation and the
+The triangles drawn are those of the smooth surface the mesh stands for: faces welded across UV
+seams, with a normal at each corner for the shading mode (:mod:`gbuffer.surface`), refined by Loop
+subdivision where they are coarse for the image (:mod:`gbuffer.subdivision`). Everything else is
+computed on the CPU in float64 from that index: the exact intersection of the pixel's ray with the
+triangle (Möller-Trumbore), its barycentric coordinates, the interpolated vertex normals (or the
+facet normal with ``shading="flat"``), colours and texture coordinates (through the position of
+the hit on the input face); then stored as float32. This avoids both 8-bit quantisation and the
 interpolation error of a software rasteriser on thin triangles (llvmpipe's perspective-correct
 interpolation is off by up to 2e-4 there). Pixels are sampled at their centres without
 anti-aliasing: coverage is 1 or 0, and every value belongs to exactly one surface.
@@ -26,27 +27,31 @@ from __future__ import annotations
 import atexit
 import math
 import os
-import sys
 import threading
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
-import cv2
 import numpy as np
 import trimesh
 
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import BUFFERS, Frame
+from gbuffer.mesh import (
+    bounding_sphere,
+    corner_colors,
+    load_mesh,
+    sample_texture,
+    texture_image,
+)
+from gbuffer.osmesa import TriangleIds
+from gbuffer.subdivision import View, levels_for, refine
+from gbuffer.surface import Shading, smooth_surface
 from ops.ambient_occlusion import ssao
 from ops.shading import MODELS, Light, shade_lobes
 
-if "OpenGL" not in sys.modules:  # must be set before PyOpenGL is first imported
-    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
-
 MAX_SIZE = 16384  # llvmpipe's GL_MAX_RENDERBUFFER_SIZE
-MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 
 #: Buffers a render produces (canonical names, see gbuffer.frame.BUFFERS).
 RENDER_BUFFERS: tuple[str, ...] = (
@@ -69,104 +74,7 @@ RENDER_BUFFERS: tuple[str, ...] = (
     "specular.color",
 )
 
-_VERTEX_SHADER = """#version 330 core
-layout(location = 0) in vec3 a_pos;
-uniform mat4 u_proj;
-void main() {
-    gl_Position = u_proj * vec4(a_pos, 1.0);
-}
-"""
-
-# the triangle drawn at each pixel centre, as two exact float halves (ids < 2^32)
-_FRAGMENT_SHADER = """#version 330 core
-layout(location = 0) out vec4 o_id;
-void main() {
-    uint id = uint(gl_PrimitiveID);
-    o_id = vec4(float(id & 0xFFFFu), float(id >> 16u), 1.0, 0.0);
-}
-"""
-
 _CHUNK = 1 << 18  # pixels per float64 batch in the exact-geometry pass
-
-
-# -- meshes -----------------------------------------------------------------------------------
-
-
-def _tristrips_to_faces(strips: np.ndarray) -> np.ndarray:
-    """Triangles of PLY ``tristrips`` (−1 restarts, alternating winding), degenerates dropped."""
-    s = np.asarray(strips, np.int64).reshape(-1)
-    if s.size < 3:
-        return np.zeros((0, 3), np.int64)
-    restart = s < 0
-    start = np.maximum.accumulate(np.where(restart, np.arange(s.size), -1))  # last restart idx
-    pos = np.arange(s.size) - start - 1  # index within its strip
-    i = np.arange(s.size - 2)
-    ok = ~(restart[i] | restart[i + 1] | restart[i + 2])
-    i = i[ok]
-    odd = (pos[i] % 2) == 1
-    a, b, c = s[i], s[i + 1], s[i + 2]
-    faces = np.stack([a, np.where(odd, c, b), np.where(odd, b, c)], axis=1)
-    keep = (
-        (faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 0] != faces[:, 2])
-    )
-    return faces[keep]
-
-
-def _from_point_cloud(loaded: Any, path: Path) -> trimesh.Trimesh | None:
-    """A mesh from a PLY whose faces are triangle strips (trimesh reads those as points)."""
-    raw = getattr(loaded, "metadata", {}).get("_ply_raw")
-    if not raw or "tristrips" not in raw:
-        return None
-    data = raw["tristrips"]["data"]
-    # ASCII files give {name: (rows, n) array}; binary ones a structured array (count, values)
-    rows = next(iter(data.values())) if isinstance(data, dict) else data[data.dtype.names[0]]
-    strips = [np.asarray(row[row.dtype.names[-1]] if row.dtype.names else row) for row in rows]
-    faces = _tristrips_to_faces(np.concatenate([np.append(st, -1) for st in strips]))
-    vertices = np.asarray(loaded.vertices, np.float64)
-    if faces.size and (faces.max() >= len(vertices) or faces.min() < 0):
-        raise FrameError(f"mesh {path}: triangle strips index missing vertices")
-    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
-
-
-def load_mesh(path: str | Path) -> trimesh.Trimesh:
-    """Read a triangle mesh (OBJ, PLY incl. triangle strips, STL, GLB/glTF, OFF).
-
-    Scenes (glTF, multi-object OBJ) are flattened into one mesh with their node transforms
-    applied. Raises :class:`FrameError` when the file is missing, unreadable, or holds no
-    triangles.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FrameError(f"mesh file {path} does not exist")
-    if path.suffix.lower() not in MESH_SUFFIXES:
-        raise FrameError(
-            f"mesh file {path} has suffix {path.suffix!r}; supported: {', '.join(MESH_SUFFIXES)}"
-        )
-    loaded: Any
-    try:
-        loaded = trimesh.load(str(path))
-        if isinstance(loaded, trimesh.Scene):
-            loaded = loaded.to_mesh() if loaded.geometry else None
-    except Exception as exc:  # trimesh raises many types on bad files
-        raise FrameError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}") from exc
-    mesh: trimesh.Trimesh | None = None
-    if isinstance(loaded, trimesh.Trimesh):
-        mesh = loaded
-    elif isinstance(loaded, trimesh.PointCloud):
-        mesh = _from_point_cloud(loaded, path)
-    if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
-        raise FrameError(f"mesh file {path} holds no triangles")
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise FrameError(f"mesh file {path} has non-finite vertex coordinates")
-    return mesh
-
-
-def bounding_sphere(mesh: trimesh.Trimesh) -> tuple[np.ndarray, float]:
-    """(centre, radius): the bounding-box centre and the farthest vertex from it."""
-    v = np.asarray(mesh.vertices, np.float64)
-    centre = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    radius = float(np.sqrt(((v - centre) ** 2).sum(axis=1).max()))
-    return centre, max(radius, 1e-12)
 
 
 def look_at(eye: np.ndarray, target: np.ndarray, up: Sequence[float] = (0, 1, 0)) -> np.ndarray:
@@ -239,60 +147,6 @@ def default_lights() -> list[Light]:
     ]
 
 
-# -- colours ----------------------------------------------------------------------------------
-
-_SRGB_LUT = np.array(
-    [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in np.arange(256) / 255.0],
-    np.float32,
-)
-
-
-def _srgb8_to_linear(rgb8: np.ndarray) -> np.ndarray:
-    return _SRGB_LUT[np.asarray(rgb8)[..., :3].astype(np.uint8)]
-
-
-def _is_placeholder(image: np.ndarray) -> bool:
-    """trimesh's stand-in texture (2×2, RGBA 100,100,100,255) for an OBJ without materials."""
-    return image.shape[:2] == (2, 2) and bool(
-        np.all(image.reshape(-1, image.shape[-1])[:, :3] == 100)
-    )
-
-
-def _texture_image(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    """The mesh's base-colour texture as linear float32 (h, w, 3), or None."""
-    visual = mesh.visual
-    if getattr(visual, "kind", None) != "texture" or getattr(visual, "uv", None) is None:
-        return None
-    material = getattr(visual, "material", None)
-    image = getattr(material, "image", None)
-    if image is None:
-        image = getattr(material, "baseColorTexture", None)
-    if image is None:
-        return None
-    arr = np.asarray(image.convert("RGBA"))
-    if _is_placeholder(arr):
-        return None
-    return _srgb8_to_linear(arr)
-
-
-def _corner_colors(mesh: trimesh.Trimesh) -> np.ndarray | None:
-    """Linear RGB per face corner (F, 3, 3) from vertex / face colours, or None."""
-    visual: Any = mesh.visual
-    kind = getattr(visual, "kind", None)
-    faces = np.asarray(mesh.faces)
-    if kind == "vertex":
-        return np.asarray(_srgb8_to_linear(visual.vertex_colors)[faces], np.float32)
-    if kind == "face":
-        fc = _srgb8_to_linear(visual.face_colors)
-        return np.repeat(fc[:, None, :], 3, axis=1).astype(np.float32)
-    if kind == "texture" and _texture_image(mesh) is None:
-        factor = getattr(getattr(visual, "material", None), "baseColorFactor", None)
-        if factor is not None:
-            rgb = _srgb8_to_linear(np.asarray(factor, np.uint8))
-            return np.broadcast_to(rgb, (len(faces), 3, 3)).astype(np.float32)
-    return None
-
-
 # -- rasteriser -------------------------------------------------------------------------------
 
 
@@ -302,12 +156,8 @@ def _check_size(width: int, height: int) -> None:
             raise ValueError(f"{name} must be an integer in 1..{MAX_SIZE}, got {value!r}")
 
 
-def _near_far(mesh: trimesh.Trimesh, w2c: np.ndarray, orthographic: bool) -> tuple[float, float]:
-    lo, hi = np.asarray(mesh.bounds, np.float64)
-    corners = np.array(
-        [[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
-    )
-    z = corners @ w2c[:3, :3].T[:, 2] + w2c[2, 3]
+def _near_far(z: np.ndarray, orthographic: bool) -> tuple[float, float]:
+    """Clip planes (near, far) around points at camera-space ``z`` (the camera looks down −z)."""
     depth_min, depth_max = float(-z.max()), float(-z.min())
     # a margin that survives float32 for flat meshes (zero depth range) far from the camera
     pad = 0.01 * (depth_max - depth_min) + 1e-4 * max(abs(depth_min), abs(depth_max), 1e-6)
@@ -319,112 +169,13 @@ def _near_far(mesh: trimesh.Trimesh, w2c: np.ndarray, orthographic: bool) -> tup
     return max(depth_min - pad, far * 1e-4), far
 
 
-class Rasterizer:
-    """An OSMesa context with a float32 framebuffer; rasterises meshes into G-buffers.
+class Rasterizer(TriangleIds):
+    """Rasterises meshes into G-buffers in an OSMesa context (:class:`TriangleIds`).
 
     One instance is reusable across meshes and sizes (the framebuffer is reallocated when the size
     changes; creating the context is the expensive part). Thread-safe (one render at a time).
     Call :meth:`delete` (or use it as a context manager) to free the context.
     """
-
-    def __init__(self) -> None:
-        self._lock = threading.RLock()
-        self._platform: Any = None
-        self._program: Any = None
-        self._vao: Any = None
-        self._fbo: Any = None
-        self._renderbuffers: list[Any] = []
-        self._size: tuple[int, int] | None = None
-
-    def __enter__(self) -> Rasterizer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.delete()
-
-    def _context(self) -> Any:
-        """Make the context current (creating it on first use); returns the GL module."""
-        platform_name = os.environ.get("PYOPENGL_PLATFORM", "osmesa")
-        if platform_name != "osmesa":
-            raise FrameError(
-                f"mesh rendering needs PYOPENGL_PLATFORM=osmesa (it is {platform_name!r}); "
-                "unset it or import gbuffer.render before anything imports OpenGL"
-            )
-        if not hasattr(np, "infty"):  # pyrender 0.1.45 still uses np.infty
-            setattr(np, "infty", np.inf)  # noqa: B010
-        try:
-            from OpenGL import GL as gl
-            from OpenGL.GL import shaders
-            from pyrender.platforms.osmesa import OSMesaPlatform
-        except Exception as exc:
-            raise FrameError(f"OpenGL/OSMesa is not available for mesh rendering: {exc}") from exc
-        if self._platform is None:
-            platform = OSMesaPlatform(1, 1)
-            try:
-                platform.init_context()
-                platform.make_current()
-            except Exception as exc:
-                raise FrameError(
-                    f"cannot create an OSMesa context (install libosmesa6): {exc}"
-                ) from exc
-            self._platform = platform
-            self._program = shaders.compileProgram(
-                shaders.compileShader(_VERTEX_SHADER, gl.GL_VERTEX_SHADER),
-                shaders.compileShader(_FRAGMENT_SHADER, gl.GL_FRAGMENT_SHADER),
-                validate=False,
-            )
-            self._vao = gl.glGenVertexArrays(1)
-        else:
-            self._platform.make_current()
-        return gl
-
-    def _target(self, gl: Any, width: int, height: int) -> None:
-        if self._size == (width, height):
-            gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, self._fbo)
-            return
-        self._free_target(gl)
-        self._fbo = gl.glGenFramebuffers(1)
-        gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, self._fbo)
-        rbs = list(np.atleast_1d(gl.glGenRenderbuffers(2)))
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, rbs[0])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_RGBA32F, width, height)
-        gl.glFramebufferRenderbuffer(
-            gl.GL_FRAMEBUFFER, gl.GL_COLOR_ATTACHMENT0, gl.GL_RENDERBUFFER, rbs[0]
-        )
-        gl.glBindRenderbuffer(gl.GL_RENDERBUFFER, rbs[1])
-        gl.glRenderbufferStorage(gl.GL_RENDERBUFFER, gl.GL_DEPTH_COMPONENT32F, width, height)
-        gl.glFramebufferRenderbuffer(
-            gl.GL_FRAMEBUFFER, gl.GL_DEPTH_ATTACHMENT, gl.GL_RENDERBUFFER, rbs[1]
-        )
-        self._renderbuffers = rbs
-        status = gl.glCheckFramebufferStatus(gl.GL_FRAMEBUFFER)
-        if status != gl.GL_FRAMEBUFFER_COMPLETE:
-            self._free_target(gl)
-            raise FrameError(f"float framebuffer {width}x{height} is incomplete (status {status})")
-        self._size = (width, height)
-
-    def _free_target(self, gl: Any) -> None:
-        if self._fbo is not None:
-            gl.glBindFramebuffer(gl.GL_FRAMEBUFFER, 0)
-            gl.glDeleteFramebuffers(1, [self._fbo])
-            gl.glDeleteRenderbuffers(len(self._renderbuffers), self._renderbuffers)
-        self._fbo, self._renderbuffers, self._size = None, [], None
-
-    def delete(self) -> None:
-        """Free the framebuffer and the OSMesa context (a later render creates them again)."""
-        with self._lock:
-            if self._platform is None:
-                return
-            try:
-                gl = self._context()
-                self._free_target(gl)
-                if self._program is not None:
-                    gl.glDeleteProgram(self._program)
-                if self._vao is not None:
-                    gl.glDeleteVertexArrays(1, [self._vao])
-            finally:
-                self._platform.delete_context()
-                self._platform = self._program = self._vao = None
 
     def rasterize(
         self,
@@ -433,16 +184,19 @@ class Rasterizer:
         width: int,
         height: int,
         *,
-        flat: bool = False,
+        shading: Shading = "auto",
         albedo: Sequence[float] | None = None,
     ) -> dict[str, np.ndarray]:
         """Geometry buffers of ``mesh`` seen by ``camera`` over a ``width`` × ``height`` window.
 
-        The GPU only resolves visibility: which triangle covers each pixel centre. Position,
-        depth, normal and albedo are then computed on the CPU in float64 from that triangle: the
-        exact intersection of the pixel's ray with the triangle's plane, its barycentric
-        coordinates, and the barycentric interpolation of the vertex normals (renormalised) or
-        the facet normal (``flat``); normals of back faces are flipped towards the camera.
+        The mesh stands for the smooth surface of :func:`gbuffer.surface.smooth_surface` (faces
+        welded across UV seams, corner normals for ``shading``), Loop-subdivided as the image
+        needs (:func:`gbuffer.subdivision.levels_for`). The GPU only resolves visibility: which
+        triangle covers each pixel centre. Position, depth, normal and albedo are then computed on
+        the CPU in float64 from that triangle: the exact intersection of the pixel's ray with it,
+        its barycentric coordinates, and the barycentric interpolation of the vertex normals
+        (renormalised) or the facet normal (``flat``); normals of back faces are flipped towards
+        the camera.
 
         Returns canonical buffers (row 0 at the top): ``coverage`` (H, W) 1/0, ``normal``
         (H, W, 3) camera-space unit (0 on background), ``depth`` (H, W) planar, +inf on
@@ -457,99 +211,30 @@ class Rasterizer:
             raise FrameError("rendering with an orthographic camera needs its ortho_height")
         if camera.projection == "perspective" and camera.fov_y_deg is None:
             raise FrameError("rendering with a perspective camera needs its fov_y_deg")
-        w2c = np.asarray(camera.world_to_camera, np.float64)
         faces = np.asarray(mesh.faces, np.int64)
         if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
             raise FrameError("mesh has no triangles")
         constant = np.asarray((0.8, 0.8, 0.8) if albedo is None else albedo, np.float64)
         if constant.shape != (3,) or not np.all(np.isfinite(constant)) or np.any(constant < 0):
             raise ValueError(f"albedo must be 3 finite values >= 0, got {albedo!r}")
-        rot, trans = w2c[:3, :3], w2c[:3, 3]
-        verts = np.asarray(mesh.vertices, np.float64) @ rot.T + trans
-        ortho = camera.projection == "orthographic"
-        near, far = _near_far(mesh, w2c, ortho)
+        rays = _PixelRays(camera, width, height)
+        geometry = _MeshGeometry(mesh, shading, camera, rays, albedo is not None)
+        near, far = _near_far(geometry.verts[:, 2], rays.ortho)
         proj = camera.projection_matrix(width / height, near, far).astype(np.float32)
-        corners = verts[faces].reshape(-1, 3).astype(np.float32)
+        corners = geometry.verts.astype(np.float32)[geometry.drawn.faces].reshape(-1, 3)
         with self._lock:
-            ids = self._draw(corners, proj, width, height)
-
-        covered = ids >= 0
-        pix = np.flatnonzero(covered)
-        coverage = covered.astype(np.float32)
-        position = np.zeros((height * width, 3), np.float32)
-        normal = np.zeros((height * width, 3), np.float32)
-        depth = np.full(height * width, np.inf, np.float32)
-        color = np.zeros((height * width, 3), np.float32)
-        if pix.size:
-            geometry = _MeshGeometry(mesh, faces, verts, rot, flat, albedo is not None)
-            rays = _PixelRays(camera, width, height)
-            fid = ids.reshape(-1)[pix]
-            for i in range(0, pix.size, _CHUNK):
-                sel = slice(i, i + _CHUNK)
-                p, n, c = geometry.shade(fid[sel], *rays.at(pix[sel]))
-                position[pix[sel]] = p
-                normal[pix[sel]] = n
-                depth[pix[sel]] = -p[:, 2]
-                if c is not None:
-                    color[pix[sel]] = c
-            if geometry.texture is not None:
-                color = _sample_texture(geometry.texture, color, covered.reshape(-1))
-            elif geometry.corner_colors is None:
-                color[pix] = constant
-        shape3 = (height, width, 3)
-        return {
-            "coverage": coverage,
-            "normal": normal.reshape(shape3),
-            "depth": depth.reshape(height, width),
-            "position": position.reshape(shape3),
-            "albedo": color.reshape(shape3),
-        }
-
-    def _draw(self, corners: np.ndarray, proj: np.ndarray, width: int, height: int) -> np.ndarray:
-        """(H, W) int64 index of the triangle at each pixel centre (row 0 at the top), −1 = none."""
-        gl = self._context()
-        self._target(gl, width, height)
-        gl.glViewport(0, 0, width, height)
-        gl.glDrawBuffers(1, [gl.GL_COLOR_ATTACHMENT0])
-        gl.glDisable(gl.GL_CULL_FACE)
-        gl.glDisable(gl.GL_BLEND)
-        gl.glEnable(gl.GL_DEPTH_TEST)
-        gl.glDepthFunc(gl.GL_LESS)
-        gl.glClearColor(0.0, 0.0, 0.0, 0.0)
-        gl.glClearDepth(1.0)
-        gl.glClear(gl.GL_COLOR_BUFFER_BIT | gl.GL_DEPTH_BUFFER_BIT)
-        gl.glUseProgram(self._program)
-        gl.glUniformMatrix4fv(gl.glGetUniformLocation(self._program, "u_proj"), 1, gl.GL_TRUE, proj)
-        gl.glBindVertexArray(self._vao)
-        buffer = gl.glGenBuffers(1)
-        try:
-            arr = np.ascontiguousarray(corners, np.float32)
-            gl.glBindBuffer(gl.GL_ARRAY_BUFFER, buffer)
-            gl.glBufferData(gl.GL_ARRAY_BUFFER, arr.nbytes, arr, gl.GL_STREAM_DRAW)
-            gl.glEnableVertexAttribArray(0)
-            gl.glVertexAttribPointer(0, 3, gl.GL_FLOAT, False, 0, None)
-            gl.glDrawArrays(gl.GL_TRIANGLES, 0, len(arr))
-            gl.glReadBuffer(gl.GL_COLOR_ATTACHMENT0)
-            raw = gl.glReadPixels(0, 0, width, height, gl.GL_RGBA, gl.GL_FLOAT)
-            err = gl.glGetError()
-            if err != gl.GL_NO_ERROR:
-                raise FrameError(f"OpenGL error {err} while rendering")
-        finally:
-            gl.glDisableVertexAttribArray(0)
-            gl.glBindBuffer(gl.GL_ARRAY_BUFFER, 0)
-            gl.glDeleteBuffers(1, [buffer])
-            gl.glBindVertexArray(0)
-        rgba = np.asarray(raw, np.float32).reshape(height, width, 4)[::-1]  # GL row 0: bottom
-        ids = rgba[..., 0].astype(np.int64) + (rgba[..., 1].astype(np.int64) << 16)
-        ids[rgba[..., 2] < 0.5] = -1
-        return ids
+            ids = self.draw(corners, proj, width, height)
+        buffers = geometry.buffers(ids, rays)
+        if geometry.texture is None and geometry.corner_colors is None:
+            buffers["albedo"][buffers["coverage"] > 0] = constant
+        return buffers
 
 
 class _PixelRays:
     """Camera rays through pixel centres: origin and direction, camera space, float64."""
 
     def __init__(self, camera: Camera, width: int, height: int) -> None:
-        self.width = width
+        self.width, self.height = width, height
         self.ortho = camera.projection == "orthographic"
         if self.ortho:
             assert camera.ortho_height is not None
@@ -574,51 +259,91 @@ class _PixelRays:
             direction[:, 0], direction[:, 1] = x, y
         return origin, direction
 
+    def view(self, near: float) -> View:
+        """What :func:`gbuffer.subdivision.levels_for` needs to size triangles in pixels."""
+        return View(self.scale, self.ortho, self.width, self.height, near)
+
 
 class _MeshGeometry:
-    """Per-face data of a mesh in camera space, and the exact per-pixel evaluation."""
+    """A mesh's surface in camera space, the triangles drawn for it, and the exact per-pixel
+    evaluation."""
 
     def __init__(
         self,
         mesh: trimesh.Trimesh,
-        faces: np.ndarray,
-        verts: np.ndarray,
-        rot: np.ndarray,
-        flat: bool,
+        shading: Shading,
+        camera: Camera,
+        rays: _PixelRays,
         constant_albedo: bool,
     ) -> None:
-        self.faces = faces
-        self.verts = verts
-        normal_mat = np.linalg.inv(rot).T
-        self.flat = flat
-        if flat:
-            self.vertex_normals = None
-        else:
-            vn = np.asarray(mesh.vertex_normals, np.float64) @ normal_mat.T
-            self.vertex_normals = vn
-        self.texture = None if constant_albedo else _texture_image(mesh)
+        assert camera.world_to_camera is not None
+        w2c = np.asarray(camera.world_to_camera, np.float64)
+        rot = w2c[:3, :3]
+        surface = smooth_surface(mesh, shading)
+        self.faces = np.asarray(mesh.faces, np.int64)  # for texture coordinates and colours
+        verts = surface.vertices @ rot.T + w2c[:3, 3]
+        near = _near_far(verts[:, 2], rays.ortho)[0]
+        self.drawn = refine(surface, levels_for(surface, verts, rays.view(near)))
+        self.verts = self.drawn.vertices @ rot.T + w2c[:3, 3]
+        self.normals: np.ndarray | None = None  # camera space, indexed by drawn.normal_faces
+        if self.drawn.normals is not None:
+            normals = self.drawn.normals @ np.linalg.inv(rot)  # (R⁻¹)ᵀ n, as row vectors
+            length = np.linalg.norm(normals, axis=1, keepdims=True)
+            self.normals = normals / np.maximum(length, 1e-300)
+        self.texture = None if constant_albedo else texture_image(mesh)
         self.uv = (
             np.asarray(getattr(mesh.visual, "uv", None), np.float64)
             if self.texture is not None
             else None
         )
         self.corner_colors = (
-            None if constant_albedo or self.texture is not None else _corner_colors(mesh)
+            None if constant_albedo or self.texture is not None else corner_colors(mesh)
         )
 
+    def buffers(self, ids: np.ndarray, rays: _PixelRays) -> dict[str, np.ndarray]:
+        """Canonical geometry buffers from the drawn triangle at each pixel (``ids``, −1: none);
+        albedo holds the colours (0 where the mesh has none)."""
+        height, width = ids.shape
+        covered = ids >= 0
+        pix = np.flatnonzero(covered)
+        position = np.zeros((height * width, 3), np.float32)
+        normal = np.zeros((height * width, 3), np.float32)
+        depth = np.full(height * width, np.inf, np.float32)
+        color = np.zeros((height * width, 3), np.float32)
+        tri = ids.reshape(-1)[pix]
+        for i in range(0, pix.size, _CHUNK):
+            sel = slice(i, i + _CHUNK)
+            p, n, c = self.shade(tri[sel], *rays.at(pix[sel]))
+            position[pix[sel]] = p
+            normal[pix[sel]] = n
+            depth[pix[sel]] = -p[:, 2]
+            if c is not None:
+                color[pix[sel]] = c
+        if self.texture is not None and pix.size:
+            color = sample_texture(self.texture, color, covered.reshape(-1))
+        shape3 = (height, width, 3)
+        return {
+            "coverage": covered.astype(np.float32),
+            "normal": normal.reshape(shape3),
+            "depth": depth.reshape(height, width),
+            "position": position.reshape(shape3),
+            "albedo": color.reshape(shape3),
+        }
+
     def shade(
-        self, fid: np.ndarray, origin: np.ndarray, direction: np.ndarray
+        self, tri: np.ndarray, origin: np.ndarray, direction: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        """Position, normal and colour (or uv for textures) at the rays' hits on faces ``fid``.
+        """Position, normal and colour (or uv for textures) at the rays' hits on drawn
+        triangles ``tri``.
 
         Möller-Trumbore: with e1 = B − A, e2 = C − A, s = o − A, the hit o + t d has barycentric
         coordinates (1 − u − v, u, v), u = (s·(d × e2))/det, v = (d·(s × e1))/det,
         t = (e2·(s × e1))/det, det = e1·(d × e2), all in float64.
         """
-        tri = self.faces[fid]
-        a = self.verts[tri[:, 0]]
-        e1 = self.verts[tri[:, 1]] - a
-        e2 = self.verts[tri[:, 2]] - a
+        corners = self.verts[self.drawn.faces[tri]]
+        a = corners[:, 0]
+        e1 = corners[:, 1] - a
+        e2 = corners[:, 2] - a
         pvec = np.cross(direction, e2)
         det = np.einsum("ij,ij->i", e1, pvec)
         ok = np.abs(det) > 1e-300
@@ -636,10 +361,10 @@ class _MeshGeometry:
         position = origin + t[:, None] * direction
         w = np.stack([1.0 - u - v, u, v], axis=1)
         face_n = np.cross(e1, e2)
-        if self.vertex_normals is None:
+        if self.normals is None or self.drawn.normal_faces is None:
             n = face_n
         else:
-            n = np.einsum("ij,ijk->ik", w, self.vertex_normals[tri])
+            n = np.einsum("ij,ijk->ik", w, self.normals[self.drawn.normal_faces[tri]])
             weak = np.einsum("ij,ij->i", n, n) < 1e-24
             n[weak] = face_n[weak]
         # seen from behind (the ray runs along the facet normal): flip towards the camera
@@ -647,37 +372,29 @@ class _MeshGeometry:
         n[back] = -n[back]
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         color: np.ndarray | None = None
-        if self.uv is not None:
-            uv = np.einsum("ij,ijk->ik", w, self.uv[tri])
-            color = np.zeros((len(fid), 3))
-            color[:, :2] = uv
-        elif self.corner_colors is not None:
-            color = np.einsum("ij,ijk->ik", w, self.corner_colors[fid])
+        if self.uv is not None or self.corner_colors is not None:
+            color = self._color(tri, w)
         return (
             position.astype(np.float32),
             n.astype(np.float32),
             None if color is None else color.astype(np.float32),
         )
 
-
-def _sample_texture(texture: np.ndarray, uv: np.ndarray, covered: np.ndarray) -> np.ndarray:
-    """Bilinear, repeating lookup of ``texture`` at per-pixel (u, v) (v up, OpenGL style)."""
-    th, tw = texture.shape[:2]
-    map_x = (uv[:, 0] * tw - 0.5).astype(np.float32).reshape(1, -1)
-    map_y = ((1.0 - uv[:, 1]) * th - 0.5).astype(np.float32).reshape(1, -1)
-    out = np.zeros_like(uv)
-    idx = np.flatnonzero(covered)
-    for i in range(0, idx.size, 16384):  # cv2.remap maps must be narrower than 32767
-        sel = idx[i : i + 16384]
-        sampled = cv2.remap(
-            texture,
-            map_x[:, sel],
-            map_y[:, sel],
-            cv2.INTER_LINEAR,
-            borderMode=cv2.BORDER_WRAP,
-        )
-        out[sel] = np.asarray(sampled, np.float32).reshape(-1, 3)
-    return out
+    def _color(self, tri: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Colours (or texture coordinates, in the first two channels) at barycentric
+        coordinates ``w`` on drawn triangles ``tri``: those of the input face under them."""
+        face = self.drawn.parent[tri]
+        if self.drawn.bary is not None:
+            w = np.einsum("ij,ijk->ik", w, self.drawn.bary[tri])
+        # a hit a rounding error outside its triangle: no colour outside the corners' range
+        w = np.clip(w, 0.0, None)
+        w /= w.sum(axis=1, keepdims=True)
+        if self.uv is not None:
+            color = np.zeros((len(tri), 3))
+            color[:, :2] = np.einsum("ij,ijk->ik", w, self.uv[self.faces[face]])
+            return color
+        assert self.corner_colors is not None
+        return np.einsum("ij,ijk->ik", w, self.corner_colors[face])
 
 
 _SHARED: Rasterizer | None = None
@@ -720,7 +437,7 @@ def render(
     albedo: Sequence[float] | None = None,
     ao: Literal["ssao", "none"] = "ssao",
     *,
-    flat: bool = False,
+    shading: Shading = "auto",
     model: str = "blinn_phong",
     ambient: float = 0.1,
     specular: float | Sequence[float] = 0.3,
@@ -742,7 +459,8 @@ def render(
     albedo : linear RGB; default the mesh's texture / vertex / face colours, else 0.8 grey.
     ao : ``"ssao"`` (:func:`ops.ambient_occlusion.ssao`, multiplied into the ambient lobe) or
         ``"none"`` (AO = 1).
-    flat : facet normals instead of smooth vertex normals.
+    shading : ``"auto"`` (the file's normals, else smooth with the creases of a creased mesh),
+        ``"smooth"`` or ``"flat"`` (facet normals); see :mod:`gbuffer.surface`.
     model, ambient, specular, shininess : shading, see :func:`ops.shading.shade_lobes`.
     ao_radius : SSAO radius in scene units; default 0.2 × the bounding-sphere radius.
     ao_directions, ao_steps : SSAO sampling.
@@ -774,7 +492,7 @@ def render(
                 f"lights must be ops.shading.Light objects, got {type(light).__name__}"
             )
     raster = rasterizer if rasterizer is not None else shared_rasterizer()
-    geo = raster.rasterize(mesh, camera, width, height, flat=flat, albedo=albedo)
+    geo = raster.rasterize(mesh, camera, width, height, shading=shading, albedo=albedo)
     display = (width, height)
     view = camera.view_vectors((height, width), display)
     if ao == "ssao":

@@ -57,6 +57,9 @@ def cmd_render(args: argparse.Namespace) -> int:
     if args.server:
         from service.client import Client
 
+        if args.shading != "auto":
+            raise UsageError("--shading is not sent to a server (it renders with auto)")
+
         with Client.from_env(args.server) as client:
             client.render(
                 args.mesh,
@@ -90,7 +93,9 @@ def cmd_render(args: argparse.Namespace) -> int:
             azimuth_deg=args.azimuth,
             elevation_deg=args.elevation,
         )
-    frame = render(mesh, args.width, args.height, camera=camera, lights=lights)
+    frame = render(
+        mesh, args.width, args.height, camera=camera, lights=lights, shading=args.shading
+    )
     write(frame, args.output)
     print(f"wrote {args.output} ({args.width}x{args.height})")
     return 0
@@ -303,6 +308,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="SPEC",
         help="light, camera space: X,Y,Z (directional, towards the light) or point:X,Y,Z; "
         "repeat for several",
+    )
+    p.add_argument(
+        "--shading",
+        choices=("auto", "smooth", "flat"),
+        default="auto",
+        help="normals: smooth across UV seams, flat facets, or auto (the file's normals, else "
+        "smooth, with the creases of a creased mesh such as a box)",
     )
     add_server_option(p)
     p.set_defaults(func=cmd_render)

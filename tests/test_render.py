@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pytest
 import trimesh
@@ -13,6 +14,7 @@ from PIL import Image
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import BUFFERS
+from gbuffer.mesh import FILE_NORMALS
 from gbuffer.render import (
     RENDER_BUFFERS,
     Rasterizer,
@@ -23,9 +25,13 @@ from gbuffer.render import (
     look_at,
     render,
 )
+from gbuffer.subdivision import View, levels_for
+from gbuffer.surface import smooth_surface
 from ops.shading import Light
+from service import pipeline
 
 MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
+SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 W, H = 160, 120
 DIST = 3.0
 FOV = 40.0
@@ -199,7 +205,7 @@ def test_ssao_darkens_a_concave_corner() -> None:
     wall.apply_translation((0.0, 1.0, -1.0))
     mesh = trimesh.util.concatenate([floor, wall])
     cam = Camera(world_to_camera=look_at([0.0, 2.5, 3.0], [0.0, 0.3, -0.5]), fov_y_deg=45.0)
-    frame = render(mesh, W, H, camera=cam, ao_radius=0.4, flat=True)
+    frame = render(mesh, W, H, camera=cam, ao_radius=0.4, shading="flat")
     b = frame.buffers
     ao = b["ao"]
     assert cam.world_to_camera is not None
@@ -215,7 +221,7 @@ def test_ssao_darkens_a_concave_corner() -> None:
     assert ao[open_floor].mean() > 0.97
     # AO multiplies the ambient lobe
     np.testing.assert_allclose(b["ambient.light"][..., 0], 0.1 * ao * b["coverage"], atol=1e-6)
-    none = render(mesh, W, H, camera=cam, ao="none", flat=True, outputs=False)
+    none = render(mesh, W, H, camera=cam, ao="none", shading="flat", outputs=False)
     assert np.all(none.buffers["ao"] == 1.0)
     assert none.outputs == {}
 
@@ -223,19 +229,19 @@ def test_ssao_darkens_a_concave_corner() -> None:
 # -- meshes, colours, cameras ----------------------------------------------------------------
 
 
-def test_flat_normals_on_a_cube() -> None:
+def test_cube_shading_modes() -> None:
     cube = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
     cam = Camera(world_to_camera=look_at([2.0, 1.5, 2.5], [0, 0, 0]), fov_y_deg=40.0)
     rot = cam.world_to_camera[:3, :3]
     axes = np.concatenate([np.eye(3), -np.eye(3)]) @ rot.T  # world axes in camera space
-    for flat in (True, False):
-        n = render(cube, W, H, camera=cam, ao="none", flat=flat).buffers["normal"]
+    for shading in ("flat", "auto", "smooth"):
+        n = render(cube, W, H, camera=cam, ao="none", shading=shading).buffers["normal"]
         cover = np.linalg.norm(n, axis=2) > 0.5
         best = np.max(n[cover] @ axes.T, axis=1)
-        if flat:
-            assert best.min() > 1.0 - 1e-5  # every pixel has exactly a face's normal
-        else:
-            assert best.min() < 0.95  # smooth vertex normals bend over the box
+        if shading == "smooth":
+            assert best.min() < 0.95, shading  # a smooth surface through the corners
+        else:  # auto: a box is made of creases; every pixel has exactly a face's normal
+            assert best.min() > 1.0 - 1e-5, shading
 
 
 def test_vertex_colours_and_albedo_override() -> None:
@@ -374,6 +380,8 @@ def test_bad_render_parameters(sphere: trimesh.Trimesh) -> None:
         render(sphere, 10, 10, model="toon")
     with pytest.raises(ValueError, match="ao_radius"):
         render(sphere, 10, 10, ao_radius=-1.0)
+    with pytest.raises(ValueError, match="shading"):
+        render(sphere, 10, 10, shading="phong")  # type: ignore[arg-type]
     with pytest.raises(FrameError, match="world_to_camera"):
         render(sphere, 10, 10, camera=Camera(fov_y_deg=30.0))
     with pytest.raises(FrameError, match="fov_y_deg"):
@@ -414,3 +422,157 @@ def test_spot_renders_sensible_buffers() -> None:
     # trimesh's stand-in texture for an OBJ without materials is not used: default grey
     np.testing.assert_allclose(b["albedo"][cover], 0.8, atol=1e-6)
     assert b["normal"][cover][:, 2].mean() > 0.3  # facing the camera on the whole
+
+
+# -- the smooth surface: UV seams, creases, coarse meshes ------------------------------------
+
+
+def uv_ramp(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """``mesh`` textured with its own coordinates: red grows with u, green with v."""
+    ramp = np.zeros((256, 256, 3), np.uint8)
+    ramp[..., 0] = np.arange(256)[None, :]
+    ramp[..., 1] = np.arange(256)[::-1, None]  # v grows upwards
+    out = mesh.copy()
+    out.visual = trimesh.visual.TextureVisuals(uv=mesh.visual.uv, image=Image.fromarray(ramp))
+    return out
+
+
+def seam_jumps(frame) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """Degrees the normal turns between neighbouring pixels across a UV seam (their texture
+    coordinates jump, their depths do not), beyond the mean turn of the pairs on either side."""
+    b = frame.buffers
+    jumps = []
+    for axis in (0, 1):
+        n, uv, depth, cover = (
+            np.moveaxis(a, axis, 0)
+            for a in (
+                b["normal"].astype(np.float64),
+                b["albedo"][..., :2],
+                b["depth"],
+                b["coverage"],
+            )
+        )
+        turn = np.degrees(np.arccos(np.clip((n[:-1] * n[1:]).sum(axis=-1), -1.0, 1.0)))
+        with np.errstate(invalid="ignore"):  # inf - inf on the background
+            same_surface = (cover[:-1] > 0) & (cover[1:] > 0)
+            same_surface &= np.abs(depth[:-1] - depth[1:]) < 0.002 * depth[:-1]
+        turn = np.where(same_surface, turn, np.nan)
+        seam = np.abs(uv[:-1] - uv[1:]).max(axis=-1) > 0.1
+        excess = turn[1:-1] - 0.5 * (turn[:-2] + turn[2:])
+        jumps.append(excess[seam[1:-1] & np.isfinite(excess)])
+    return np.concatenate(jumps)
+
+
+def test_uv_seams_do_not_split_the_normals() -> None:
+    spot = load_mesh(SPOT)  # split along its UV seams: 3225 vertices at 2930 positions
+    frame = render(uv_ramp(spot), 640, 480, ao="none")
+    jumps = seam_jumps(frame)
+    assert jumps.size > 300  # the seams of the back, neck and head are in view
+    # averaged per split vertex, the normals jumped by 6.8° (median) and 44° (99th percentile)
+    assert np.median(jumps) < 0.5 and np.percentile(jumps, 99) < 2.0, np.percentile(jumps, 99)
+    # the same as the mesh welded by position beforehand
+    welded = spot.copy()
+    welded.merge_vertices(merge_tex=True, merge_norm=True)
+    assert len(welded.vertices) < len(spot.vertices)
+    reference = render(welded, 640, 480, ao="none").buffers["normal"]
+    np.testing.assert_allclose(frame.buffers["normal"], reference, atol=1e-5)
+
+
+def fine_detail(frame) -> float:  # type: ignore[no-untyped-def]
+    """RMS of the band-pass (minus a 2-pixel Gaussian) of the curvature operator's mapped mean
+    curvature, 6 pixels and more inside the silhouette."""
+    h = pipeline.run(frame, [{"op": "curvature"}]).outputs["curvature.H"]
+    inside = cv2.erode((frame.buffers["coverage"] > 0).astype(np.uint8), np.ones((13, 13)))
+    band = h - cv2.GaussianBlur(h, (0, 0), 2.0)
+    return float(np.sqrt(np.mean(band[inside > 0] ** 2)))
+
+
+def test_a_coarse_sphere_shows_no_triangles() -> None:
+    w, h = 480, 360
+    coarse = render(trimesh.creation.icosphere(subdivisions=1), w, h, camera=front_camera())
+    fine = render(trimesh.creation.icosphere(subdivisions=5), w, h, camera=front_camera())
+    # 80 faces against 20480: interpolated over the flat triangles, 5.0 times the fine detail
+    assert fine_detail(coarse) < 1.2 * fine_detail(fine), fine_detail(coarse) / fine_detail(fine)
+    # the refined surface passes through the vertices: the silhouette and normals of the sphere
+    disc, _, n_exact = analytic_sphere(front_camera(), w, h, np.array([0.0, 0.0, -DIST]))
+    cover = coarse.buffers["coverage"] > 0
+    assert np.mean(cover != (disc > 0)) < 0.005  # 0.09 with flat triangles
+    interior = disc > 0.05 * disc.max()
+    cos = (coarse.buffers["normal"].astype(np.float64) * n_exact).sum(axis=2)[interior]
+    assert np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))).max() < 1.0
+
+
+def test_only_coarse_meshes_are_refined() -> None:
+    def levels(mesh: trimesh.Trimesh, width: int, height: int) -> int:
+        surface = smooth_surface(mesh)
+        cam = front_camera()
+        verts = surface.vertices + cam.world_to_camera[:3, 3]
+        view = View(1.0 / cam.focal_px(height), False, width, height, 0.1)
+        return levels_for(surface, verts, view)
+
+    ico = trimesh.creation.icosphere
+    assert levels(ico(subdivisions=6), 320, 240) == 0  # edges under 2 pixels
+    assert levels(ico(subdivisions=1), 320, 240) >= 4
+    assert levels(ico(subdivisions=1), 16384, 16384) <= 8  # bounded by the triangle budget
+    assert levels(trimesh.creation.box(), 1920, 1080) == 0  # flat faces stay as they are
+
+
+def test_creases_stay_sharp_and_flat_faces_flat() -> None:
+    # a coarse cylinder: its rims are creases, its caps planar, its side a smooth surface
+    cylinder = trimesh.creation.cylinder(radius=1.0, height=2.0, sections=16)
+    cam = Camera(world_to_camera=look_at([3.0, 4.0, 5.0], [0, 0, 0], up=(0, 0, 1)), fov_y_deg=40)
+    b = render(cylinder, 320, 240, camera=cam, ao="none").buffers
+    cover = b["coverage"] > 0
+    axis = cam.world_to_camera[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    n = b["normal"].astype(np.float64)
+    along = n @ axis
+    cap = cover & (along > 0.5)
+    facing = (n * cam_view(b["position"])).sum(axis=2) > 0.5
+    side = cover & (np.abs(along) < 0.5) & facing
+    assert cap.sum() > 2000 and side.sum() > 2000
+    assert along[cap].min() > 1.0 - 1e-6  # the cap keeps the cap's normal
+    c2w = np.linalg.inv(cam.world_to_camera)
+    height = (b["position"][cap] @ c2w[:3, :3].T + c2w[:3, 3])[:, 2]
+    np.testing.assert_allclose(height, 1.0, atol=1e-6)  # and its plane
+    # the side is smooth: about 1.2° from pixel to pixel (its 16 flat faces: 22.5° at an edge)
+    turn = np.degrees(np.arccos(np.clip((n[:, 1:] * n[:, :-1]).sum(axis=2), -1.0, 1.0)))
+    assert turn[side[:, 1:] & side[:, :-1]].max() < 2.0
+
+
+def cam_view(position: np.ndarray) -> np.ndarray:
+    """Unit vectors from camera-space positions towards the camera."""
+    return -position / np.maximum(np.linalg.norm(position, axis=2, keepdims=True), 1e-12)
+
+
+def test_normals_from_the_file_are_kept(tmp_path: Path) -> None:
+    # an icosphere whose OBJ gives every face its own normal (a faceted ball)
+    ball = trimesh.creation.icosphere(subdivisions=2)
+    lines = [f"v {x} {y} {z}" for x, y, z in ball.vertices]
+    lines += [f"vn {x} {y} {z}" for x, y, z in ball.face_normals]
+    lines += [f"f {a}//{i} {b}//{i} {c}//{i}" for i, (a, b, c) in enumerate(ball.faces + 1, 1)]
+    path = tmp_path / "faceted.obj"
+    path.write_text("\n".join(lines) + "\n")
+    mesh = load_mesh(path)
+    assert mesh.metadata[FILE_NORMALS]
+    cam = front_camera()
+    face_n = ball.face_normals @ cam.world_to_camera[:3, :3].T
+    for shading, faceted in (("auto", True), ("smooth", False)):
+        b = render(mesh, W, H, camera=cam, ao="none", shading=shading).buffers
+        n = b["normal"][b["coverage"] > 0].astype(np.float64)
+        best = np.max(n @ face_n.T, axis=1)  # the closest face normal
+        assert (best.min() > 1.0 - 1e-6) == faceted, shading
+
+
+@pytest.mark.models
+def test_fandisk_keeps_its_creases() -> None:
+    path = MODELS / "fandisk.obj"
+    if not path.is_file():
+        pytest.skip(f"{path} is absent (the shared test meshes are not checked out)")
+    b = render(path, 320, 240, ao="none").buffers
+    n = b["normal"].astype(np.float64)
+    depth = b["depth"]
+    turn = np.degrees(np.arccos(np.clip((n[:, 1:] * n[:, :-1]).sum(axis=2), -1.0, 1.0)))
+    with np.errstate(invalid="ignore"):  # inf - inf on the background
+        same_surface = np.abs(depth[:, 1:] - depth[:, :-1]) < 0.005 * depth[:, :-1]
+    # neighbours on either side of a crease: smooth normals would turn by a few degrees at most
+    assert np.count_nonzero(same_surface & (turn > 45.0)) > 50
