@@ -82,6 +82,10 @@ class Frame:
     outputs : EXR channel name -> (H, W) float32 array, written over the passthrough.
     attributes : header attributes to add or replace in the primary part on write.
     passthrough : the file as read (empty for frames built in memory).
+    result_layer : the layer a result written into this file goes to by default, following
+        the renderer's convention (``"ViewLayer.Depict"`` for a Blender multilayer file, the
+        layer of the file's earlier Depict result); ``None``: ``R,G,B,A``.
+    history : the pipeline steps applied to the frame so far, each with every parameter.
     """
 
     buffers: dict[str, np.ndarray]
@@ -93,6 +97,8 @@ class Frame:
     outputs: dict[str, np.ndarray] = field(default_factory=dict)
     attributes: dict[str, Any] = field(default_factory=dict)
     passthrough: Passthrough = field(default_factory=Passthrough)
+    result_layer: str | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         shapes = {b.shape[:2] for b in self.buffers.values()}
@@ -135,8 +141,10 @@ class Frame:
     def need_camera(self, why: str) -> Camera:
         if self.camera is None:
             raise MissingCameraError(
-                f"no camera in the file and none given ({why}); pass --camera CAM.json "
-                '({"world_to_camera": [[...4 rows...]], "fov_y_deg": 40})'
+                f"no camera in the file, none given and no world-space position pass to solve "
+                f"it from ({why}); give a camera JSON (--camera CAM.json on the command line, "
+                'the camera form field over HTTP): {"world_to_camera": [[...4 rows...]], '
+                '"fov_y_deg": 40}'
             )
         return self.camera
 
@@ -207,6 +215,8 @@ class Frame:
             outputs=dict(self.outputs),
             attributes=dict(self.attributes),
             passthrough=self.passthrough,
+            result_layer=self.result_layer,
+            history=list(self.history),
         )
 
     def layer(self, name: str) -> dict[str, np.ndarray]:

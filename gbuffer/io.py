@@ -25,6 +25,7 @@ FLOAT, ZIP compression, the camera as ``worldToCamera``/``worldToNDC`` + ``depic
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 from typing import Any
 
@@ -35,7 +36,7 @@ from gbuffer import exr
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
-from gbuffer.presets import ReadOptions, canonical_channels, to_frame
+from gbuffer.presets import PRESETS, ReadOptions, canonical_channels, detect, to_frame
 
 #: Header keys an output attribute may not replace (they describe the pixels).
 PROTECTED_ATTRIBUTES = frozenset(
@@ -219,13 +220,85 @@ def _subframe(frame: Frame, keys: set[str]) -> Frame:
     return sub
 
 
+def inspect(
+    path: str | Path,
+    preset: str = "auto",
+    camera: Camera | dict[str, Any] | str | Path | None = None,
+    options: ReadOptions | dict[str, Any] | None = None,
+    max_pixels: int | None = None,
+) -> dict[str, Any]:
+    """:func:`describe` of any readable file (``depict inspect``): world-space normals with no
+    camera are left out (``missing`` says so) and a file whose buffers cannot be mapped (a NaN in
+    a data channel, ...) is still described, the reason in ``problems``. An unreadable file, an
+    unknown preset or a bad explicit mapping still raise :class:`FrameError`."""
+    cam = _camera_arg(camera)
+    opts = options if isinstance(options, ReadOptions) else ReadOptions.from_dict(options or {})
+    opts = dataclasses.replace(opts, require_camera=False)
+    if preset != "auto" and preset not in PRESETS:
+        raise FrameError(f"preset={preset!r} is not known; valid: auto, {', '.join(PRESETS)}")
+    passthrough = exr.read_parts(path, max_pixels)
+    try:
+        frame = to_frame(passthrough, preset, cam, opts)
+        problems: list[str] = []
+    except FrameError as exc:
+        if opts.mapping:
+            raise
+        header = passthrough.parts[0][0]
+        x0, y0, x1, y1 = exr.window(header, "displayWindow", passthrough.parts[0][1])
+        name = preset if preset != "auto" else detect(passthrough)[0]
+        size = (x1 - x0 + 1, y1 - y0 + 1)
+        frame = Frame(buffers={}, display_size=size, preset=name, passthrough=passthrough)
+        problems = [str(exc)]
+    info = describe(frame)
+    info["problems"] = problems
+    return info
+
+
+#: Buffers most operators need, and what their absence means.
+_KEY_BUFFERS = {
+    "beauty": "the image to enhance (operators that rebuild it from lobes or shade the G-buffer "
+    "still run)",
+    "normal": "curvature, Radiance Scaling, Light Alignment, Apparent Relief need it",
+    "depth": "every operator needs it (or a position pass)",
+}
+
+
+def _missing(frame: Frame) -> list[str]:
+    """What the frame lacks that operators need, one line each."""
+    out = [f"{name}: {why}" for name, why in _KEY_BUFFERS.items() if name not in frame.buffers]
+    if frame.camera is None:
+        out.append(
+            "camera: none in the file, none given, none solved (no world-space position pass); "
+            "world-space normals and sizes in scene units need one (--camera CAM.json)"
+        )
+    return out
+
+
+def _provenance(header: dict[str, Any]) -> dict[str, Any] | None:
+    """What Depict wrote about an output it made (version, pipeline, input, result layer)."""
+    keys = ("version", "input", "pipeline", "result", "original", "history")
+    found = {k: header[f"depict/{k}"] for k in keys if isinstance(header.get(f"depict/{k}"), str)}
+    for key in ("pipeline", "history"):
+        if key in found:
+            try:
+                found[key] = json.loads(found[key])
+            except json.JSONDecodeError:
+                pass
+    return found or None
+
+
 def describe(frame: Frame) -> dict[str, Any]:
     """The stable JSON form of a frame (``depict inspect --json``).
 
     Keys: ``file``, ``preset``, ``preset_reason``, ``size`` ([w, h] of the grid),
     ``display_window`` and ``data_window`` ([xmin, ymin, xmax, ymax], inclusive), ``parts``
     (name, channels, type, compression, tiled), ``buffers`` (name -> source, shape),
-    ``camera`` (camera JSON or null), ``warnings``.
+    ``camera`` (camera JSON or null), ``camera_source`` (where it came from: given, file header,
+    solved from a position pass), ``camera_fit`` (its reprojection error against the world-space
+    position pass: rms_px, max_px, pixels, outliers; null without one), ``missing`` (what
+    operators need and the frame lacks), ``depict`` (what Depict wrote into a file it made:
+    version, input, pipeline, result layer, original layer, history; null otherwise),
+    ``warnings``.
     """
     pt = frame.passthrough
     assert frame.display_size is not None
@@ -271,5 +344,9 @@ def describe(frame: Frame) -> dict[str, Any]:
         "parts": parts,
         "buffers": buffers,
         "camera": None if frame.camera is None else frame.camera.to_dict(),
+        "camera_source": None if frame.camera is None else frame.camera.source or None,
+        "camera_fit": None if frame.camera is None else frame.camera.fit,
+        "missing": _missing(frame),
+        "depict": _provenance(pt.parts[pt.primary][0]) if pt.parts else None,
         "warnings": list(getattr(pt, "warnings", [])),
     }

@@ -91,14 +91,24 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_inspect(args: argparse.Namespace) -> int:
-    from gbuffer.io import describe
+def _runnable(info: dict[str, Any]) -> dict[str, Any]:
+    """Which operators can run on the inspected frame, and what the others lack."""
+    from service.registry import operators
 
-    frame = read_frame(args, args.file)
-    info = describe(frame)
-    if args.json:
-        print(json.dumps(info, indent=2))
-        return 0
+    have = set(info["buffers"])
+    if "position" in have:
+        have.add("depth")
+    blocked = {}
+    for op in operators().values():
+        lacks = [b for b in op.needs if b not in have]
+        if op.needs_camera and info["camera"] is None:
+            lacks.append("camera")
+        if lacks:
+            blocked[op.name] = lacks
+    return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}
+
+
+def _print_inspection(info: dict[str, Any]) -> None:
     print(f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}")
     print(f"  preset: {info['preset_reason']}")
     print(f"  display window {info['display_window']}, data window {info['data_window']}")
@@ -111,9 +121,49 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     for name, buf in info["buffers"].items():
         print(f"    {name:<20s} <- {buf['source']}")
     cam = info["camera"]
-    print(f"  camera: {json.dumps(cam) if cam else 'none (pass --camera CAM.json if needed)'}")
-    for warning in info.get("warnings", []):
-        print(f"  warning: {warning}")
+    print(f"  camera: {json.dumps(cam) if cam else 'none'}")
+    if cam:
+        print(f"  camera source: {info['camera_source'] or 'unknown'}")
+        fit = info["camera_fit"]
+        if fit and fit.get("pixels"):
+            outliers = f" ({fit['outliers']} outliers left out)" if fit["outliers"] else ""
+            print(
+                f"  camera reprojection error against the position pass: RMS "
+                f"{fit['rms_px']:.2g} px, max {fit['max_px']:.2g} px over {fit['pixels']} "
+                f"pixels{outliers}"
+            )
+    made = info["depict"]
+    if made:
+        where = made.get("result") or "R,G,B,A"
+        print(
+            f"  depict: result in {where} (original beauty: {made.get('original', '?')}), "
+            f"version {made.get('version', '?')}, input {made.get('input', '?')}"
+        )
+        if "pipeline" in made:
+            print(f"  depict pipeline: {json.dumps(made['pipeline'])}")
+    for line in info["missing"]:
+        print(f"  missing: {line}")
+    ops = info["operators"]
+    if not ops["not_runnable"]:
+        print("  operators: every one can run")
+    for name, lacks in ops["not_runnable"].items():
+        print(f"  cannot run: {name} (needs {', '.join(lacks)})")
+    for key in ("problems", "warnings"):
+        for line in info.get(key, []):
+            print(f"  {key[:-1]}: {line}")
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from gbuffer.io import ReadOptions, inspect
+
+    read = read_options(args)
+    options = ReadOptions(mapping=read["mapping"], normal_space=read["normal_space"])
+    info = inspect(args.file, read["preset"], read["camera"], options)
+    info["operators"] = _runnable(info)
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        _print_inspection(info)
     return 0
 
 
@@ -169,7 +219,8 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     out = pipeline.finish(
         pipeline.run(frame, spec, debug_layers=args.debug_layers), args.output_layer
     )
-    gbuffer.write(out, args.output)
+    for warning in gbuffer.write(out, args.output):
+        print(f"depict: warning: {warning}", file=sys.stderr)
     print(f"wrote {args.output}")
     return 0
 

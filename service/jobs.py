@@ -123,12 +123,17 @@ def read_frame(path: str, read: dict[str, Any], max_pixels: int | None = None) -
     """Read a frame exactly as the CLI does (same preset, camera, mapping).
 
     ``read``: ``preset``, ``camera`` (path of a camera JSON file), ``mapping`` (buffer ->
-    channels), ``normal_space``.
+    channels), ``normal_space``, ``require_camera`` (False: world-space normals without a camera
+    are left out with a warning instead of refused, as ``depict inspect`` does).
     """
     from gbuffer.io import ReadOptions
     from gbuffer.io import read as read_exr
 
-    options = ReadOptions(mapping=read.get("mapping") or {}, normal_space=read.get("normal_space"))
+    options = ReadOptions(
+        mapping=read.get("mapping") or {},
+        normal_space=read.get("normal_space"),
+        require_camera=read.get("require_camera", True),
+    )
     return read_exr(
         path,
         preset=read.get("preset") or "auto",
@@ -163,10 +168,12 @@ def enhance_file(
     """Read ``in_path``, run the pipeline, write the EXR (or a PNG preview) to ``out_path``.
 
     The same steps as ``depict enhance``, so the output is bit for bit the CLI's.
-    ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``.
+    ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``,
+    ``input_name`` (the input's name recorded in the output; default: ``in_path``'s).
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`).
     ``files``: whether parameters may name image files (False for the HTTP service).
-    Returns ``op_s`` (seconds per operator), ``size`` and the statistics ``measured``.
+    Returns ``op_s`` (seconds per operator), ``size``, the statistics ``measured`` and the
+    writer's ``warnings`` (e.g. a compression it could not keep).
     """
     from gbuffer.io import write as write_exr
     from service import pipeline
@@ -178,15 +185,21 @@ def enhance_file(
         debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}), files=files
     )
     out, op_s = run_steps(frame, spec, context)
-    out = pipeline.finish(out, write.get("output_layer"))
+    out = pipeline.finish(out, write.get("output_layer"), write.get("input_name"))
+    warnings: list[str] = []
     if write.get("preview"):
         from gbuffer.preview import picture, write_png
 
         write_png(picture(out, "beauty", exposure=float(write.get("exposure", 0.0))), out_path)
     else:
-        write_exr(out, out_path)
+        warnings = write_exr(out, out_path)
     h, w = out.shape
-    return {"op_s": op_s, "size": [w, h], "measured": dict(context.measured)}
+    return {
+        "op_s": op_s,
+        "size": [w, h],
+        "measured": dict(context.measured),
+        "warnings": warnings,
+    }
 
 
 def enhance_job(

@@ -68,9 +68,17 @@ def check_common(
 
 def test_blender(tmp_path: Path, scene: F.Scene) -> None:
     path = F.write_blender(tmp_path / "b.exr", scene)
+    no_position = F.write_blender(tmp_path / "np.exr", scene, position=False)
     with pytest.raises(MissingCameraError, match=r"--camera CAM\.json .*world_to_camera"):
-        read(path)
+        read(no_position)
+    solved = read(path)  # the camera solved from the Position pass
+    assert solved.camera is not None and solved.camera.world_to_camera is not None
+    assert solved.camera.source == "solved from ViewLayer.Position.X,Y,Z (world positions)"
+    assert solved.camera.fov_y_deg == pytest.approx(40.0, abs=1e-3)
+    np.testing.assert_allclose(solved.camera.world_to_camera, scene.world_to_camera, atol=1e-4)
     frame = read(path, camera=cam_dict(scene))
+    assert frame.camera is not None and frame.camera.source == "given"
+    assert frame.camera.fit is not None and frame.camera.fit["rms_px"] < 1e-3
     assert frame.preset == "blender"
     check_common(frame, scene, normal_tol=2.5e-2)  # filtered normals (2x2 average)
     m = inner(scene)
@@ -147,8 +155,10 @@ def test_renderman_left_handed_normals(tmp_path: Path, scene: F.Scene) -> None:
     assert frame.preset == "renderman"
     check_common(frame, scene)
     assert frame.sources["normal"] == "Nn.x,y,z (camera-lh -> camera)"
-    assert "position" not in frame.buffers  # __Pworld needs a camera: left out with a warning
-    assert any("__Pworld" in w for w in describe(frame)["warnings"])
+    # no camera in the file: solved from __Pworld, which then becomes camera-space
+    assert frame.camera is not None and frame.camera.source.startswith("solved from __Pworld")
+    assert frame.camera.fov_y_deg == pytest.approx(40.0, abs=1e-3)
+    close(frame.buffers["position"], scene.position, inner(scene), 1e-3)
     frame = read(tmp_path / "r.exr", camera=cam_dict(scene))
     close(frame.buffers["position"], scene.position, inner(scene), 1e-4)
 
@@ -326,9 +336,11 @@ def test_bad_options(tmp_path: Path, scene: F.Scene) -> None:
 def test_world_normals_without_camera_can_be_left_out(tmp_path: Path, scene: F.Scene) -> None:
     path = F.write_arnold(tmp_path / "a.exr", scene)
     pt = exr.read_parts(path)
-    for header, _ in pt.parts:
+    for header, channels in pt.parts:
         header.pop("worldToCamera")
         header.pop("worldToNDC")
+        for name in ("P.X", "P.Y", "P.Z"):  # no position pass to solve the camera from
+            channels.pop(name)
     from gbuffer.presets import to_frame
 
     with pytest.raises(MissingCameraError):
@@ -452,8 +464,14 @@ def test_describe_is_json(tmp_path: Path, scene: F.Scene) -> None:
         "parts",
         "buffers",
         "camera",
+        "camera_source",
+        "camera_fit",
+        "missing",
+        "depict",
         "warnings",
     ]
+    assert info["camera_source"] == "file header (V-Ray cameraTransform)"
+    assert info["camera_fit"] is None and info["missing"] == [] and info["depict"] is None
     assert info["parts"][0]["compression"] == "PIZ"
     assert info["buffers"]["normal"] == {"source": "VRayNormals.X,Y,Z", "shape": [48, 64, 3]}
     assert info["camera"]["fov_y_deg"] == pytest.approx(40.0, abs=1e-4)
