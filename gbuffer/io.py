@@ -9,11 +9,10 @@ canonical buffers).
 
 * an output named like an existing channel replaces its pixels and keeps its pixel type
   (HALF stays HALF); a new output is a FLOAT channel;
-* the primary part keeps its compression, unless new channels are added to a part with lossy
-  compression (DWAA/DWAB/B44/B44A/PXR24): that part is then written with ZIP, so the data
-  layers are exact and the channels already there are not degraded a second time (lossy
-  codecs are not idempotent); ``depict/sourceCompression`` records the original and a warning
-  says so;
+* every part keeps its compression, lossy ones (DWAA/DWAB/B44/B44A/PXR24) included, so an
+  output is about the size of its input; what re-encoding a changed part with a lossy codec
+  costs is returned as a warning (:func:`_lossy_notes`: DWA re-quantises its R, G, B, Y
+  channels, PXR24 rounds new 32-bit layers to 24 bits; B44 keeps 32-bit layers exact);
 * parts and channels that did not change are copied chunk for chunk (bit-identical).
 
 A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
@@ -134,7 +133,6 @@ def write(frame: Frame, path: str | Path) -> list[str]:
     parts = [(dict(h), dict(c)) for h, c in pt.parts]
     header, channels = parts[pt.primary]
     shape = _grid_shape(pt)
-    added = False
     for name, arr in frame.outputs.items():
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
@@ -149,21 +147,45 @@ def write(frame: Frame, path: str | Path) -> list[str]:
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:
             channels[name] = OpenEXR.Channel(name, pixels)
-            added = True
     compression = header.get("compression")
-    if added and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
-        original = exr.compression_name(header)
-        header["compression"] = OpenEXR.ZIP_COMPRESSION
-        header["depict/sourceCompression"] = original
-        warnings.append(
-            f"part {pt.primary}: {original} is lossy; written with ZIP so the new data layers "
-            "are exact (the original compression is in depict/sourceCompression)"
-        )
+    if frame.outputs and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
+        new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
+        warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
     for key, value in frame.attributes.items():
         header[key] = value
     new_pt = dataclasses.replace(pt, parts=parts)
     warnings += exr.write_parts(new_pt, path)
     return warnings
+
+
+#: Channel-name suffixes DWAA/DWAB quantise (OpenEXR's DWA rules, case-sensitive, HALF and FLOAT).
+DWA_LOSSY_SUFFIXES = frozenset({"R", "G", "B", "Y", "BY", "RY"})
+
+
+def _lossy_notes(part: int, codec: str, new: list[str]) -> list[str]:
+    """What re-encoding a changed part with its own lossy ``codec`` costs (one line, or none).
+
+    Measured with OpenEXR 3.4: B44/B44A and PXR24 give back exactly what they decode
+    (idempotent) and B44 leaves FLOAT channels exact, so new 32-bit layers are exact; PXR24
+    rounds new FLOAT layers to 24 bits; DWAA/DWAB re-quantise every R, G, B, Y, BY, RY channel
+    again (about half the first encoding's error) and quantise new layers so named.
+    """
+    if codec in ("DWAA", "DWAB"):
+        data = [n for n in new if n.rpartition(".")[2] in DWA_LOSSY_SUFFIXES - {"R", "G", "B"}]
+        also = f"; new data layers it quantises: {', '.join(data[:6])}" if data else ""
+        return [
+            f"part {part} is written with {codec} as it was read: {codec} is lossy and not "
+            "idempotent, so its R, G, B, Y channels lose a little more precision (re-save the "
+            "input with ZIP or PIZ to avoid it, e.g. oiiotool IN.exr --compression zip -o "
+            f"IN_zip.exr){also}"
+        ]
+    if codec == "PXR24" and new:  # new outputs are FLOAT channels
+        more = ", ..." if len(new) > 6 else ""
+        return [
+            f"part {part} is written with PXR24 as it was read: its new 32-bit layers "
+            f"({', '.join(new[:6])}{more}) are rounded to 24 bits"
+        ]
+    return []
 
 
 def _radiance_keys() -> set[str]:
