@@ -24,12 +24,12 @@ from :func:`cv2.solvePnP` poses over a sweep of fields of view instead.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
-from scipy.linalg import rq
-from scipy.optimize import least_squares
 
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
@@ -206,11 +206,27 @@ def _dlt_rms(p: np.ndarray, uv: np.ndarray, xyz: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
 
+def _refine(
+    residuals: Callable[..., np.ndarray],
+    x0: np.ndarray,
+    uv: np.ndarray,
+    xyz: np.ndarray,
+    centre: np.ndarray,
+) -> Any:
+    """Levenberg-Marquardt-style trust-region refinement with a robust (soft L1) loss: pixels
+    off by more than half a pixel (mixed edge samples) weigh less and less."""
+    from scipy.optimize import least_squares
+
+    return least_squares(residuals, x0, args=(uv, xyz, centre), loss="soft_l1", f_scale=0.5)
+
+
 # -- perspective ---------------------------------------------------------------------------------
 
 
 def _decompose(p: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """P = K [R | t] -> (focal in pixels, OpenGL rotation, OpenGL translation)."""
+    from scipy.linalg import rq  # scipy on first solve only: reading a frame need not pay it
+
     if np.linalg.det(p[:, :3]) < 0:
         p = -p
     k, r = rq(p[:, :3])
@@ -262,9 +278,7 @@ def _solve_perspective(
         raise FrameError("the position pass does not determine a perspective camera")
     best = None
     for x0 in starts:
-        fit = least_squares(
-            _perspective_residuals, x0, args=(uv, xyz, centre), loss="soft_l1", f_scale=0.5
-        )
+        fit = _refine(_perspective_residuals, x0, uv, xyz, centre)
         if best is None or fit.cost < best.cost:
             best = fit
     assert best is not None
@@ -304,9 +318,7 @@ def _solve_orthographic(
     tx = (affine[0, 3] - centre[0]) / scale
     ty = (centre[1] - affine[1, 3]) / scale
     x0 = np.r_[_rvec(rot), tx, ty, math.log(scale)]
-    fit = least_squares(
-        _orthographic_residuals, x0, args=(uv, xyz, centre), loss="soft_l1", f_scale=0.5
-    )
+    fit = _refine(_orthographic_residuals, x0, uv, xyz, centre)
     rot, scale = _rotation(fit.x[:3]), math.exp(float(fit.x[5]))
     along = xyz @ rot[2]
     known = np.isfinite(depth) if depth is not None else np.zeros(0, bool)

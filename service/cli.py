@@ -23,7 +23,8 @@ from service.cli_common import (
     pipeline_spec,
     read_options,
 )
-from service.client import DepictError
+from service.errors import DepictError
+from service.version import version
 
 EXIT_USAGE = 2
 
@@ -285,7 +286,19 @@ def add_service_commands(sub: Any) -> None:
 
 class _Parser(argparse.ArgumentParser):
     """Command-line errors as one line ``depict: error: ...`` and exit code 2, like the others
-    (subcommand parsers inherit the class)."""
+    (subcommand parsers inherit the class). ``builder(parser)``, when given, adds the
+    arguments only when the command is parsed: what they import (defaults, choices) costs
+    ``depict --help`` nothing."""
+
+    def __init__(self, *args: Any, builder: Any = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._builder = builder
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        if self._builder is not None:
+            build, self._builder = self._builder, None
+            build(self)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> Any:
         self.exit(EXIT_USAGE, f"depict: error: {message} (see {self.prog} --help)\n")
@@ -296,6 +309,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="depict",
         description="Depict shape in rendered images: EXR G-buffers in, enhanced EXR out.",
     )
+    parser.add_argument("--version", action="version", version=f"depict {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR")
