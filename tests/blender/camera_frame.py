@@ -30,13 +30,40 @@ def args() -> list:
 def build(projection: str, fit: str, size: float) -> object:
     for obj in list(bpy.data.objects):
         bpy.data.objects.remove(obj, do_unlink=True)
-    bpy.ops.mesh.primitive_plane_add(size=12.0, location=(0.0, 0.0, 0.0))
-    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.6, location=(0.3, -0.5, 0.6))
-    bpy.ops.mesh.primitive_monkey_add(size=1.2, location=(-1.1, 0.6, 0.8))
-    bpy.ops.mesh.primitive_cube_add(size=0.7, location=(1.4, 0.9, 0.35))
+    shapes = (  # add, its size, location, colour, smooth (subdivided)
+        (bpy.ops.mesh.primitive_plane_add, {"size": 12.0}, (0, 0, 0), (0.6, 0.6, 0.55), False),
+        (
+            bpy.ops.mesh.primitive_uv_sphere_add,
+            {"radius": 0.6},
+            (0.3, -0.5, 0.6),
+            (0.2, 0.4, 0.8),
+            True,
+        ),
+        (
+            bpy.ops.mesh.primitive_monkey_add,
+            {"size": 1.2},
+            (-1.1, 0.6, 0.8),
+            (0.8, 0.45, 0.15),
+            True,
+        ),
+        (bpy.ops.mesh.primitive_cube_add, {"size": 0.7}, (1.4, 0.9, 0.35), (0.7, 0.7, 0.7), False),
+    )
+    for add, extent, location, colour, smooth in shapes:
+        add(location=location, **extent)
+        obj = bpy.context.active_object
+        material = bpy.data.materials.new(obj.name)
+        material.use_nodes = True
+        bsdf = material.node_tree.nodes["Principled BSDF"]
+        bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
+        obj.data.materials.append(material)
+        if smooth:
+            obj.modifiers.new("Subdivision", "SUBSURF").levels = 2
+            for poly in obj.data.polygons:
+                poly.use_smooth = True
     light = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", type="SUN"))
+    light.data.energy = 3.0
     bpy.context.scene.collection.objects.link(light)
-    light.rotation_euler = (0.7, 0.2, 0.4)
+    light.rotation_euler = (0.9, 0.3, 0.6)
     data = bpy.data.cameras.new("Camera")
     data.type = projection
     data.sensor_fit = fit
@@ -99,4 +126,5 @@ def main() -> None:
     bpy.ops.render.render(write_still=True)
 
 
-main()
+if __name__ == "__main__":
+    main()
