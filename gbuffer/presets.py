@@ -265,7 +265,7 @@ KARMA = Preset(
 
 CANONICAL = Preset(
     name="canonical",
-    description="Depict's own names (DESIGN.md): R G B A, N.XYZ, depth.Z, P.XYZ, lobes, AO.X",
+    description="Depict's own names (the table above): R G B A, N.XYZ, depth.Z, P.XYZ, lobes, AO.X",
     buffers={
         "beauty": ("",),
         "alpha": ("A",),
@@ -627,8 +627,13 @@ def _blender_prefix(flat: Mapping[str, Any], opts: ReadOptions, warnings: list[s
         return opts.layer
     if not prefixes:
         return ""
-    with_combined = [p for p in prefixes if f"{p}.Combined.R" in flat]
-    chosen = (with_combined or prefixes)[0]
+    # the layer with the most passes: not the "Composite" layer (Combined alone) that Blender
+    # adds to a render saved with the compositor on
+    passes = {
+        p: sum(1 for n in flat if n.startswith(f"{p}.") and _BLENDER_PASS.match(n))
+        for p in prefixes
+    }
+    chosen = max(prefixes, key=lambda p: (passes[p], f"{p}.Combined.R" in flat))
     if len(prefixes) > 1:
         warnings.append(
             f"view layers {', '.join(prefixes)}: using '{chosen}' (choose with layer=...)"

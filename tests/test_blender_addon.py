@@ -53,7 +53,7 @@ def check_result(tmp: Path, report: dict[str, Any]) -> Path:
     assert "error" not in report, report["error"]
     assert report["enabled"] and report["operator"]
     assert report["panels"] == ["DEPICT_PT_render", "DEPICT_PT_image"]
-    assert report["result"] == ["FINISHED"]
+    assert report["result"] == report["again"] == ["FINISHED"]
     image = report["image"]
     assert image["name"] == "Depict Result" and image["type"] == "MULTILAYER"
     assert "Depict" in report["node_outputs"] and report["composite_from"] == ["Depict"]

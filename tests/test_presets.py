@@ -124,6 +124,20 @@ def test_blender_two_view_layers(tmp_path: Path, scene: F.Scene) -> None:
         read(both, camera=cam_dict(scene), options={"layer": "Nope"})
 
 
+def test_blender_composite_layer_is_not_the_view_layer(tmp_path: Path, scene: F.Scene) -> None:
+    """A render saved with the compositor on has a "Composite" layer holding Combined alone."""
+    a = OpenEXR.File(str(F.write_blender(tmp_path / "a.exr", scene)), True)
+    chans = {k: c.pixels for k, c in a.channels().items()}
+    chans.update(
+        {k.replace("ViewLayer.", "Composite."): v for k, v in chans.items() if ".Combined." in k}
+    )
+    path = F.write_exr(tmp_path / "comp.exr", {"BlenderMultiChannel": "x"}, chans)
+    frame = read(path)
+    assert frame.sources["normal"].startswith("ViewLayer.Normal")
+    assert frame.sources["beauty"].startswith("ViewLayer.Combined")
+    assert frame.result_layer == "ViewLayer.Depict"
+
+
 def test_arnold_camera_from_header_and_distance_depth(tmp_path: Path, scene: F.Scene) -> None:
     frame = read(F.write_arnold(tmp_path / "a.exr", scene))
     assert frame.preset == "arnold"

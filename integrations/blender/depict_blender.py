@@ -290,14 +290,21 @@ def load_result(path):
     return image
 
 
-def use_in_compositor(scene, image):
-    """An Image node of the result, its Depict pass linked to the Composite (and Viewer)."""
+def use_in_compositor(scene, image, view_layer):
+    """An Image node of the result on ``view_layer`` (a render saved with the compositor on also
+    holds a "Composite" layer), its Depict pass linked to the Composite (and Viewer) node."""
     scene.use_nodes = True
     tree = scene.node_tree
     node = tree.nodes.get(RESULT_NODE) or tree.nodes.new("CompositorNodeImage")
     node.name = node.label = RESULT_NODE
     node.image = image
-    socket = node.outputs.get("Depict") or node.outputs[0]
+    try:
+        node.layer = view_layer
+    except TypeError:  # a single-layer file: no choice to make
+        pass
+    socket = node.outputs.get("Depict")
+    if socket is None:
+        raise DepictError(f"the result has no Depict pass in the view layer {view_layer!r}")
     for kind in ("CompositorNodeComposite", "CompositorNodeViewer"):
         target = next((n for n in tree.nodes if n.bl_idname == kind), None)
         if target is None and kind == "CompositorNodeComposite":
@@ -348,7 +355,7 @@ def enhance(context, pipeline_text, render, compositor):
         warnings = run_local(find_executable(prefs), src, out, camera, pipe)
     image = load_result(out)
     if compositor:
-        use_in_compositor(scene, image)
+        use_in_compositor(scene, image, context.view_layer.name)
     return out, warnings
 
 

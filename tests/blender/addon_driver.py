@@ -5,7 +5,8 @@
 
 Installs ADDON.py with Blender's own "Install Add-on" operator (into BLENDER_USER_SCRIPTS when
 set) and enables it, builds a small Cycles scene (tests/blender/camera_frame.py) with the lobe
-passes, runs ``bpy.ops.depict.enhance`` with the compositor option, then renders the compositor
+passes, runs ``bpy.ops.depict.enhance`` with the compositor option (twice: the second time on a
+fresh render made with the compositor on), then renders the compositor
 twice (its output linked to the result's Depict pass, then to its Combined pass) to
 OUTDIR/compositor_depict.png and OUTDIR/compositor_combined.png. OUTDIR/report.json says what
 the add-on registered and produced; a failure is reported there too.
@@ -106,6 +107,9 @@ def main() -> None:
             for link in links
             if link.to_node.bl_idname == "CompositorNodeComposite"
         ]
+        # again, rendering with the compositor now on: the saved render gains a Composite layer
+        again = bpy.ops.depict.enhance(pipeline=pipeline, render=True, compositor=True)
+        report["again"] = sorted(again)
         render_compositor(os.path.join(outdir, "compositor_depict.png"), "Depict")
         render_compositor(os.path.join(outdir, "compositor_combined.png"), "Combined")
     except Exception:  # everything lands in the report for the test to show
