@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import shutil
 import subprocess
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import OpenEXR
 import pytest
 
 import gbuffer
@@ -190,3 +192,63 @@ def test_fresh_blender_renders(tmp_path: Path, args: tuple[Any, ...]) -> None:
     assert frame.camera.fit["rms_px"] < 0.01
     if args[:2] == (240, 135) and args[3] == "AUTO":
         assert true.fov_y_deg is not None and abs(angle_y - true.fov_y_deg) > 3  # the trap
+
+
+# -- inspect says what it found and what is missing ------------------------------------------------
+
+
+def inspect_text(path: Path, *flags: str) -> tuple[int, str, str]:
+    import contextlib
+    import io
+
+    from service.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["inspect", str(path), *flags])
+    return code, out.getvalue(), err.getvalue()
+
+
+def test_inspect_of_a_blender_frame_shows_the_solved_camera_and_its_error() -> None:
+    code, text, _ = inspect_text(FIXTURE / "cycles_multilayer.exr")
+    assert code == 0
+    assert "camera source: solved from ViewLayer.Position.X,Y,Z (world positions)" in text
+    assert re.search(r"reprojection error against the position pass: RMS \S+ px", text)
+    assert "operators: every one can run" in text
+    code, text, _ = inspect_text(
+        FIXTURE / "cycles_multilayer.exr", "--camera", str(FIXTURE / "camera.json")
+    )
+    assert code == 0 and "camera source: given" in text
+
+
+def test_inspect_says_what_is_missing_instead_of_failing(tmp_path: Path) -> None:
+    scene = F.make_scene()
+    path = F.write_blender(tmp_path / "b.exr", scene, position=False)  # world normals, no camera
+    code, text, err = inspect_text(path)
+    assert code == 0 and err == ""
+    assert "camera: none" in text and "missing: camera: none in the file" in text
+    assert "missing: normal:" in text
+    assert re.search(r"cannot run: curvature \(needs normal\)", text)
+    assert "warning: normals ViewLayer.Normal.X,Y,Z left out" in text
+
+
+def test_inspect_describes_a_file_whose_buffers_cannot_be_mapped(tmp_path: Path) -> None:
+    scene = F.make_scene()
+    path = F.write_blender(tmp_path / "b.exr", scene)
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        header = dict(f.header())
+        chans = {n: np.array(c.pixels) for n, c in f.channels().items()}
+    ys, xs = np.nonzero(np.isfinite(scene.depth))
+    chans["ViewLayer.Normal.Y"][ys[5], xs[5]] = np.nan  # on a covered pixel
+    bad = tmp_path / "nan.exr"
+    with OpenEXR.File(
+        {"compression": header["compression"], "BlenderMultiChannel": "x"}, chans
+    ) as f:
+        f.write(str(bad))
+    with pytest.raises(FrameError, match="NaN"):
+        gbuffer.read(bad)
+    code, text, _ = inspect_text(bad, "--json")
+    assert code == 0
+    info = json.loads(text)
+    assert info["buffers"] == {} and len(info["parts"]) == 1
+    assert any("NaN" in p for p in info["problems"])
