@@ -51,6 +51,10 @@ class Camera:
         Vertical field of view of the display window (perspective).
     ortho_height : float or None
         Height of the display window in scene units (orthographic).
+    source : where it came from ("given", "file header (worldToCamera)", "solved from ...").
+    fit : its reprojection error against the frame's world-space position pass, when there is
+        one (:class:`gbuffer.camera_solve.CameraFit` as a dict: rms_px, max_px, pixels,
+        outliers).
     """
 
     world_to_camera: np.ndarray | None = None
@@ -58,6 +62,8 @@ class Camera:
     fov_y_deg: float | None = None
     ortho_height: float | None = None
     extra: dict[str, Any] = field(default_factory=dict)
+    source: str = ""
+    fit: dict[str, float | int] | None = None
 
     def __post_init__(self) -> None:
         if self.projection not in ("perspective", "orthographic"):
@@ -232,7 +238,22 @@ class Camera:
             attrs["depict/fovYDeg"] = float(self.fov_y_deg)
         if self.ortho_height is not None:
             attrs["depict/orthoHeight"] = float(self.ortho_height)
+        if self.source and not self.source.startswith("file header"):
+            attrs["depict/cameraSource"] = self.describe_source()
         return attrs
+
+    def describe_source(self) -> str:
+        """Where the camera came from, with its reprojection error when known (one line)."""
+        text = self.source or "unknown"
+        if self.fit and self.fit.get("pixels"):
+            text += (
+                f"; reprojection error against the position pass: RMS "
+                f"{self.fit['rms_px']:.4g} px, max {self.fit['max_px']:.4g} px over "
+                f"{self.fit['pixels']} pixels"
+            )
+            if self.fit.get("outliers"):
+                text += f" ({self.fit['outliers']} outliers left out)"
+        return text
 
     @classmethod
     def from_header(cls, header: dict[str, Any]) -> Camera | None:
@@ -250,11 +271,13 @@ class Camera:
                 else:
                     projection = "orthographic"
                     ortho = 2.0 / p[1, 1]
+            how = header.get("depict/cameraSource")
             return cls(
                 world_to_camera=w2c,
                 projection=projection,
                 fov_y_deg=None if fov is None else float(fov),
                 ortho_height=None if ortho is None else float(ortho),
+                source="file header (worldToCamera" + (f"; {how})" if how else ")"),
             )
         if "cameraTransform" in header:  # V-Ray: camera-to-world, row vectors, -z forward
             c2w = np.asarray(header["cameraTransform"], dtype=np.float64).T
@@ -264,5 +287,9 @@ class Camera:
                 aspect = (x1 - x0 + 1) / (y1 - y0 + 1)
                 half_h = math.tan(math.radians(float(header["cameraFov"])) / 2.0) / aspect
                 fov = math.degrees(2.0 * math.atan(half_h))
-            return cls(world_to_camera=np.linalg.inv(c2w), fov_y_deg=fov)
+            return cls(
+                world_to_camera=np.linalg.inv(c2w),
+                fov_y_deg=fov,
+                source="file header (V-Ray cameraTransform)",
+            )
         return None

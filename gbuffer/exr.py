@@ -692,12 +692,23 @@ def _encode_part(
         )
     if not chans:
         raise FrameError(f"{where}: part {part_no} has no channels")
-    buf = io.BytesIO()
     try:
-        OpenEXR.File(hdr, chans).write(buf)
+        data = _encode(hdr, chans)
     except Exception as exc:
-        raise FrameError(f"{where}: cannot encode part {part_no} ({_one_line(exc)})") from exc
-    data = buf.getvalue()
+        codec = compression_name(hdr)
+        if int(hdr.get("compression", 0)) not in LOSSY_COMPRESSIONS:
+            raise FrameError(f"{where}: cannot encode part {part_no} ({_one_line(exc)})") from exc
+        hdr["compression"] = OpenEXR.ZIP_COMPRESSION  # keep the pixels, lose the size
+        try:
+            data = _encode(hdr, chans)
+        except Exception as again:
+            raise FrameError(
+                f"{where}: cannot encode part {part_no} ({_one_line(again)})"
+            ) from again
+        warnings.append(
+            f"part {part_no}: the OpenEXR binding cannot write it with {codec} "
+            f"({_one_line(exc)}); written with ZIP"
+        )
     layout = _read_layout(io.BytesIO(data), len(data), where)
     _read_offsets(io.BytesIO(data), layout, where)
     part = layout.parts[0]
@@ -707,6 +718,13 @@ def _encode_part(
         _physical_order(part.offsets),
         warnings,
     )
+
+
+def _encode(header: dict[str, Any], channels: dict[str, Any]) -> bytes:
+    """One part encoded by the binding as a standalone file (the binding may raise)."""
+    buf = io.BytesIO()
+    OpenEXR.File(header, dict(channels)).write(buf)
+    return buf.getvalue()
 
 
 def _unchanged_pixels(pt: Passthrough, index: int, header: dict[str, Any]) -> bool:

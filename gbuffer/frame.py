@@ -84,6 +84,10 @@ class Frame:
     passthrough : the file as read (empty for frames built in memory).
     holes : (H, W) bool, pixels whose radiance was NaN/Inf (:mod:`gbuffer.holes`), or None.
     hole_beauty : the beauty read in the holes, (N, 3), given back after the operators.
+    result_layer : the layer a result written into this file goes to by default, following
+        the renderer's convention (``"ViewLayer.Depict"`` for a Blender multilayer file, the
+        layer of the file's earlier Depict result); ``None``: ``R,G,B,A``.
+    history : the pipeline steps applied to the frame so far, each with every parameter.
     """
 
     buffers: dict[str, np.ndarray]
@@ -97,6 +101,8 @@ class Frame:
     passthrough: Passthrough = field(default_factory=Passthrough)
     holes: np.ndarray | None = None
     hole_beauty: np.ndarray | None = None
+    result_layer: str | None = None
+    history: list[dict[str, Any]] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         shapes = {b.shape[:2] for b in self.buffers.values()}
@@ -139,8 +145,10 @@ class Frame:
     def need_camera(self, why: str) -> Camera:
         if self.camera is None:
             raise MissingCameraError(
-                f"no camera in the file and none given ({why}); pass --camera CAM.json "
-                '({"world_to_camera": [[...4 rows...]], "fov_y_deg": 40})'
+                f"no camera in the file, none given and no world-space position pass to solve "
+                f"it from ({why}); give a camera JSON (--camera CAM.json on the command line, "
+                'the camera form field over HTTP): {"world_to_camera": [[...4 rows...]], '
+                '"fov_y_deg": 40}'
             )
         return self.camera
 
@@ -213,6 +221,8 @@ class Frame:
             passthrough=self.passthrough,
             holes=self.holes,
             hole_beauty=self.hole_beauty,
+            result_layer=self.result_layer,
+            history=list(self.history),
         )
 
     def layer(self, name: str) -> dict[str, np.ndarray]:

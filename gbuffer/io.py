@@ -9,11 +9,10 @@ canonical buffers).
 
 * an output named like an existing channel replaces its pixels and keeps its pixel type
   (HALF stays HALF); a new output is a FLOAT channel;
-* the primary part keeps its compression, unless new channels are added to a part with lossy
-  compression (DWAA/DWAB/B44/B44A/PXR24): that part is then written with ZIP, so the data
-  layers are exact and the channels already there are not degraded a second time (lossy
-  codecs are not idempotent); ``depict/sourceCompression`` records the original and a warning
-  says so;
+* every part keeps its compression, lossy ones (DWAA/DWAB/B44/B44A/PXR24) included, so an
+  output is about the size of its input; what re-encoding a changed part with a lossy codec
+  costs is returned as a warning (:func:`_lossy_notes`: DWA re-quantises its R, G, B, Y
+  channels, PXR24 rounds new 32-bit layers to 24 bits; B44 keeps 32-bit layers exact);
 * parts and channels that did not change are copied chunk for chunk (bit-identical).
 
 A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
@@ -25,6 +24,7 @@ FLOAT, ZIP compression, the camera as ``worldToCamera``/``worldToNDC`` + ``depic
 from __future__ import annotations
 
 import dataclasses
+import json
 import struct
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,7 @@ from gbuffer import exr
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
-from gbuffer.presets import ReadOptions, canonical_channels, to_frame
+from gbuffer.presets import PRESETS, ReadOptions, canonical_channels, detect, to_frame
 
 #: Header keys an output attribute may not replace (they describe the pixels).
 PROTECTED_ATTRIBUTES = frozenset(
@@ -137,7 +137,6 @@ def write(frame: Frame, path: str | Path) -> list[str]:
     parts = [(dict(h), dict(c)) for h, c in pt.parts]
     header, channels = parts[pt.primary]
     shape = _grid_shape(pt)
-    added = False
     for name, arr in frame.outputs.items():
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
@@ -152,21 +151,45 @@ def write(frame: Frame, path: str | Path) -> list[str]:
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:
             channels[name] = OpenEXR.Channel(name, pixels)
-            added = True
     compression = header.get("compression")
-    if added and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
-        original = exr.compression_name(header)
-        header["compression"] = OpenEXR.ZIP_COMPRESSION
-        header["depict/sourceCompression"] = original
-        warnings.append(
-            f"part {pt.primary}: {original} is lossy; written with ZIP so the new data layers "
-            "are exact (the original compression is in depict/sourceCompression)"
-        )
+    if frame.outputs and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
+        new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
+        warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
     for key, value in frame.attributes.items():
         header[key] = value
     new_pt = dataclasses.replace(pt, parts=parts)
     warnings += exr.write_parts(new_pt, path)
     return warnings
+
+
+#: Channel-name suffixes DWAA/DWAB quantise (OpenEXR's DWA rules, case-sensitive, HALF and FLOAT).
+DWA_LOSSY_SUFFIXES = frozenset({"R", "G", "B", "Y", "BY", "RY"})
+
+
+def _lossy_notes(part: int, codec: str, new: list[str]) -> list[str]:
+    """What re-encoding a changed part with its own lossy ``codec`` costs (one line, or none).
+
+    Measured with OpenEXR 3.4: B44/B44A and PXR24 give back exactly what they decode
+    (idempotent) and B44 leaves FLOAT channels exact, so new 32-bit layers are exact; PXR24
+    rounds new FLOAT layers to 24 bits; DWAA/DWAB re-quantise every R, G, B, Y, BY, RY channel
+    again (about half the first encoding's error) and quantise new layers so named.
+    """
+    if codec in ("DWAA", "DWAB"):
+        data = [n for n in new if n.rpartition(".")[2] in DWA_LOSSY_SUFFIXES - {"R", "G", "B"}]
+        also = f"; new data layers it quantises: {', '.join(data[:6])}" if data else ""
+        return [
+            f"part {part} is written with {codec} as it was read: {codec} is lossy and not "
+            "idempotent, so its R, G, B, Y channels lose a little more precision (re-save the "
+            "input with ZIP or PIZ to avoid it, e.g. oiiotool IN.exr --compression zip -o "
+            f"IN_zip.exr){also}"
+        ]
+    if codec == "PXR24" and new:  # new outputs are FLOAT channels
+        more = ", ..." if len(new) > 6 else ""
+        return [
+            f"part {part} is written with PXR24 as it was read: its new 32-bit layers "
+            f"({', '.join(new[:6])}{more}) are rounded to 24 bits"
+        ]
+    return []
 
 
 def _radiance_keys() -> set[str]:
@@ -223,13 +246,85 @@ def _subframe(frame: Frame, keys: set[str]) -> Frame:
     return sub
 
 
+def inspect(
+    path: str | Path,
+    preset: str = "auto",
+    camera: Camera | dict[str, Any] | str | Path | None = None,
+    options: ReadOptions | dict[str, Any] | None = None,
+    max_pixels: int | None = None,
+) -> dict[str, Any]:
+    """:func:`describe` of any readable file (``depict inspect``): world-space normals with no
+    camera are left out (``missing`` says so) and a file whose buffers cannot be mapped (a NaN in
+    a data channel, ...) is still described, the reason in ``problems``. An unreadable file, an
+    unknown preset or a bad explicit mapping still raise :class:`FrameError`."""
+    cam = _camera_arg(camera)
+    opts = options if isinstance(options, ReadOptions) else ReadOptions.from_dict(options or {})
+    opts = dataclasses.replace(opts, require_camera=False, strict=False)
+    if preset != "auto" and preset not in PRESETS:
+        raise FrameError(f"preset={preset!r} is not known; valid: auto, {', '.join(PRESETS)}")
+    passthrough = exr.read_parts(path, max_pixels)
+    try:
+        frame = to_frame(passthrough, preset, cam, opts)
+        problems: list[str] = []
+    except FrameError as exc:
+        if opts.mapping:
+            raise
+        header = passthrough.parts[0][0]
+        x0, y0, x1, y1 = exr.window(header, "displayWindow", passthrough.parts[0][1])
+        name = preset if preset != "auto" else detect(passthrough)[0]
+        size = (x1 - x0 + 1, y1 - y0 + 1)
+        frame = Frame(buffers={}, display_size=size, preset=name, passthrough=passthrough)
+        problems = [str(exc)]
+    info = describe(frame)
+    info["problems"] = problems
+    return info
+
+
+#: Buffers most operators need, and what their absence means.
+_KEY_BUFFERS = {
+    "beauty": "the image to enhance (operators that rebuild it from lobes or shade the G-buffer "
+    "still run)",
+    "normal": "curvature, Radiance Scaling, Light Alignment, Apparent Relief need it",
+    "depth": "every operator needs it (or a position pass)",
+}
+
+
+def _missing(frame: Frame) -> list[str]:
+    """What the frame lacks that operators need, one line each."""
+    out = [f"{name}: {why}" for name, why in _KEY_BUFFERS.items() if name not in frame.buffers]
+    if frame.camera is None:
+        out.append(
+            "camera: none in the file, none given, none solved (no world-space position pass); "
+            "world-space normals and sizes in scene units need one (--camera CAM.json)"
+        )
+    return out
+
+
+def _provenance(header: dict[str, Any]) -> dict[str, Any] | None:
+    """What Depict wrote about an output it made (version, pipeline, input, result layer)."""
+    keys = ("version", "input", "pipeline", "result", "original", "history")
+    found = {k: header[f"depict/{k}"] for k in keys if isinstance(header.get(f"depict/{k}"), str)}
+    for key in ("pipeline", "history"):
+        if key in found:
+            try:
+                found[key] = json.loads(found[key])
+            except json.JSONDecodeError:
+                pass
+    return found or None
+
+
 def describe(frame: Frame) -> dict[str, Any]:
     """The stable JSON form of a frame (``depict inspect --json``).
 
     Keys: ``file``, ``preset``, ``preset_reason``, ``size`` ([w, h] of the grid),
     ``display_window`` and ``data_window`` ([xmin, ymin, xmax, ymax], inclusive), ``parts``
     (name, channels, type, compression, tiled), ``buffers`` (name -> source, shape),
-    ``camera`` (camera JSON or null), ``warnings``.
+    ``camera`` (camera JSON or null), ``camera_source`` (where it came from: given, file header,
+    solved from a position pass), ``camera_fit`` (its reprojection error against the world-space
+    position pass: rms_px, max_px, pixels, outliers; null without one), ``missing`` (what
+    operators need and the frame lacks), ``depict`` (what Depict wrote into a file it made:
+    version, input, pipeline, result layer, original layer, history; null otherwise),
+    ``warnings``.
     """
     pt = frame.passthrough
     assert frame.display_size is not None
@@ -275,6 +370,10 @@ def describe(frame: Frame) -> dict[str, Any]:
         "parts": parts,
         "buffers": buffers,
         "camera": None if frame.camera is None else frame.camera.to_dict(),
+        "camera_source": None if frame.camera is None else frame.camera.source or None,
+        "camera_fit": None if frame.camera is None else frame.camera.fit,
+        "missing": _missing(frame),
+        "depict": _provenance(pt.parts[pt.primary][0]) if pt.parts else None,
         "warnings": list(getattr(pt, "warnings", [])),
     }
 

@@ -35,6 +35,7 @@ through unchanged).
 
 from __future__ import annotations
 
+import dataclasses
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -44,6 +45,7 @@ import cv2
 import numpy as np
 
 from gbuffer.camera import Camera
+from gbuffer.camera_solve import reprojection_fit, solve_camera, usable_pixels
 from gbuffer.errors import FrameError, MissingCameraError, OptionError
 from gbuffer.exr import ExrPassthrough, window
 from gbuffer.frame import BUFFERS, LOBES, Frame, Passthrough
@@ -266,7 +268,7 @@ KARMA = Preset(
 
 CANONICAL = Preset(
     name="canonical",
-    description="Depict's own names (DESIGN.md): R G B A, N.XYZ, depth.Z, P.XYZ, lobes, AO.X",
+    description="Depict's own names (the table above): R G B A, N.XYZ, depth.Z, P.XYZ, lobes, AO.X",
     buffers={
         "beauty": ("",),
         "alpha": ("A",),
@@ -646,8 +648,13 @@ def _blender_prefix(flat: Mapping[str, Any], opts: ReadOptions, warnings: list[s
         return opts.layer
     if not prefixes:
         return ""
-    with_combined = [p for p in prefixes if f"{p}.Combined.R" in flat]
-    chosen = (with_combined or prefixes)[0]
+    # the layer with the most passes: not the "Composite" layer (Combined alone) that Blender
+    # adds to a render saved with the compositor on
+    passes = {
+        p: sum(1 for n in flat if n.startswith(f"{p}.") and _BLENDER_PASS.match(n))
+        for p in prefixes
+    }
+    chosen = max(prefixes, key=lambda p: (passes[p], f"{p}.Combined.R" in flat))
     if len(prefixes) > 1:
         warnings.append(
             f"view layers {', '.join(prefixes)}: using '{chosen}' (choose with layer=...)"
@@ -707,10 +714,11 @@ def _trust(length: np.ndarray, tol: float) -> np.ndarray:
 def _camera_error(where: str, what: str, src: str, camera: Camera | None) -> MissingCameraError:
     have = "the camera given has no world_to_camera matrix" if camera else "the file has none"
     return MissingCameraError(
-        f"{where}: the {what} ({src}) are in world space and no camera is known ({have}); pass "
-        '--camera CAM.json with {"world_to_camera": [[4 numbers], [4], [4], [4]], '
-        '"fov_y_deg": 40} (OpenGL camera looking down -z), or --normal-space camera if they '
-        "are already camera-space"
+        f"{where}: the {what} ({src}) are in world space and no camera is known ({have}, and "
+        "no world-space position pass to solve it from); give a camera JSON (--camera "
+        'CAM.json on the command line, the camera form field over HTTP) with {"world_to_camera": '
+        '[[4 numbers], [4], [4], [4]], "fov_y_deg": 40} (OpenGL camera looking down -z), or '
+        "declare them camera-space (--normal-space camera, normal_space=camera)"
     )
 
 
@@ -735,6 +743,63 @@ def _to_camera_points(p: np.ndarray, space: str, camera: Camera | None) -> np.nd
     assert camera is not None and camera.world_to_camera is not None
     m = camera.world_to_camera[:3, :].astype(np.float32)
     return np.asarray(cv2.transform(p, m), dtype=np.float32)
+
+
+def _camera_from_positions(
+    camera: Camera | None,
+    points: np.ndarray,
+    covered: np.ndarray,
+    display_size: tuple[int, int],
+    origin: tuple[int, int],
+    depth: np.ndarray | None,
+    found: Mapping[str, list[str]],
+    warnings: list[str],
+) -> Camera | None:
+    """The camera solved from world-space positions when none is known; else the known one
+    with its reprojection error against them (a wrong field of view shows up in pixels)."""
+    src = _describe(found["position"])
+    if camera is not None and camera.world_to_camera is not None:
+        if camera.fov_y_deg is None and camera.ortho_height is None:
+            return camera
+        fit = reprojection_fit(camera, points, usable_pixels(points, covered), display_size, origin)
+        if fit.rms_px > CAMERA_DISAGREES_PX:
+            warnings.append(
+                f"the camera ({camera.source or 'given'}) puts the points of {src} "
+                f"{fit.rms_px:.3g} px (RMS) away from their pixels: check its field of view and "
+                "pose (a Blender camera's angle_y is the sensor's, not the image's), or give no "
+                "camera and let Depict solve it from the position pass"
+            )
+        return dataclasses.replace(camera, fit=fit.as_dict())
+    if camera is not None:  # intrinsics only: camera-space buffers, nothing to solve
+        return camera
+    finite_depth = None if depth is None else np.where(covered, depth, np.inf)
+    try:
+        solved, fit = solve_camera(points, covered, display_size, origin, finite_depth)
+    except FrameError as exc:
+        warnings.append(f"no camera solved from {src}: {exc}")
+        return None
+    return dataclasses.replace(
+        solved, source=f"solved from {src} (world positions)", fit=fit.as_dict()
+    )
+
+
+#: A camera whose points land further than this from their pixels (RMS) gets a warning.
+CAMERA_DISAGREES_PX = 0.5
+
+#: Header attribute naming the layer of Depict's result in the files it writes ("" for R,G,B,A).
+RESULT_ATTRIBUTE = "depict/result"
+
+
+def _marked_result(pt: Passthrough, flat: Mapping[str, Any], warnings: list[str]) -> str | None:
+    """The layer of an earlier Depict result (``depict/result``; "" for R,G,B,A), if the file
+    has one whose channels are all there."""
+    for header, _ in pt.parts:
+        layer = header.get(RESULT_ATTRIBUTE)
+        if isinstance(layer, str):
+            if _resolve(flat, layer, 3) is not None:
+                return layer
+            warnings.append(f"{RESULT_ATTRIBUTE}={layer!r} names no RGB layer of the file")
+    return None
 
 
 def _file_camera(header: dict[str, Any], warnings: list[str]) -> Camera | None:
@@ -800,6 +865,12 @@ def to_frame(
     prefix = opts.layer or ""
     if p.view_layer:
         prefix = _blender_prefix(flat, opts, warnings)
+    result_layer = f"{prefix}.Depict" if p.view_layer and prefix else None
+    marked = _marked_result(passthrough, flat, warnings)
+    if marked is not None:
+        result_layer = marked or None
+        if "beauty" not in opts.mapping:  # an output of Depict: its result is the beauty
+            opts = dataclasses.replace(opts, mapping={**opts.mapping, "beauty": marked or "R,G,B"})
 
     found: dict[str, list[str]] = {}
     spaces: dict[str, str] = {}
@@ -845,6 +916,8 @@ def to_frame(
 
     if camera is None:
         camera = _file_camera(header, warnings)
+    elif not camera.source:
+        camera = dataclasses.replace(camera, source="given")
 
     buffers: dict[str, np.ndarray] = {}
     sources: dict[str, str] = {}
@@ -880,6 +953,14 @@ def to_frame(
         return arr
 
     any_bg = bool(background.any())
+
+    position = None
+    if "position" in found:
+        position = load_checked("position", found["position"])
+        if spaces["position"] == "world":
+            camera = _camera_from_positions(
+                camera, position, ~background, display_size, origin, depth, found, warnings
+            )
 
     if depth is not None:
         kind = opts.depth or p.depth_kind
@@ -937,11 +1018,11 @@ def to_frame(
             if space == "world":
                 _check_facing(n, camera, reader.shape, display_size, origin, src, warnings)
 
-    if "position" in found:
+    if position is not None:
         names = found["position"]
         space = spaces["position"]
         src = _describe(names)
-        pos = load_checked("position", names)
+        pos = position
         if space == "world" and (camera is None or camera.world_to_camera is None):
             warnings.append(f"position {src} left out: world space and no camera")
         else:
@@ -1021,6 +1102,8 @@ def to_frame(
             "no buffer recognised with preset "
             f"'{p.name}'; channels: {_channel_list(flat)} (choose --preset or --map)"
         )
+    if marked is not None and "beauty" in sources:
+        sources["beauty"] += " (Depict's result: depict/result)"
     frame = Frame(
         buffers=buffers,
         camera=camera,
@@ -1029,6 +1112,7 @@ def to_frame(
         preset=p.name,
         sources=sources,
         passthrough=passthrough,
+        result_layer=result_layer,
     )
     if reader.holes is not None:
         original = reader.stack(found["beauty"], "beauty") if "beauty" in found else None

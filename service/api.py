@@ -42,6 +42,7 @@ import anyio
 from fastapi import FastAPI, File, Form, Query, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.openapi.utils import get_openapi
+from fastapi_offline import FastAPIOffline
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from pydantic.json_schema import models_json_schema
 from starlette.background import BackgroundTask
@@ -53,6 +54,7 @@ from gbuffer.errors import FrameError
 from service import jobs
 from service.logs import REQUEST_ID, configure_logging
 from service.metrics import Metrics
+from service.output import LAYER_PATTERN
 from service.problems import (
     PROBLEM_SCHEMA,
     Problem,
@@ -62,6 +64,7 @@ from service.problems import (
 )
 from service.registry import PipelineError
 from service.settings import Settings
+from service.version import version
 
 API_VERSION = "1"
 EXR_MAGIC = b"\x76\x2f\x31\x01"
@@ -70,7 +73,16 @@ MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 #: Routes that take an upload: multipart/form-data only.
 UPLOAD_PATHS = ("/v1/enhance", "/v1/render", "/v1/score", "/v1/compare", "/v1/relief/pick")
 #: Routes open without the API key.
-PUBLIC_PATHS = ("/healthz", "/readyz", "/openapi.json", "/docs", "/docs/oauth2-redirect")
+PUBLIC_PATHS = (
+    "/healthz",
+    "/readyz",
+    "/openapi.json",
+    "/docs",
+    "/docs/oauth2-redirect",
+    "/redoc",
+)
+#: Where the Swagger UI and ReDoc assets are served from (fastapi-offline's copies: no CDN).
+DOCS_ASSETS = "/docs-assets"
 
 _REQUEST_ID_RE = re.compile(r"^[A-Za-z0-9._:/+=-]{1,128}$")
 #: The command-line flags that messages shared with the CLI name, as the form fields that do
@@ -117,6 +129,7 @@ class OperatorInfo(BaseModel):
 
 class Health(BaseModel):
     status: str
+    version: str = Field(description="Depict's version")
 
 
 class Ready(BaseModel):
@@ -184,7 +197,11 @@ class Gate:
     def _refuse(self, scope: Scope, headers: dict[str, str]) -> Problem | None:
         path = scope["path"]
         key = self.settings.key
-        public = path in PUBLIC_PATHS or (path == "/metrics" and self.settings.metrics_public)
+        public = (
+            path in PUBLIC_PATHS
+            or path.startswith(f"{DOCS_ASSETS}/")
+            or (path == "/metrics" and self.settings.metrics_public)
+        )
         if key and not public:
             auth = headers.get("authorization", "")
             scheme, _, token = auth.partition(" ")
@@ -520,7 +537,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             await pool.shutdown()
             shutil.rmtree(root, ignore_errors=True)
 
-    app = FastAPI(
+    app = FastAPIOffline(  # /docs (Swagger UI) and /redoc with packaged assets, no CDN
+        static_url=DOCS_ASSETS,
         title="Depict",
         version=API_VERSION,
         summary="Shape depiction on EXR G-buffers: enhance, render, score.",
@@ -530,7 +548,6 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             "`Authorization: Bearer <key>` (/metrics too, unless DEPICT_METRICS_PUBLIC=true)."
         ),
         lifespan=lifespan,
-        redoc_url=None,
     )
     app.state.settings = settings
     app.state.metrics = metrics
@@ -600,7 +617,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         debug_layers: Annotated[bool, Form(description="also write intermediate layers")] = False,
         output_layer: Annotated[
             str | None,
-            Form(description="write NAME.R/G/B/A instead of R,G,B,A", pattern=r"^[A-Za-z0-9_]+$"),
+            Form(
+                description="write the result to NAME.R/G/B/A, e.g. ViewLayer.Depict (default: "
+                "the view layer's Depict pass for Blender files, else R,G,B,A)",
+                pattern=LAYER_PATTERN,
+                max_length=200,
+            ),
         ] = None,
         preview: Annotated[
             Literal["png"] | None, Query(description="png: answer a tone-mapped PNG preview")
@@ -619,6 +641,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
             with _scrubbed(work, {src: file.filename or "upload.exr"}):
                 read = await _receive_frame(file, src, fields, settings.limits)
                 write = {
+                    "input_name": Path(file.filename or "upload.exr").name,
                     "debug_layers": debug_layers,
                     "output_layer": output_layer,
                     "preview": preview == "png",
@@ -737,7 +760,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         healthy, why = pool().pool.health()
         if not healthy:
             raise Problem("unavailable", f"{why}; restart the service")
-        return {"status": "ok"}
+        return {"status": "ok", "version": version()}
 
     @app.get(
         "/readyz",

@@ -42,6 +42,7 @@ import glob
 import json
 import os
 import re
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -190,6 +191,7 @@ def process_frame(
             "frame": frame,
             "status": "done",
             "measured": out["measured"],
+            "warnings": out["warnings"],
             "seconds": time.perf_counter() - t0,
         }
     except Exception as exc:  # one bad frame must not stop the sequence
@@ -208,13 +210,15 @@ def process_frame(
 
 @dataclass
 class Summary:
-    """What a batch did: frames done, skipped and failed (frame -> message), pinned statistics."""
+    """What a batch did: frames done, skipped and failed (frame -> message), pinned statistics,
+    the writer's warnings (message -> frames)."""
 
     done: list[int] = field(default_factory=list)
     skipped: list[int] = field(default_factory=list)
     failed: dict[int, str] = field(default_factory=dict)
     pinned: dict[str, float] = field(default_factory=dict)
     seconds: float = 0.0
+    warnings: dict[str, list[int]] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -326,6 +330,8 @@ def run_batch(
             def record(result: dict[str, Any]) -> None:
                 if result["status"] == "done":
                     summary.done.append(result["frame"])
+                    for warning in result.get("warnings", []):
+                        summary.warnings.setdefault(warning, []).append(result["frame"])
                 else:
                     summary.failed[result["frame"]] = result.get("error", "failed")
                 bar.update(task, advance=1, failed=len(summary.failed))
@@ -389,6 +395,8 @@ def print_summary(summary: Summary, total: int) -> None:
 
     for frame, error in summary.failed.items():
         print(f"  frame {frame} failed: {printable(error)}")
+    for warning, frames in summary.warnings.items():
+        print(f"depict: warning ({len(frames)} frames): {printable(warning)}", file=sys.stderr)
 
 
 def cmd_batch(args: Any) -> int:

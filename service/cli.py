@@ -25,15 +25,16 @@ from service.cli_common import (
     printable,
     read_options,
 )
-from service.client import DepictError
+from service.errors import DepictError
+from service.version import version
 
 EXIT_USAGE = 2
 
 
-def read_frame(args: argparse.Namespace, path: str, strict: bool = True) -> Any:
+def read_frame(args: argparse.Namespace, path: str) -> Any:
     from service.jobs import read_frame as read
 
-    return read(path, {**read_options(args), "strict": strict})
+    return read(path, read_options(args))
 
 
 def check_outputs(outputs: list[str | None], inputs: list[str | None]) -> None:
@@ -112,18 +113,40 @@ def cmd_warmup(args: argparse.Namespace) -> int:
     return 0
 
 
-def cmd_inspect(args: argparse.Namespace) -> int:
-    from gbuffer.errors import FrameError, LimitError
+def _runnable(info: dict[str, Any]) -> dict[str, Any]:
+    """Which operators can run on the inspected frame, and what the others lack."""
+    from service.registry import operators
 
-    try:  # NaN/Inf data pixels are described as holes, not refused (strict=False)
-        info = _describe(read_frame(args, args.file, strict=False))
-    except LimitError:
-        raise
-    except FrameError as exc:  # the pixels cannot be decoded: describe the header alone
-        info = _describe_header(args.file, exc)
-    if args.json:
-        print(json.dumps(info, indent=2))
-        return 0
+    have = set(info["buffers"])
+    if "position" in have:
+        have.add("depth")
+    blocked = {}
+    for op in operators().values():
+        lacks = [b for b in op.needs if b not in have]
+        if op.needs_camera and info["camera"] is None:
+            lacks.append("camera")
+        if lacks:
+            blocked[op.name] = lacks
+    return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}
+
+
+def _camera_lines(info: dict[str, Any]) -> list[str]:
+    cam = info["camera"]
+    lines = [f"  camera: {json.dumps(cam) if cam else 'none'}"]
+    if cam:
+        lines.append(f"  camera source: {info.get('camera_source') or 'unknown'}")
+        fit = info.get("camera_fit")
+        if fit and fit.get("pixels"):
+            outliers = f" ({fit['outliers']} outliers left out)" if fit["outliers"] else ""
+            lines.append(
+                f"  camera reprojection error against the position pass: RMS "
+                f"{fit['rms_px']:.2g} px, max {fit['max_px']:.2g} px over {fit['pixels']} "
+                f"pixels{outliers}"
+            )
+    return lines
+
+
+def _inspection_lines(info: dict[str, Any]) -> list[str]:
     lines = [f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}"]
     lines.append(f"  preset: {info['preset_reason']}")
     lines.append(f"  display window {info['display_window']}, data window {info['data_window']}")
@@ -135,19 +158,45 @@ def cmd_inspect(args: argparse.Namespace) -> int:
     lines.append("  buffers:")
     for name, buf in info["buffers"].items():
         lines.append(f"    {name:<20s} <- {buf['source']}")
-    cam = info["camera"]
-    lines.append(
-        f"  camera: {json.dumps(cam) if cam else 'none (pass --camera CAM.json if needed)'}"
-    )
-    lines += [f"  warning: {warning}" for warning in info.get("warnings", [])]
-    print("\n".join(printable(line) for line in lines))
+    lines += _camera_lines(info)
+    made = info.get("depict")
+    if made:
+        where = made.get("result") or "R,G,B,A"
+        lines.append(
+            f"  depict: result in {where} (original beauty: {made.get('original', '?')}), "
+            f"version {made.get('version', '?')}, input {made.get('input', '?')}"
+        )
+        if "pipeline" in made:
+            lines.append(f"  depict pipeline: {json.dumps(made['pipeline'])}")
+    lines += [f"  missing: {line}" for line in info.get("missing", [])]
+    ops = info["operators"]
+    if not ops["not_runnable"]:
+        lines.append("  operators: every one can run")
+    for name, lacks in ops["not_runnable"].items():
+        lines.append(f"  cannot run: {name} (needs {', '.join(lacks)})")
+    for key in ("problems", "warnings"):
+        lines += [f"  {key[:-1]}: {line}" for line in info.get(key, [])]
+    return lines
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    from gbuffer.errors import FrameError, LimitError, OptionError
+    from gbuffer.io import ReadOptions, inspect
+
+    read = read_options(args)
+    options = ReadOptions(mapping=read["mapping"], normal_space=read["normal_space"])
+    try:
+        info = inspect(args.file, read["preset"], read["camera"], options)
+    except (LimitError, OptionError):
+        raise
+    except FrameError as exc:  # the pixels cannot be decoded: describe the header alone
+        info = _describe_header(args.file, exc)
+    info["operators"] = _runnable(info)
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        print("\n".join(printable(line) for line in _inspection_lines(info)))
     return 0
-
-
-def _describe(frame: Any) -> dict[str, Any]:
-    from gbuffer.io import describe
-
-    return describe(frame)
 
 
 def _describe_header(path: str, error: Exception) -> dict[str, Any]:
@@ -280,7 +329,19 @@ def add_service_commands(sub: Any) -> None:
 
 class _Parser(argparse.ArgumentParser):
     """Command-line errors as one line ``depict: error: ...`` and exit code 2, like the others
-    (subcommand parsers inherit the class)."""
+    (subcommand parsers inherit the class). ``builder(parser)``, when given, adds the
+    arguments only when the command is parsed: what they import (defaults, choices) costs
+    ``depict --help`` nothing."""
+
+    def __init__(self, *args: Any, builder: Any = None, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._builder = builder
+
+    def parse_known_args(self, args: Any = None, namespace: Any = None) -> Any:
+        if self._builder is not None:
+            build, self._builder = self._builder, None
+            build(self)
+        return super().parse_known_args(args, namespace)
 
     def error(self, message: str) -> Any:
         self.exit(EXIT_USAGE, f"depict: error: {message} (see {self.prog} --help)\n")
@@ -291,6 +352,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="depict",
         description="Depict shape in rendered images: EXR G-buffers in, enhanced EXR out.",
     )
+    parser.add_argument("--version", action="version", version=f"depict {version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     p = sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR")

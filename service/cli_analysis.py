@@ -255,12 +255,39 @@ def add_analysis_commands(sub: Any) -> None:
     add_server_option(p)
     p.set_defaults(func=cmd_score)
 
+    sub.add_parser(
+        "compare",
+        help="score every depiction method under the 21 light directions (LLA §7)",
+        builder=_compare_arguments,
+    )
+
+    p = sub.add_parser(
+        "relief-pick", help="the Apparent Relief descriptor under a pixel, to paint an ARM there"
+    )
+    p.add_argument("file")
+    p.add_argument("x", type=int, help="column, from the left")
+    p.add_argument("y", type=int, help="row, from the top")
+    p.add_argument("--scale", type=float, help="curvature scale / image height (0.006)")
+    p.add_argument("--curvedness-norm", type=float, help="pinned curvedness norm (default auto)")
+    p.add_argument("--json", action="store_true", help="stable JSON for other tools")
+    add_read_options(p)
+    add_server_option(p)
+    p.set_defaults(func=cmd_relief_pick)
+
+    sub.add_parser(
+        "arm",
+        help="write an Apparent Relief Map template, or paint an ARM",
+        builder=_arm_arguments,
+    )
+
+
+# Built only when their command is run (depict --help and --version import nothing heavy).
+
+
+def _compare_arguments(p: argparse.ArgumentParser) -> None:
     from ops.directions import N_DIRECTIONS
     from service.compare import ALBEDOS, METHODS
 
-    p = sub.add_parser(
-        "compare", help="score every depiction method under the 21 light directions (LLA §7)"
-    )
     p.add_argument("input", help="a mesh (rendered with Depict) or an EXR with normals and depth")
     p.add_argument("--methods", default=",".join(METHODS), help="comma list of methods")
     p.add_argument(
@@ -292,22 +319,10 @@ def add_analysis_commands(sub: Any) -> None:
     add_server_option(p)
     p.set_defaults(func=cmd_compare)
 
-    p = sub.add_parser(
-        "relief-pick", help="the Apparent Relief descriptor under a pixel, to paint an ARM there"
-    )
-    p.add_argument("file")
-    p.add_argument("x", type=int, help="column, from the left")
-    p.add_argument("y", type=int, help="row, from the top")
-    p.add_argument("--scale", type=float, help="curvature scale / image height (0.006)")
-    p.add_argument("--curvedness-norm", type=float, help="pinned curvedness norm (default auto)")
-    p.add_argument("--json", action="store_true", help="stable JSON for other tools")
-    add_read_options(p)
-    add_server_option(p)
-    p.set_defaults(func=cmd_relief_pick)
 
+def _arm_arguments(p: argparse.ArgumentParser) -> None:
     from ops.relief import SHIPPED_ARMS
 
-    p = sub.add_parser("arm", help="write an Apparent Relief Map template, or paint an ARM")
     p.add_argument("-o", "--output", required=True, help="output PNG")
     p.add_argument("--size", type=int, default=256, help="side in pixels (64-4096)")
     p.add_argument(

@@ -32,15 +32,9 @@ from typing import Any
 import httpx
 
 from gbuffer.atomic import atomic_path
+from service.errors import DepictError
 
-
-class DepictError(Exception):
-    """An error answer of the server (``status``, ``problem`` body) or a connection failure."""
-
-    def __init__(self, message: str, status: int = 0, problem: dict[str, Any] | None = None):
-        super().__init__(message)
-        self.status = status
-        self.problem = problem or {}
+__all__ = ["Client", "DepictError"]
 
 
 def _pipeline_json(pipeline: Any) -> str | None:

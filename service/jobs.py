@@ -93,8 +93,7 @@ def read_frame(path: str, read: dict[str, Any], limits: dict[str, int] | None = 
     """Read a frame exactly as the CLI does (same preset, camera, mapping).
 
     ``read``: ``preset``, ``camera`` (path of a camera JSON file), ``mapping`` (buffer ->
-    channels), ``normal_space``, ``strict`` (False: non-finite data pixels are masked with a
-    warning instead of refused, for ``inspect``). ``limits``: the keyword arguments of
+    channels), ``normal_space``. ``limits``: the keyword arguments of
     :class:`gbuffer.limits.Limits` (default: the ``DEPICT_MAX_*`` variables when set).
     """
     from gbuffer.io import ReadOptions
@@ -104,8 +103,6 @@ def read_frame(path: str, read: dict[str, Any], limits: dict[str, int] | None = 
     options = ReadOptions(
         mapping=read.get("mapping") or {},
         normal_space=read.get("normal_space"),
-        strict=read.get("strict", True),
-        require_camera=read.get("strict", True),
     )
     return read_exr(
         path,
@@ -141,10 +138,12 @@ def enhance_file(
     """Read ``in_path``, run the pipeline, write the EXR (or a PNG preview) to ``out_path``.
 
     The same steps as ``depict enhance``, so the output is bit for bit the CLI's.
-    ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``.
+    ``write``: ``debug_layers``, ``output_layer``, ``preview`` (bool), ``exposure``,
+    ``input_name`` (the input's name recorded in the output; default: ``in_path``'s).
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`).
     ``files``: whether parameters may name image files (False for the HTTP service).
-    Returns ``op_s`` (seconds per operator), ``size`` and the statistics ``measured``.
+    Returns ``op_s`` (seconds per operator), ``size``, the statistics ``measured`` and the
+    writer's ``warnings`` (e.g. a compression it could not keep).
     """
     from gbuffer.io import write as write_exr
     from service import pipeline
@@ -156,15 +155,21 @@ def enhance_file(
         debug_layers=bool(write.get("debug_layers")), pinned=dict(pinned or {}), files=files
     )
     out, op_s = run_steps(frame, spec, context)
-    out = pipeline.finish(out, write.get("output_layer"))
+    out = pipeline.finish(out, write.get("output_layer"), write.get("input_name"))
+    warnings: list[str] = []
     if write.get("preview"):
         from gbuffer.preview import picture, write_png
 
         write_png(picture(out, "beauty", exposure=float(write.get("exposure", 0.0))), out_path)
     else:
-        write_exr(out, out_path)
+        warnings = write_exr(out, out_path)
     h, w = out.shape
-    return {"op_s": op_s, "size": [w, h], "measured": dict(context.measured)}
+    return {
+        "op_s": op_s,
+        "size": [w, h],
+        "measured": dict(context.measured),
+        "warnings": warnings,
+    }
 
 
 def enhance_job(

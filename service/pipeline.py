@@ -166,26 +166,16 @@ def run(
             raise
         except ValueError as exc:  # ops/ names a bad value in a ValueError
             raise PipelineError(f"{op.name}: {exc}") from None
+        out.history.append({"op": op.name, "params": params.model_dump(mode="json")})
     holes.restore(out)  # and given back unchanged
     return out
 
 
-def finish(frame: Frame, output_layer: str | None = None) -> Frame:
-    """Put the frame's beauty into the output channels ``R,G,B,A`` (or ``LAYER.R`` ...).
+def finish(frame: Frame, output_layer: str | None = None, input_name: str | None = None) -> Frame:
+    """A copy of ``frame`` ready to write: the enhanced beauty in its result layer (``R,G,B,A``,
+    the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own ``R,G,B,A``
+    kept under ``input.*``, and the camera and provenance in the header
+    (:mod:`service.output` has the rules)."""
+    from service.output import finish as place
 
-    When writing to ``R,G,B,A`` and the file already had channels of those names in its primary
-    part, those are kept, unchanged and with their pixel type, as ``input.R`` ... ``input.A``.
-    """
-    out = frame.copy()
-    beauty = out.need("beauty", "the enhanced image")
-    alpha = out.buffers.get("alpha", out.mask)
-    prefix = f"{output_layer}." if output_layer else ""
-    if not output_layer and out.passthrough.parts:
-        original = out.passthrough.parts[out.passthrough.primary][1]
-        for name in ("R", "G", "B", "A"):
-            if name in original and f"input.{name}" not in out.outputs:
-                out.outputs[f"input.{name}"] = original[name].pixels
-    for i, name in enumerate(("R", "G", "B")):
-        out.outputs[prefix + name] = np.ascontiguousarray(beauty[..., i], dtype=np.float32)
-    out.outputs[prefix + "A"] = np.asarray(alpha, np.float32)
-    return out
+    return place(frame, output_layer, input_name)

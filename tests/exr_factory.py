@@ -198,9 +198,15 @@ BLENDER5_NAMES = {
 
 
 def write_blender(
-    path: Path, s: Scene, layer: str = "ViewLayer", blender5: bool = False, signature: bool = True
+    path: Path,
+    s: Scene,
+    layer: str = "ViewLayer",
+    blender5: bool = False,
+    signature: bool = True,
+    position: bool = True,
 ) -> Path:
-    """Cycles multilayer: world normals (filtered, not unit at edges), planar depth 1e10 bg."""
+    """Cycles multilayer: world normals (filtered, not unit at edges), planar depth 1e10 bg,
+    world positions (unless ``position`` is False)."""
     names = BLENDER5_NAMES if blender5 else {k: k for k in BLENDER5_NAMES}
     ch: dict[str, np.ndarray] = {}
     L = layer
@@ -208,7 +214,8 @@ def write_blender(
     ch[f"{L}.Combined.A"] = s.alpha.astype(HALF)
     ch[f"{L}.Depth.Z"] = np.where(s.covered, s.depth, BLENDER_BG).astype(FLOAT)
     ch.update(_split(s.to_world_vectors(s.normal_filtered), XYZ, f"{L}.Normal", FLOAT))
-    ch.update(_split(s.to_world_points(s.position), XYZ, f"{L}.Position", FLOAT))
+    if position:
+        ch.update(_split(s.to_world_points(s.position), XYZ, f"{L}.Position", FLOAT))
     direct = s.diffuse_light * 0.75
     ch.update(_split(direct, RGB, f"{L}.{names['DiffDir']}", FLOAT))
     ch.update(_split(s.diffuse_light - direct, RGB, f"{L}.{names['DiffInd']}", FLOAT))

@@ -217,7 +217,8 @@ def test_not_an_exr_400(client: Any) -> None:
         ({"camera": '{"focal_px": [1], "height": 2}'}, "camera"),
         ({"map": '{"normal": 3}'}, "map"),
         ({"preset": "maya"}, "preset 'maya' is unknown"),
-        ({"output_layer": "a b"}, "output_layer"),
+        ({"output_layer": "a/b"}, "output_layer"),
+        ({"output_layer": "ViewLayer..Depict"}, "output_layer"),
         ({"normal_space": "up"}, "normal_space"),
     ],
 )

@@ -92,8 +92,18 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
         "parts",
         "buffers",
         "camera",
+        "camera_source",
+        "camera_fit",
+        "missing",
+        "depict",
+        "problems",
+        "operators",
         "warnings",
     }
+    assert info["camera_source"] == "file header (worldToCamera)"
+    assert info["missing"] == [] and info["problems"] == [] and info["depict"] is None
+    assert info["operators"]["not_runnable"] == {}
+    assert "radiance_scaling" in info["operators"]["runnable"]
     assert info["file"] == str(exr)
     assert info["size"] == [W, H]
     assert info["display_window"] == info["data_window"] == [0, 0, W - 1, H - 1]

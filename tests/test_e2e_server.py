@@ -178,7 +178,7 @@ def test_preview_png(server: Server, files: dict[str, Path]) -> None:
 
 def test_python_client_and_score_match_local(server: Server, files: dict[str, Path]) -> None:
     with Client(server.url, api_key=KEY) as client:
-        assert client.health() == {"status": "ok"} and client.ready()["osmesa"] is True
+        assert client.health()["status"] == "ok" and client.ready()["osmesa"] is True
         assert "radiance_scaling" in {op["name"] for op in client.operators()}
         remote = client.score(files["canonical"], gradient_scale=0.004)
     local = score_frame(read_exr(files["canonical"]), gradient_scale=0.004)
@@ -361,13 +361,13 @@ def test_bad_pipeline_422(server: Server, files: dict[str, Path]) -> None:
     assert_problem(post_enhance(server, data, data=bad_param), 422, "nope")
 
 
-def test_missing_camera_422(server: Server) -> None:
-    exr = BLENDER / "cycles_multilayer.exr"
-    if not exr.is_file():
-        pytest.skip(f"Blender fixture {exr} is absent")
+def test_missing_camera_422(server: Server, tmp_path: Path) -> None:
+    # world-space normals, no camera, and no Position pass to solve one from
+    exr = exr_factory.write_blender(tmp_path / "b.exr", exr_factory.make_scene(), position=False)
     response = post_enhance(server, exr.read_bytes(), data={"preset": "blender"})
-    body = assert_problem(response, 422, "camera")
+    body = assert_problem(response, 422, "camera form field")
     assert body["type"] == "urn:depict:problem:missing-camera"
+    assert "--camera" not in body["detail"]  # over HTTP the form fields are named, not flags
 
 
 def test_wrong_or_missing_key_401(server: Server, files: dict[str, Path]) -> None:
