@@ -20,7 +20,7 @@ labelled PNG sheets into ``gallery/`` (git-ignored):
 ``make gallery`` runs :mod:`bench.gallery_corpus` first: every operator's defaults on the corpus
 frames, in ``gallery/corpus/``.
 
-``--docs DIR`` also writes six small pictures for the README (≤ 640 px wide, < 150 KB):
+``--docs DIR`` also writes six pictures for the README (at least 800 px wide):
 ``rs_scenarios.png``, ``rs_blender.png``, ``lla_scales.png``, ``lla_materials.png``, ``usm.png``
 and ``relief_styles.png`` (``make gallery`` then ``python -m bench.gallery --docs docs/images``
 refreshes the committed ones). The meshes
@@ -563,8 +563,8 @@ def docs_pictures(
     out: Path,
     written: list[Path],
 ) -> None:
-    """A few small pictures (≤ 640 px wide) for the README, one per operator family."""
-    kw: dict[str, Any] = {"gap": 2, "label_scale": 0.38, "title_scale": 0.42, "square": True}
+    """A few pictures (at least 800 px wide) for the README, one per operator family."""
+    kw: dict[str, Any] = {"gap": 2, "label_scale": 0.5, "title_scale": 0.55, "square": True}
 
     chosen = ("lobes", "toon", "lit_sphere", "mirror")
     pairs = rs["pairs"]
@@ -574,7 +574,7 @@ def docs_pictures(
     ]
     title = f"Radiance Scaling, 4 of the 10 scenarios (gamma {RS_GAMMA:g})"
     save(
-        sheet(rows, title, height=150, frame=frames[names["rs"]], **kw),
+        sheet(rows, title, height=204, frame=frames[names["rs"]], **kw),
         out / "rs_scenarios.png",
         written,
     )
@@ -590,7 +590,7 @@ def docs_pictures(
                 ]
             ],
             "Radiance Scaling of a Blender Cycles render's lobes (Eq. 4)",
-            height=158,
+            height=215,
             **kw,
         ),
         out / "rs_blender.png",
@@ -603,7 +603,7 @@ def docs_pictures(
         sheet(
             [scales],
             "Light Alignment: diffuse, enhancing coarse, fine or all scales",
-            height=157,
+            height=213,
             frame=frames[names["lla"]],
             **kw,
         ),
@@ -623,7 +623,7 @@ def docs_pictures(
                 ]
             ],
             "Light Alignment of specular and transmission (LLA Fig. 8)",
-            height=157,
+            height=213,
             frame=frames[names["lla"]],
             **kw,
         ),
@@ -640,7 +640,7 @@ def docs_pictures(
         sheet(
             rows,
             "Unsharp masking: plain 2-D, 3D (along surfaces), depth buffer",
-            height=[157, 118],
+            height=[213, 160],
             frame=frames[names["usm"]],
             **kw,
         ),
@@ -654,7 +654,7 @@ def docs_pictures(
         sheet(
             [picked[:3], picked[3:]],
             "Apparent Relief: descriptor colour code and styles",
-            height=190,
+            height=268,
             frame=frames[names["relief"]],
             **kw,
         ),

@@ -16,7 +16,8 @@ and of ``corpus/frames`` when it has been rendered (``make corpus``), it runs ea
   target marked ``*``).
 
 ``--frames`` keeps the frames whose name contains one of the given strings, ``--op`` picks
-operators, ``--dir`` other folders of frames.
+operators, ``--dir`` other folders of frames. ``--docs DIR`` also writes the README's
+``defaults_cycles.png`` (:func:`docs_defaults`).
 """
 
 from __future__ import annotations
@@ -138,12 +139,39 @@ def frame_sheet(cf: corpus.CorpusFrame, ops: Sequence[str]) -> np.ndarray:
     return sheet(rows, title, height=ROW, label_scale=0.36)
 
 
+#: The corpus frame of the README's picture of the defaults: the largest rendered rock frame.
+DOCS_SCENE = "rock"
+#: Operators of that picture.
+DOCS_OPS = ("radiance_scaling", "light_alignment", "unsharp_masking")
+
+
+def docs_defaults(out: Path, written: list[Path]) -> None:
+    """``defaults_cycles.png`` for the README: a Blender Cycles corpus frame (the largest rock
+    frame rendered, else the committed 240p one), its input and each default of
+    :data:`DOCS_OPS` at 800 px wide, and the same crop of each enlarged with nearest-neighbour."""
+    rocks = [f for f in corpus.gather(None, [DOCS_SCENE]) if f.name.startswith(DOCS_SCENE)]
+    cf = max(rocks, key=lambda f: (corpus.SIZES.get(f.name.split("_")[1], (0, 0))[1], f.name))
+    ref = quality.reference(cf.read())
+    lights = cf.light_strings()
+    results = [(pic(quality.run_operator(ref.frame, op, lights)), op) for op in DOCS_OPS]
+    h, w = ref.frame.shape
+    _, box = crop_windows(ref)[0]
+    zoom = max(1, round(800 / 2 / (box[1] - box[0])))
+    full = [(pic(ref.frame), "Cycles input"), *results]
+    crops = [(enlarge(img, box, zoom), f"{label} x{zoom}") for img, label in full]
+    title = f"Each default on a Blender Cycles frame ({cf.name}, {w}x{h}), and a crop x{zoom}"
+    height = round(800 * h / w)
+    rows = [full[:2], full[2:], crops]
+    save(sheet(rows, title, height=[height, height, 400], gap=4), out, written)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").split("\n\n")[0])
     ap.add_argument("out", nargs="?", type=Path, default=DEFAULT_OUT / "corpus")
     ap.add_argument("--dir", type=Path, action="append", help="folder of frames (repeatable)")
     ap.add_argument("--frames", nargs="+", default=(), help="only frames whose name has one of")
     ap.add_argument("--op", action="append", help="operator (repeatable)")
+    ap.add_argument("--docs", type=Path, default=None, help="also write the README's picture here")
     args = ap.parse_args(argv)
     frames = corpus.gather(args.dir, args.frames)
     if not frames:
@@ -153,6 +181,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     written: list[Path] = []
     for cf in frames:
         save(frame_sheet(cf, args.op or quality.DEFAULT_OPS), args.out / f"{cf.name}.png", written)
+    if args.docs is not None:
+        docs_defaults(args.docs / "defaults_cycles.png", written)
     print(f"gallery: {len(written)} corpus sheets in {time.perf_counter() - t0:.1f} s")
     return 0
 
