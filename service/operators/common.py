@@ -12,6 +12,7 @@ from pydantic import Field, field_validator
 
 from gbuffer.frame import Frame
 from ops.lighting import lighting_gain
+from ops.scaling import luminance
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.images import load_image
 from service.registry import Context, Params, PipelineError
@@ -96,13 +97,20 @@ def relative_pixel_sizes(frame: Frame, why: str) -> np.ndarray:
     )
 
 
+#: Relative luminance change from which an operator's change is corrected in full by
+#: :func:`kept_lighting_gain` (smaller changes are corrected in proportion).
+KEPT_CHANGE = 0.05
+
+
 def kept_lighting_gain(
     frame: Frame, before: np.ndarray, after: np.ndarray, scale: float, why: str
 ) -> np.ndarray:
     """:func:`ops.lighting.lighting_gain` of an operator's change on ``frame``: the factor per
     pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
-    ``scale`` (relative to the image height). Only the pixels the operator changed are
-    corrected (the gain is 1 elsewhere), so what it left alone stays bit for bit."""
+    ``scale`` (relative to the image height). The correction is weighed by how much the
+    operator changed each pixel, ``min(1, |ΔY| / (KEPT_CHANGE · Y))``: what it left alone stays bit
+    for bit, and the correction fades out continuously where the change does (a cut-off would
+    draw a line where the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
     gain = lighting_gain(
         before,
@@ -113,9 +121,12 @@ def kept_lighting_gain(
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
     )
-    unchanged = np.all(np.asarray(before) == np.asarray(after), axis=-1)
-    gain[unchanged] = 1.0
-    return gain
+    y0, y1 = luminance(before), luminance(after)
+    weight = np.abs(y1 - y0)
+    np.divide(weight, np.float32(KEPT_CHANGE) * np.abs(y0), out=weight, where=y0 != 0)
+    np.minimum(weight, np.float32(1.0), out=weight)
+    weight[y1 == y0] = 0.0
+    return np.asarray(1.0 + weight * (gain - 1.0), np.float32)
 
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
