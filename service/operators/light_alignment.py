@@ -36,8 +36,8 @@ from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
+from service.operators.base import Context, register
 from service.operators.common import LightsParams, channels, frame_albedo, kept_lighting_gain
-from service.registry import Context, register
 
 Component = Literal["diffuse", "specular", "transmission"]
 Sigmas = list[float]

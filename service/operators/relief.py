@@ -26,9 +26,10 @@ from gbuffer.frame import Frame
 from ops import relief as rl
 from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
+from service.errors import PipelineError
+from service.operators.base import Context, Params, get, register
 from service.operators.common import Auto, channels, layer_plane, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
-from service.registry import Context, Params, PipelineError, get, register
 
 Style = Literal["cel", "counter", "xtoon", "mask", "descriptor"]
 
