@@ -249,7 +249,7 @@ def _deferred(
 ) -> rs.Scaled:
     normal = frame.need("normal", f"scenario '{scenario}'")
     albedo = frame_albedo(frame, None)
-    common = {"alpha": p.alpha, "gain": p.gain}
+    common: dict[str, Any] = {"alpha": p.alpha, "gain": p.gain}
     if scenario in ("phong", "sub_lambert", "toon", "ashikhmin_shirley"):
         lit = (normal, frame.positions(), frame.view_vectors(), p.parsed_lights(), curv)
         common.update(albedo=albedo, lam=p.anisotropy)
