@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from service import cli_common
+from service.cli import args as cli_args
 from service.compare import LABELS, METHODS, ComparisonResult, compare, contact_sheet, plot
 
 #: Views (azimuth, elevation in degrees) that show each mesh's front (checked by eye).
@@ -51,8 +51,8 @@ DEFAULT_MODELS = Path(__file__).resolve().parents[1].parent / "shared" / "models
 def parse_sets(items: list[str]) -> dict[str, dict[str, Any]]:
     """``section.key=value`` items -> ``{section: {key: value}}`` (values parsed as JSON)."""
     try:
-        return cli_common.parse_sets(items)
-    except cli_common.UsageError as exc:
+        return cli_args.parse_sets(items)
+    except cli_args.UsageError as exc:
         raise SystemExit(str(exc)) from None
 
 

@@ -42,15 +42,28 @@ import glob
 import json
 import os
 import re
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from distributed import Client, Future, LocalCluster, as_completed
+from rich.progress import (
+    BarColumn,
+    MofNCompleteColumn,
+    Progress,
+    TextColumn,
+    TimeElapsedColumn,
+    TimeRemainingColumn,
+)
+
 from gbuffer.atomic import atomic_path, output_target
 from gbuffer.errors import OutputError
+from service import allocator
+from service.enhance import ReadRequest, WriteRequest, enhance
+from service.pipeline import Pipeline
+from service.problems import from_exception
 
 _TOKEN = re.compile(r"#+|@+|%(0?)(\d*)d")
 
@@ -144,7 +157,7 @@ def check_sequence_outputs(
         except OSError:
             continue
         inodes.add((st.st_dev, st.st_ino))
-    outputs = [(f, expand(out_pattern, f)) for f in frames]
+    outputs: list[tuple[int | None, str]] = [(f, expand(out_pattern, f)) for f in frames]
     if pinned:
         outputs.append((None, str(pinned)))
     for frame, path in outputs:
@@ -172,21 +185,16 @@ def process_frame(
     frame: int,
     in_path: str,
     out_path: str,
-    spec_json: str,
-    read: dict[str, Any],
-    write: dict[str, Any],
+    steps: Pipeline,
+    read: ReadRequest,
+    write: WriteRequest,
     pinned: dict[str, float],
 ) -> dict[str, Any]:
     """Enhance one frame (on a Dask worker). Never raises: failures come back as data."""
-    from service import allocator
-    from service.jobs import enhance_file
-    from service.problems import from_exception
-
     allocator.tune()
-
     t0 = time.perf_counter()
     try:
-        out = enhance_file(in_path, out_path, spec_json, read, write, pinned=pinned)
+        out = enhance(in_path, out_path, steps, read, write, pinned=pinned)
         return {
             "frame": frame,
             "status": "done",
@@ -224,6 +232,15 @@ class Summary:
     def ok(self) -> bool:
         return not self.failed
 
+    def record(self, result: dict[str, Any]) -> None:
+        """Count one frame's result (from :func:`process_frame`)."""
+        if result["status"] == "done":
+            self.done.append(result["frame"])
+            for warning in result.get("warnings", []):
+                self.warnings.setdefault(warning, []).append(result["frame"])
+        else:
+            self.failed[result["frame"]] = result.get("error", "failed")
+
 
 def _load_pinned(path: Path) -> dict[str, float]:
     try:
@@ -235,10 +252,8 @@ def _load_pinned(path: Path) -> dict[str, float]:
     return {str(k): float(v) for k, v in data.items()}
 
 
-def _cluster(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
+def _cluster(scheduler: str | None, workers: int | None) -> tuple[Client, LocalCluster | None]:
     """A Dask client on ``scheduler``, or on a new local cluster (returned to be closed)."""
-    from distributed import Client, LocalCluster
-
     if scheduler:
         try:
             return Client(scheduler, timeout="20s"), None
@@ -256,29 +271,87 @@ def _cluster(scheduler: str | None, workers: int | None) -> tuple[Any, Any]:
     return Client(cluster), cluster
 
 
-def run_batch(
-    in_pattern: str,
-    out_pattern: str,
-    *,
-    spec_json: str,
-    frames: Sequence[int] | None = None,
-    read: dict[str, Any] | None = None,
-    write: dict[str, Any] | None = None,
-    scheduler: str | None = None,
-    workers: int | None = None,
-    skip_existing: bool = False,
-    pinned_file: str | Path | None = None,
-    progress: bool = True,
-) -> Summary:
-    """Enhance every frame of a sequence on a Dask cluster; see the module docstring.
+@dataclass
+class _Run:
+    """One sequence on a Dask client: frames submitted as tasks, results counted."""
 
-    ``spec_json``: the pipeline as JSON text. ``read``/``write``: as for
-    :func:`service.jobs.enhance_file`. The first frame to process is run alone to measure the
-    statistics that are then pinned for all others (unless ``pinned_file`` already exists).
-    """
-    from service import pipeline
+    client: Client
+    in_pattern: str
+    out_pattern: str
+    steps: Pipeline
+    read: ReadRequest
+    write: WriteRequest
+    summary: Summary
 
-    pipeline.checked(spec_json)  # bad pipelines fail before any work
+    def submit(self, f: int, pins: dict[str, float]) -> Future:
+        return self.client.submit(
+            process_frame,
+            f,
+            expand(self.in_pattern, f),
+            expand(self.out_pattern, f),
+            self.steps,
+            self.read,
+            self.write,
+            pins,
+            key=f"depict-frame-{f}-{os.urandom(4).hex()}",
+            pure=False,
+        )
+
+    @staticmethod
+    def gather(future: Future, f: int) -> dict[str, Any]:
+        try:
+            return dict(future.result())
+        except Exception as exc:  # worker died, cancelled, ...
+            return {"frame": f, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
+
+    def frames(
+        self,
+        todo: list[int],
+        pinned: dict[str, float] | None,
+        pinned_path: Path | None,
+        bar: Progress,
+    ) -> dict[str, float] | None:
+        """Run ``todo``: frames one by one until one measures the statistics (unless
+        ``pinned``), then the others at once with them pinned. Returns the pinned statistics."""
+        task = bar.add_task("frames", total=len(todo), failed=0)
+
+        def record(result: dict[str, Any]) -> None:
+            self.summary.record(result)
+            bar.update(task, advance=1, failed=len(self.summary.failed))
+
+        queue = list(todo)
+        while pinned is None and queue:  # sample frames one by one until one succeeds
+            f = queue.pop(0)
+            result = self.gather(self.submit(f, {}), f)
+            record(result)
+            if result["status"] == "done":
+                pinned = dict(result.get("measured") or {})
+                if pinned_path is not None:
+                    with atomic_path(pinned_path) as tmp:
+                        tmp.write_text(json.dumps(pinned, indent=2, sort_keys=True))
+        futures = {self.submit(f, pinned or {}): f for f in queue}
+        for future in as_completed(futures):
+            record(self.gather(future, futures[future]))
+        return pinned
+
+
+def _progress(enabled: bool) -> Progress:
+    """The progress bar: frames done of all, failures, time spent and left."""
+    columns = (
+        TextColumn("[bold]depict batch"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[failed]} failed"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+    )
+    return Progress(*columns, disable=not enabled, transient=False)
+
+
+def _checked_frames(
+    in_pattern: str, out_pattern: str, frames: Sequence[int] | None, pinned_file: str | Path | None
+) -> list[int]:
+    """The frames to consider, the patterns and outputs checked (BatchError before any work)."""
     _token(in_pattern)
     _token(out_pattern)
     if in_pattern == out_pattern:
@@ -287,7 +360,30 @@ def run_batch(
     if not frame_list:
         raise BatchError(f"no frames: no file matches {in_pattern!r} (or pass --frames)")
     check_sequence_outputs(in_pattern, out_pattern, frame_list, pinned_file)
-    read, write = dict(read or {}), dict(write or {})
+    return frame_list
+
+
+def run_batch(
+    in_pattern: str,
+    out_pattern: str,
+    *,
+    steps: Pipeline,
+    frames: Sequence[int] | None = None,
+    read: ReadRequest | None = None,
+    write: WriteRequest | None = None,
+    scheduler: str | None = None,
+    workers: int | None = None,
+    skip_existing: bool = False,
+    pinned_file: str | Path | None = None,
+    progress: bool = True,
+) -> Summary:
+    """Enhance every frame of a sequence on a Dask cluster; see the module docstring.
+
+    ``steps``: the compiled pipeline (:func:`service.pipeline.compile`). ``read``/``write``: as
+    for :func:`service.enhance.enhance`. The first frame to process is run alone to measure the
+    statistics that are then pinned for all others (unless ``pinned_file`` already exists).
+    """
+    frame_list = _checked_frames(in_pattern, out_pattern, frames, pinned_file)
     summary = Summary()
     t_start = time.perf_counter()
     todo = []
@@ -300,133 +396,26 @@ def run_batch(
     pinned: dict[str, float] | None = None
     if pinned_path is not None and pinned_path.exists():
         pinned = _load_pinned(pinned_path)
-    if not todo:
-        summary.pinned = pinned or {}
-        summary.seconds = time.perf_counter() - t_start
-        return summary
-
-    from rich.progress import (
-        BarColumn,
-        MofNCompleteColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
-
-    client, cluster = _cluster(scheduler, workers)
-    columns = (
-        TextColumn("[bold]depict batch"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[failed]} failed"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-    )
-    try:
-        with Progress(*columns, disable=not progress, transient=False) as bar:
-            task = bar.add_task("frames", total=len(todo), failed=0)
-
-            def record(result: dict[str, Any]) -> None:
-                if result["status"] == "done":
-                    summary.done.append(result["frame"])
-                    for warning in result.get("warnings", []):
-                        summary.warnings.setdefault(warning, []).append(result["frame"])
-                else:
-                    summary.failed[result["frame"]] = result.get("error", "failed")
-                bar.update(task, advance=1, failed=len(summary.failed))
-
-            def submit(f: int, pins: dict[str, float]) -> Any:
-                return client.submit(
-                    process_frame,
-                    f,
-                    expand(in_pattern, f),
-                    expand(out_pattern, f),
-                    spec_json,
-                    read,
-                    write,
-                    pins,
-                    key=f"depict-frame-{f}-{os.urandom(4).hex()}",
-                    pure=False,
-                )
-
-            def gather(future: Any, f: int) -> dict[str, Any]:
-                try:
-                    return dict(future.result())
-                except Exception as exc:  # worker died, cancelled, ...
-                    return {"frame": f, "status": "failed", "error": f"{type(exc).__name__}: {exc}"}
-
-            queue = list(todo)
-            while pinned is None and queue:  # sample frames one by one until one succeeds
-                f = queue.pop(0)
-                result = gather(submit(f, {}), f)
-                record(result)
-                if result["status"] == "done":
-                    pinned = dict(result.get("measured") or {})
-                    if pinned_path is not None:
-                        with atomic_path(pinned_path) as tmp:
-                            tmp.write_text(json.dumps(pinned, indent=2, sort_keys=True))
-            from distributed import as_completed
-
-            futures = {submit(f, pinned or {}): f for f in queue}
-            for future in as_completed(futures):
-                record(gather(future, futures[future]))
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    if todo:
+        client, cluster = _cluster(scheduler, workers)
+        run = _Run(
+            client,
+            in_pattern,
+            out_pattern,
+            steps,
+            read or ReadRequest(),
+            write or WriteRequest(),
+            summary,
+        )
+        try:
+            with _progress(progress) as bar:
+                pinned = run.frames(todo, pinned, pinned_path, bar)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
     summary.done.sort()
     summary.failed = dict(sorted(summary.failed.items()))
     summary.pinned = pinned or {}
     summary.seconds = time.perf_counter() - t_start
     return summary
-
-
-def print_summary(summary: Summary, total: int) -> None:
-    """The end-of-run report: counts, pinned statistics and one line per failed frame."""
-    print(
-        f"batch: {len(summary.done)} done, {len(summary.skipped)} skipped, "
-        f"{len(summary.failed)} failed (of {total} frames) in {summary.seconds:.1f} s"
-    )
-    if summary.pinned:
-        pins = ", ".join(f"{k}={v:.6g}" for k, v in sorted(summary.pinned.items()))
-        print(f"  pinned: {pins}")
-    from service.cli_common import printable
-
-    for frame, error in summary.failed.items():
-        print(f"  frame {frame} failed: {printable(error)}")
-    for warning, frames in summary.warnings.items():
-        print(f"depict: warning ({len(frames)} frames): {printable(warning)}", file=sys.stderr)
-
-
-def cmd_batch(args: Any) -> int:
-    """``depict batch``: wired from :mod:`service.cli`; exit 1 when a frame failed."""
-    from service import pipeline
-    from service.cli_common import pipeline_spec, read_options
-
-    spec = pipeline_spec(args, default=pipeline.DEFAULT_PIPELINE)
-    if args.camera and not os.path.isfile(args.camera):
-        raise BatchError(f"--camera {args.camera}: no such file")
-    read = read_options(args)
-    if args.camera:
-        read["camera"] = os.path.abspath(args.camera)  # workers may run in another folder
-    write = {"debug_layers": args.debug_layers, "output_layer": args.output_layer}
-    frames = parse_frames(args.frames) if args.frames else None
-    if args.workers is not None and args.workers < 1:
-        raise BatchError(f"--workers must be >= 1, got {args.workers}")
-    summary = run_batch(
-        os.path.abspath(args.input),
-        os.path.abspath(args.output),
-        spec_json=spec.model_dump_json(),
-        frames=frames,
-        read=read,
-        write=write,
-        scheduler=args.scheduler,
-        workers=args.workers,
-        skip_existing=args.skip_existing,
-        pinned_file=args.pinned,
-        progress=not args.no_progress,
-    )
-    total = len(summary.done) + len(summary.skipped) + len(summary.failed)
-    print_summary(summary, total)
-    return 0 if summary.ok else 1

@@ -15,6 +15,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from gbuffer.presets import PRESETS
+from service.cli import build_parser
+from service.registry import operators
+
 README = Path(__file__).resolve().parent.parent / "README.md"
 
 
@@ -38,8 +42,6 @@ def _cell(text: str) -> str:
 
 def operators_section() -> str:
     """Every operator: summary, what it needs and writes, its parameters."""
-    from service.registry import operators
-
     lines = [
         "## Operators",
         "",
@@ -63,8 +65,6 @@ def operators_section() -> str:
 
 def presets_section() -> str:
     """Each renderer preset with the layer names it maps."""
-    from gbuffer.presets import PRESETS
-
     lines = [
         "## Renderer presets",
         "",
@@ -95,8 +95,6 @@ def presets_section() -> str:
 
 def cli_section() -> str:
     """The commands of ``depict`` with their one-line help."""
-    from service.cli import build_parser
-
     parser = build_parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     helps = {a.dest: a.help for a in sub._choices_actions}
@@ -126,10 +124,11 @@ def render(text: str) -> str:
     """``text`` with every generated section replaced by its current contents."""
     for name, make in SECTIONS.items():
         pattern = re.compile(rf"<!-- {name} -->\n.*?<!-- /{name} -->", re.DOTALL)
-        block = f"<!-- {name} -->\n{make()}\n<!-- /{name} -->"
-        if not pattern.search(text):
+        found = pattern.search(text)
+        if not found:
             raise ValueError(f"README has no <!-- {name} --> ... <!-- /{name} --> section")
-        text = pattern.sub(lambda _m, block=block: block, text)
+        block = f"<!-- {name} -->\n{make()}\n<!-- /{name} -->"
+        text = text[: found.start()] + block + text[found.end() :]
     return text
 
 

@@ -1,5 +1,5 @@
-"""Errors of the HTTP client, in a module of their own so the command line can catch them
-without importing the client (httpx) on every run."""
+"""The service's error types, in a module of their own (no dependency) so the command line can
+catch them without importing the HTTP client (httpx) or the operators on every run."""
 
 from __future__ import annotations
 
@@ -13,3 +13,7 @@ class DepictError(Exception):
         super().__init__(message)
         self.status = status
         self.problem = problem or {}
+
+
+class PipelineError(ValueError):
+    """An unknown operator, unknown parameter or a value out of range; the message says which."""

@@ -1,8 +1,8 @@
 """JSON logs of the service: one object per line, in the server and in its worker processes.
 
 Every line carries the request id of the request it belongs to (:data:`REQUEST_ID`, set by the
-HTTP gate in the server and by the job runner in a worker), so a worker's traceback is found by
-the ``request_id`` a client got back in its problem answer.
+request middleware in the server and by the job runner in a worker), so a worker's traceback is
+found by the ``request_id`` a client got back in its problem answer.
 """
 
 from __future__ import annotations

@@ -12,14 +12,15 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from service.http.app import create_app
+from service.settings import Settings
+
 DEFAULT_PATH = Path(__file__).resolve().parent.parent / "openapi" / "openapi.json"
 
 
 def schema() -> dict[str, Any]:
-    """The OpenAPI document of :func:`service.api.create_app` (independent of the settings)."""
-    from service.api import create_app
-    from service.settings import Settings
-
+    """The OpenAPI document of :func:`service.http.app.create_app` (independent of the
+    settings)."""
     return create_app(Settings()).openapi()
 
 

@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import json
 import re
+import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from gbuffer import holes
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from service.output import finish as place
 from service.registry import Context, Operator, Params, PipelineError, get
 
 #: Most steps in a pipeline.
@@ -126,22 +129,79 @@ def load(path: str | Path) -> PipelineSpec:
     return parse(text)
 
 
-def compile_steps(spec: PipelineSpec) -> list[tuple[Operator, Params]]:
-    """Resolve operator names and validate every step's parameters before any pixel work."""
-    return [(get(step.op), get(step.op).parse(step.params)) for step in spec.steps]
+@dataclass(frozen=True)
+class CompiledStep:
+    """A step compiled: its operator resolved and its parameters validated."""
+
+    op: Operator
+    params: Params
 
 
-def checked(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> PipelineSpec:
-    """:func:`parse` ``spec`` and validate every step's parameters (:func:`compile_steps`), so a
-    bad pipeline is refused before any pixel is read."""
-    out = parse(spec)
-    compile_steps(out)
-    return out
+@dataclass(frozen=True)
+class Pipeline:
+    """A pipeline parsed and validated once (:func:`compile`): what :func:`run` and
+    :func:`service.enhance.enhance` take. ``spec`` is the pipeline as given (what a client
+    sends on); a worker process receives the validated parameters as they are (pickled by
+    operator name), so nothing is validated twice."""
+
+    spec: PipelineSpec
+    steps: tuple[CompiledStep, ...]
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (_restore, (self.spec, tuple((s.op.name, s.params) for s in self.steps)))
+
+
+def _restore(spec: PipelineSpec, steps: tuple[tuple[str, Params], ...]) -> Pipeline:
+    return Pipeline(spec, tuple(CompiledStep(get(name), params) for name, params in steps))
+
+
+def compile(spec: Pipeline | PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> Pipeline:
+    """Parse ``spec`` (:func:`parse`), resolve its operators and validate every step's
+    parameters, before any pixel is read; :class:`PipelineError` naming the bad step."""
+    if isinstance(spec, Pipeline):
+        return spec
+    parsed = parse(spec)
+    return Pipeline(
+        parsed, tuple(CompiledStep(get(s.op), get(s.op).parse(s.params)) for s in parsed.steps)
+    )
+
+
+DEFAULT = compile(DEFAULT_PIPELINE)
+
+
+def run_timed(
+    frame: Frame, pipeline: Pipeline, context: Context
+) -> tuple[Frame, list[tuple[str, float]]]:
+    """Apply ``pipeline`` to a copy of ``frame``: the result and the seconds of each step."""
+    out = frame.copy()
+    op_s: list[tuple[str, float]] = []
+    holes.fill(out)  # pixels of NaN/Inf radiance: uncovered for the operators (gbuffer.holes)
+    for step in pipeline.steps:
+        t0 = time.perf_counter()
+        _apply(out, step, context)
+        op_s.append((step.op.name, time.perf_counter() - t0))
+    holes.restore(out)  # and given back unchanged
+    return out, op_s
+
+
+def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:
+    op = step.op
+    for buffer in op.needs:
+        frame.need(buffer, f"needed by {op.name}")
+    if op.needs_camera:
+        frame.need_camera(f"{op.name} needs the camera")
+    try:
+        op.apply(frame, step.params, context)
+    except FrameError:
+        raise
+    except ValueError as exc:  # ops/ names a bad value in a ValueError
+        raise PipelineError(f"{op.name}: {exc}") from None
+    frame.history.append({"op": op.name, "params": step.params.model_dump(mode="json")})
 
 
 def run(
     frame: Frame,
-    spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str,
+    spec: Pipeline | PipelineSpec | dict[str, Any] | Sequence[Any] | str,
     *,
     debug_layers: bool = False,
     context: Context | None = None,
@@ -151,23 +211,7 @@ def run(
     The enhanced image is ``out.buffers["beauty"]``; layers the operators wrote are in
     ``out.outputs``. Call :func:`finish` to place the beauty into ``R,G,B,A`` for writing.
     """
-    steps = compile_steps(parse(spec))
-    ctx = context or Context(debug_layers=debug_layers)
-    out = frame.copy()
-    holes.fill(out)  # pixels of NaN/Inf radiance: uncovered for the operators (gbuffer.holes)
-    for op, params in steps:
-        for buffer in op.needs:
-            out.need(buffer, f"needed by {op.name}")
-        if op.needs_camera:
-            out.need_camera(f"{op.name} needs the camera")
-        try:
-            op.apply(out, params, ctx)
-        except FrameError:
-            raise
-        except ValueError as exc:  # ops/ names a bad value in a ValueError
-            raise PipelineError(f"{op.name}: {exc}") from None
-        out.history.append({"op": op.name, "params": params.model_dump(mode="json")})
-    holes.restore(out)  # and given back unchanged
+    out, _ = run_timed(frame, compile(spec), context or Context(debug_layers=debug_layers))
     return out
 
 
@@ -176,6 +220,4 @@ def finish(frame: Frame, output_layer: str | None = None, input_name: str | None
     the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own ``R,G,B,A``
     kept under ``input.*``, and the camera and provenance in the header
     (:mod:`service.output` has the rules)."""
-    from service.output import finish as place
-
     return place(frame, output_layer, input_name)

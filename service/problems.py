@@ -43,7 +43,7 @@ from gbuffer.errors import (
     MissingCameraError,
     OptionError,
 )
-from service.registry import PipelineError
+from service.errors import PipelineError
 
 MEDIA_TYPE = "application/problem+json"
 

@@ -36,6 +36,8 @@ from typing import Literal
 from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
+from gbuffer.limits import Limits
+
 
 class Settings(BaseSettings):
     """Settings of the HTTP service; every field is the env variable ``DEPICT_<FIELD>``."""
@@ -77,13 +79,13 @@ class Settings(BaseSettings):
         return int(self.max_upload_mb * 1024 * 1024)
 
     @property
-    def limits(self) -> dict[str, int]:
-        """The decode limits, as :func:`gbuffer.exr.check_limits` takes them."""
-        return {
-            "max_pixels": self.max_pixels,
-            "max_bytes": int(self.max_decoded_mb * 1024 * 1024),
-            "max_channels": self.max_channels,
-        }
+    def limits(self) -> Limits:
+        """What an uploaded EXR's header may claim (checked before decoding)."""
+        return Limits(
+            max_pixels=self.max_pixels,
+            max_bytes=int(self.max_decoded_mb * 1024 * 1024),
+            max_channels=self.max_channels,
+        )
 
     @property
     def key(self) -> str | None:

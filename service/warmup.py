@@ -16,16 +16,16 @@ from pathlib import Path
 
 import numpy as np
 
+from gbuffer.render import auto_camera, load_mesh, render
+from ops.curvature import isotropic, principal_curvatures
+from service import pipeline
+from service.registry import operators
+
 EXAMPLE = Path(__file__).resolve().parent.parent / "examples" / "spot.obj"
 
 
 def warm(mesh: Path = EXAMPLE, size: tuple[int, int] = (96, 72)) -> dict[str, float]:
     """Run every operator once on a small render of ``mesh``; seconds per operator."""
-    from gbuffer.render import auto_camera, load_mesh, render
-    from ops.curvature import isotropic, principal_curvatures
-    from service import pipeline
-    from service.registry import operators
-
     loaded = load_mesh(mesh)
     width, height = size
     frame = render(loaded, width, height, camera=auto_camera(loaded, width=width, height=height))

@@ -5,8 +5,8 @@ Each worker is a spawned process with its own pipe (no lock shared between worke
 killed at any instant cannot leave another one stuck). Its life:
 
 1. **start**: it configures its JSON logs, imports everything a job needs and renders a tiny mesh
-   (:func:`service.jobs.warm_worker`), then says ``ready``. Only then is it handed a job, so a
-   time limit never interrupts an import or an initialisation half-way.
+   (:func:`service.http.worker.warm_worker`), then says ``ready``. Only then is it handed a job,
+   so a time limit never interrupts an import or an initialisation half-way.
 2. **jobs**: it receives ``(function, args, request id)``, runs it and sends the result back.
 3. **end**: at the job's deadline the server kills it (``SIGKILL``) rather than interrupting the
    job inside the process; when it dies on its own (a signal, the out-of-memory killer) the job

@@ -18,7 +18,8 @@ from pydantic import ValidationError
 
 from gbuffer.errors import FrameError, LimitError, MissingBufferError, MissingCameraError
 from service import problems
-from service.api import Gate, create_app
+from service.http.app import create_app
+from service.http.middleware import wrap
 from service.logs import JsonFormatter
 from service.metrics import Metrics
 from service.openapi import DEFAULT_PATH, dumps
@@ -57,7 +58,7 @@ def gate() -> Iterator[Any]:
         await send({"type": "http.response.body", "body": b"inner"})
 
     settings = Settings(api_key=KEY, metrics_public=True, max_upload_mb=0.05)
-    yield TestClient(Gate(inner, settings=settings, metrics=Metrics()))  # no lifespan needed
+    yield TestClient(wrap(inner, settings=settings, metrics=Metrics()))  # no lifespan needed
 
 
 def problem(response: Any, status: int, words: str = "") -> dict:
@@ -265,6 +266,18 @@ def test_render_requests(client: Any) -> None:
     )
     assert r.status_code == 200 and r.headers["content-type"] == "image/x-exr"
     assert r.content[:4] == b"\x76\x2f\x31\x01"
+
+
+def test_each_request_workspace_is_removed_after_its_answer(client: Any) -> None:
+    """A file answer is sent from the request's workspace, which goes once it is sent; one of a
+    refused upload goes too."""
+    root = client.app.state.services.root
+    mesh = ("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    scene = {"scene": '{"width": 32, "height": 24}'}
+    r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data=scene)
+    assert r.status_code == 200 and r.content[:4] == b"\x76\x2f\x31\x01"
+    problem(client.post("/v1/score", headers=AUTH, files={"file": ("h.exr", exr_bytes())}), 400)
+    assert root is not None and root.is_dir() and not list(root.iterdir())
 
 
 # -- request ids, metrics, logs ----------------------------------------------------------------

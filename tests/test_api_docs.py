@@ -13,7 +13,7 @@ from typing import Any
 import OpenEXR
 import pytest
 
-from service.api import create_app
+from service.http.app import create_app
 from service.settings import Settings
 from service.version import version
 from tests import exr_factory as F

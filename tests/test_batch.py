@@ -25,8 +25,8 @@ from gbuffer.io import write
 from gbuffer.render import render
 from service.batch import BatchError, expand, find_frames, parse_frames, run_batch
 from service.cli import main as cli
-from service.jobs import enhance_file
-from service.pipeline import DEFAULT_PIPELINE
+from service.enhance import enhance
+from service.pipeline import DEFAULT_PIPELINE, compile
 from tests.live_server import free_port
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -112,13 +112,13 @@ def sequence(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 def check_outputs(root: Path, out: str, pinned: dict[str, float]) -> None:
     """Every good frame written, equal to a local enhance with the pinned statistics."""
-    spec = DEFAULT_PIPELINE.model_dump_json()
+    spec = compile(DEFAULT_PIPELINE)
     for f in FRAMES:
         path = Path(expand(out, f))
         assert path.exists() == (f != BAD), f
     for f in (2, 12):  # frames that did not measure: they used the pinned values
         mine = root / f"check.{f}.exr"
-        enhance_file(str(root / "in" / f"shot.{f:04d}.exr"), str(mine), spec, {}, {}, None, pinned)
+        enhance(str(root / "in" / f"shot.{f:04d}.exr"), str(mine), spec, pinned=pinned)
         assert mine.read_bytes() == Path(expand(out, f)).read_bytes()
 
 
@@ -216,7 +216,7 @@ def test_batch_on_the_local_default(sequence: Path) -> None:
     summary = run_batch(
         str(sequence / "in" / "shot.####.exr"),
         out,
-        spec_json=DEFAULT_PIPELINE.model_dump_json(),
+        steps=compile(DEFAULT_PIPELINE),
         frames=None,  # every existing input
         workers=2,
         progress=False,
@@ -226,8 +226,8 @@ def test_batch_on_the_local_default(sequence: Path) -> None:
     check_outputs(sequence, out, summary.pinned)
     if summary.pinned:  # the brighter frame 12 alone would have measured other values
         alone = sequence / "alone.exr"
-        spec = DEFAULT_PIPELINE.model_dump_json()
-        measured = enhance_file(str(sequence / "in" / "shot.0012.exr"), str(alone), spec, {}, {})
+        spec = compile(DEFAULT_PIPELINE)
+        measured = enhance(str(sequence / "in" / "shot.0012.exr"), str(alone), spec)
         assert measured["measured"] != summary.pinned
         assert alone.read_bytes() != Path(expand(out, 12)).read_bytes()
 

@@ -1,10 +1,10 @@
 # ruff: noqa: I001  (the import order is the order of `depict ops` and the schemas)
 """The built-in operators: one registry entry each, mapping a frame onto ``ops`` functions.
 
-Each module registers its operators with :func:`service.registry.register`: it reads the buffers
-it needs from the frame, calls the maths in ``ops/`` and writes the enhanced beauty and/or output
-layers. Parameters are pydantic models; their ``description`` strings are what ``depict ops``,
-the HTTP schema and ``openapi/openapi.json`` show.
+Each module registers its operators with :func:`service.operators.base.register`: it reads the
+buffers it needs from the frame, calls the maths in ``ops/`` and writes the enhanced beauty
+and/or output layers. Parameters are pydantic models; their ``description`` strings are what
+``depict ops``, the HTTP schema and ``openapi/openapi.json`` show.
 
 =========================  ============================================================
 module                     operators

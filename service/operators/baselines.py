@@ -12,9 +12,9 @@ from gbuffer.frame import Frame
 from ops.baselines import ES_SCALES, exaggerated_shading, light_warping
 from ops.curvature import isotropic
 from ops.shading import parse_light
+from service.operators.base import Context, Params, register
 from service.operators.common import frame_albedo
 from service.operators.curvature import CurvatureParams, frame_curvature
-from service.registry import Context, Params, register
 
 
 class OneLightParams(Params):

@@ -14,8 +14,9 @@ from gbuffer.frame import Frame
 from ops.lighting import lighting_gain
 from ops.scaling import luminance
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
+from service.errors import PipelineError
 from service.images import load_image
-from service.registry import Context, Params, PipelineError
+from service.operators.base import Context, Params
 
 Fraction = Annotated[float, Field(gt=0.0, lt=1.0)]
 Magnitude = Annotated[float, Field(ge=0.0, le=100.0)]

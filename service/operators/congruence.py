@@ -15,7 +15,7 @@ from pydantic import Field
 
 from gbuffer.frame import Frame
 from service.compare import DEFAULT_PARAMS, score_frame
-from service.registry import Context, Params, register
+from service.operators.base import Context, Params, register
 
 _DEFAULTS = DEFAULT_PARAMS["congruence"]
 

@@ -7,7 +7,7 @@ from pydantic import Field
 
 from gbuffer.frame import Frame
 from ops import curvature as curv_ops
-from service.registry import Context, Params, register
+from service.operators.base import Context, Params, register
 
 #: Smallest derivative / averaging scale, pixels.
 MIN_SCALE_PX = 1.0

@@ -26,7 +26,8 @@ The aligned directions are written as ``lla_light.<component>.X/Y/Z`` (the first
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal
+from collections.abc import Sequence
+from typing import Any, ClassVar, Literal, cast
 
 import cv2
 import numpy as np
@@ -36,17 +37,18 @@ from gbuffer.frame import LOBES, Frame
 from ops import filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
+from service.operators.base import Context, register
 from service.operators.common import LightsParams, channels, frame_albedo, kept_lighting_gain
-from service.registry import Context, register
 
 Component = Literal["diffuse", "specular", "transmission"]
+COMPONENTS: tuple[Component, ...] = ("diffuse", "specular", "transmission")
 Sigmas = list[float]
 #: σ_1 … σ_5 of the paper's "fine-tuned" 6-scale result (LLA Fig. 7), finest first.
 PAPER_SIGMAS = [0.5, 0.3, 0.1, 0.2, 0.2]
 #: The default: less of the finest scale, whose filtering is a few pixels wide and shows the
 #: triangles of a mesh's interpolated normals on production frames, more of the middle ones.
 DEFAULT_SIGMAS = [0.1, 0.3, 0.3, 0.2, 0.2]
-_SIGMA_ITEMS = {"min_length": 1, "max_length": 7}
+_SIGMA_ITEMS: dict[str, Any] = {"min_length": 1, "max_length": 7}
 #: Fig. 7's scales, the ratio as is and no lighting kept (``preset: "paper"``).
 PAPER = {
     "sigmas": PAPER_SIGMAS,
@@ -80,7 +82,7 @@ class LightAlignmentParams(LightsParams):
         None, **_SIGMA_ITEMS, description="σ_i of the transmission component (default: `sigmas`)"
     )
     components: list[Component] = Field(
-        default_factory=lambda: ["diffuse", "specular", "transmission"],
+        default_factory=lambda: list(COMPONENTS),
         min_length=1,
         description="components whose light is aligned (others keep the original light; "
         "transmission only changes frames with a transmission lobe)",
@@ -211,7 +213,7 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
     view = frame.view_vectors()
     position = frame.positions()
     lights = p.parsed_lights()
-    components = {c: p.sigmas_of(c) for c in p.components}
+    components: dict[str, list[float]] = {c: p.sigmas_of(c) for c in p.components}
     aligned = align_lights(
         lights, pyramid, position, view, components, gamma=p.gamma, ior=p.ior, mask=mask
     )
@@ -222,7 +224,7 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         p.roughness if p.roughness != "frame" else frame.need("roughness", "roughness='frame'")
     )
 
-    def shade(directions: dict[str, list[np.ndarray]] | None) -> dict[str, np.ndarray]:
+    def shade(directions: dict[str, Sequence[np.ndarray]] | None) -> dict[str, np.ndarray]:
         return shade_directions(
             normal,
             view,
@@ -238,7 +240,7 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
             ior=p.ior,
         )
 
-    directions: dict[str, list[np.ndarray]] = {c: list(v) for c, v in aligned.items()}
+    directions: dict[str, Sequence[np.ndarray]] = {c: list(v) for c, v in aligned.items()}
     if form == "relight":
         _relight(frame, p, shade(directions))
     else:
@@ -299,7 +301,7 @@ def _ratio(
     power: float,
 ) -> None:
     """Each renderer lobe × (shade(aligned) + ε)/(shade(original) + ε), clamped to ratio_max."""
-    eps = np.float32(p.ratio_floor * power)
+    eps = cast(float, np.float32(p.ratio_floor * power))  # float32 on purpose, as the lobes
     lobes = [lobe for lobe in aligned if lobe in frame.buffers]
     if not lobes:
         frame.need("diffuse", "form 'ratio' needs a diffuse, specular or transmission lobe")

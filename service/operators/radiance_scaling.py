@@ -14,6 +14,7 @@ from ops import radiance_scaling as rs
 from ops.bilinear import Upsampled
 from ops.masked import masked_gaussian
 from ops.scaling import luminance, scale_lobes, white_level
+from service.operators.base import Context, register
 from service.operators.common import (
     Fraction,
     LightsParams,
@@ -24,7 +25,6 @@ from service.operators.common import (
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
-from service.registry import Context, register
 
 #: Albedo (luminance) below which a pixel's light is not beauty / albedo (scenario 'beauty').
 MIN_ALBEDO = np.float32(0.02)
@@ -249,7 +249,7 @@ def _deferred(
 ) -> rs.Scaled:
     normal = frame.need("normal", f"scenario '{scenario}'")
     albedo = frame_albedo(frame, None)
-    common = {"alpha": p.alpha, "gain": p.gain}
+    common: dict[str, Any] = {"alpha": p.alpha, "gain": p.gain}
     if scenario in ("phong", "sub_lambert", "toon", "ashikhmin_shirley"):
         lit = (normal, frame.positions(), frame.view_vectors(), p.parsed_lights(), curv)
         common.update(albedo=albedo, lam=p.anisotropy)

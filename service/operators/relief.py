@@ -22,13 +22,15 @@ import cv2
 import numpy as np
 from pydantic import Field, field_validator, model_validator
 
+from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from ops import relief as rl
 from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
+from service.errors import PipelineError
+from service.operators.base import Context, Params, get, register
 from service.operators.common import Auto, channels, layer_plane, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
-from service.registry import Context, Params, PipelineError, get, register
 
 Style = Literal["cel", "counter", "xtoon", "mask", "descriptor"]
 
@@ -92,7 +94,10 @@ class ReliefParams(CurvatureParams):
 @functools.cache
 def _shipped_arm(name: str) -> np.ndarray:
     """A shipped ARM, decoded once (read-only)."""
-    arm = rl.arm_from_image(cv2.imread(str(rl.shipped_arm_path(name)), cv2.IMREAD_UNCHANGED))
+    img = cv2.imread(str(rl.shipped_arm_path(name)), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise FrameError(f"the shipped ARM {name!r} cannot be read")
+    arm = rl.arm_from_image(img)
     arm.setflags(write=False)
     return arm
 
@@ -215,6 +220,24 @@ def _effect(frame: Frame, step: EffectStep, ctx: Context) -> np.ndarray:
     return copy.need("beauty", f"the result of {op.name}")
 
 
+def _mask_layers(
+    frame: Frame, p: ReliefParams, ctx: Context
+) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
+    """For style ``mask``: the beauty and the effect it is blended with; else (None, None)."""
+    if p.style != "mask":
+        return None, None
+    assert p.effect is not None
+    before = frame.need("beauty", "style 'mask' blends the beauty with the effect")
+    return before, _effect(frame, p.effect, ctx)
+
+
+def _curvedness_norm(p: ReliefParams, ctx: Context, key: str) -> float | Literal["auto"]:
+    """The norm given, else the one pinned for a sequence, else ``"auto"`` (measured here)."""
+    if p.curvedness_norm != "auto":
+        return p.curvedness_norm
+    return ctx.pinned.get(key, "auto")
+
+
 @register(
     "apparent_relief",
     summary="Apparent Relief (Vergne et al. 2008): curvature descriptor S, Apparent Relief Map "
@@ -229,7 +252,7 @@ def apply_apparent_relief(frame: Frame, p: ReliefParams, ctx: Context) -> None:
     layers), then the style over the covered pixels."""
     curv = frame_curvature(frame, p)
     key = "apparent_relief.curvedness_norm"
-    norm = p.curvedness_norm if p.curvedness_norm != "auto" else ctx.pinned.get(key, "auto")
+    norm = _curvedness_norm(p, ctx, key)
     arm = load_arm(frame, p.arm, ctx)
     rel = rl.relief(curv, arm, curvedness_norm=norm, percentile=p.percentile, with_descriptor=True)
     if norm == "auto":
@@ -243,11 +266,7 @@ def apply_apparent_relief(frame: Frame, p: ReliefParams, ctx: Context) -> None:
         debug = channels(colors, "RGB")  # copies: the descriptor style may reuse colors
     lit = _lit(frame, p) if p.style in ("counter", "xtoon") else {}
     toon = user_image(ctx, p.toon, "toon", srgb=False) if p.toon and p.style == "xtoon" else None
-    before = effect = None
-    if p.style == "mask":
-        assert p.effect is not None
-        before = frame.need("beauty", "style 'mask' blends the beauty with the effect")
-        effect = _effect(frame, p.effect, ctx)
+    before, effect = _mask_layers(frame, p, ctx)
     lo, hi = cv2.minMaxLoc(r)[:2] if p.style == "cel" else (0.0, 1.0)
 
     def shade(block: Block) -> np.ndarray:

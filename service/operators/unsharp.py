@@ -36,6 +36,8 @@ from ops import color
 from ops import curvature as curv_ops
 from ops.scaling import luminance
 from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
+from service.errors import PipelineError
+from service.operators.base import Context, Params, register
 from service.operators.common import (
     Auto,
     kept_lighting_gain,
@@ -47,7 +49,6 @@ from service.operators.common import (
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
-from service.registry import Context, Params, PipelineError, register
 
 Signal = Literal["beauty", "ambient", "diffuse", "specular", "transmission", "shadows"]
 

@@ -1,4 +1,5 @@
-"""Flags and helpers shared by the commands of ``depict`` (:mod:`service.cli`)."""
+"""Flags and argument helpers shared by the commands of ``depict`` (:mod:`service.cli`): the
+standard library only, so that building the parser (``depict --help``) imports nothing heavy."""
 
 from __future__ import annotations
 
@@ -64,7 +65,9 @@ def parse_sets(items: list[str]) -> dict[str, dict[str, Any]]:
 class _OpAction(argparse.Action):
     """``--op NAME`` starts a new pipeline step."""
 
-    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+    def __call__(
+        self, parser: argparse.ArgumentParser, ns: Any, value: Any, option: Any = None
+    ) -> None:
         steps = getattr(ns, "steps", None) or []
         steps.append({"op": value, "params": {}})
         ns.steps = steps
@@ -73,7 +76,9 @@ class _OpAction(argparse.Action):
 class _SetAction(argparse.Action):
     """``--set key=value`` sets a parameter of the last ``--op``."""
 
-    def __call__(self, parser: Any, ns: Any, value: Any, option: Any = None) -> None:
+    def __call__(
+        self, parser: argparse.ArgumentParser, ns: Any, value: Any, option: Any = None
+    ) -> None:
         steps = getattr(ns, "steps", None)
         if not steps:
             parser.error("--set must follow an --op NAME")
@@ -90,20 +95,6 @@ def add_pipeline_options(p: argparse.ArgumentParser, what: str = "a pipeline ste
         "--set", action=_SetAction, metavar="KEY=VALUE", help="a parameter of the last --op"
     )
     p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
-
-
-def pipeline_spec(args: argparse.Namespace, default: Any) -> Any:
-    """The pipeline of ``--pipeline`` or the ``--op`` steps (validated), else ``default``."""
-    from service import pipeline
-
-    steps = getattr(args, "steps", None)
-    if args.pipeline and steps:
-        raise UsageError("give either --pipeline or --op steps, not both")
-    if args.pipeline:
-        return pipeline.checked(pipeline.load(args.pipeline))
-    if steps:
-        return pipeline.checked(steps)
-    return default
 
 
 def add_read_options(p: argparse.ArgumentParser) -> None:
@@ -126,20 +117,15 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
     )
 
 
-def read_options(args: argparse.Namespace) -> dict[str, Any]:
-    """The read flags as :func:`service.jobs.read_frame` takes them."""
-    mapping = {}
+def mapping(args: argparse.Namespace) -> dict[str, str]:
+    """The ``--map BUFFER=CHANNELS`` items, by buffer."""
+    out = {}
     for item in args.map:
         key, sep, value = item.partition("=")
         if not sep:
             raise UsageError(f"--map {item!r}: expected BUFFER=CHANNELS")
-        mapping[key.strip()] = value.strip()
-    return {
-        "preset": args.preset,
-        "camera": args.camera,
-        "mapping": mapping,
-        "normal_space": args.normal_space,
-    }
+        out[key.strip()] = value.strip()
+    return out
 
 
 def add_server_option(p: argparse.ArgumentParser) -> None:

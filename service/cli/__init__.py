@@ -1,0 +1,61 @@
+"""``depict``: the command line. Every command is a thin layer over the service's shared paths
+(:mod:`service.enhance`, :mod:`service.scene`, :mod:`service.jobs`, :mod:`service.batch`) and
+gbuffer/.
+
+* :mod:`.parser`: the commands and their flags (``depict --help`` imports nothing heavy);
+* :mod:`.args`: flags shared by several commands; :mod:`.common`: what their values become
+  (the compiled pipeline, the read request);
+* one module per group of commands: :mod:`.frames` (enhance, preview, ops), :mod:`.render`
+  (render, warmup), :mod:`.inspection`, :mod:`.analysis` (score, compare, relief-pick, arm),
+  :mod:`.serving` (serve), :mod:`.sequence` (batch), and :mod:`.remote`: the ``--server`` forms.
+
+Bad input (a bad file, a missing buffer or camera, an unknown operator or parameter) prints one
+line ``depict: error: ...`` on stderr and exits with code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+from collections.abc import Callable, Sequence
+
+from service import allocator
+from service.cli.args import printable
+from service.cli.parser import EXIT_USAGE, build_parser
+from service.errors import DepictError
+
+__all__ = ["build_parser", "main"]
+
+
+def command(args: argparse.Namespace) -> Callable[[argparse.Namespace], int]:
+    """The function of the parsed command: its ``--server`` form when a server is given."""
+    target = args.remote if getattr(args, "server", None) and "remote" in args else args.command
+    module, _, name = target.partition(":")
+    found: Callable[[argparse.Namespace], int] = getattr(importlib.import_module(module), name)
+    return found
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    allocator.tune()
+    args = build_parser().parse_args(argv)
+    try:
+        return int(command(args)(args))
+    except (ValueError, DepictError) as exc:  # bad input, or a server that refused or is down
+        # ValueError: FrameError, PipelineError, UsageError, and ops/' bad values
+        return _fail(str(exc))
+    except FileNotFoundError as exc:
+        return _fail(f"no such file: {exc.filename or exc}")
+    except OSError as exc:  # a file that cannot be read or written
+        where = f"{exc.filename}: " if exc.filename else ""
+        return _fail(f"{where}{exc.strerror or exc}")
+    except RecursionError:
+        return _fail("input nested too deeply")
+    except KeyboardInterrupt:
+        return 130
+
+
+def _fail(message: str) -> int:
+    """One line on stderr, control characters escaped; the exit code of bad input."""
+    print(f"depict: error: {printable(message)}", file=sys.stderr)
+    return EXIT_USAGE

@@ -1,0 +1,103 @@
+"""``depict inspect``: what Depict sees in an EXR (preset and why, buffers and their channels,
+camera and where it came from, which operators can run), as text or stable JSON."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+from gbuffer.errors import FrameError, LimitError, OptionError
+from gbuffer.exr import read_layout
+from gbuffer.io import describe_layout, inspect
+from service.cli.args import printable
+from service.cli.common import read_request
+from service.registry import operators
+
+
+def _runnable(info: dict[str, Any]) -> dict[str, Any]:
+    """Which operators can run on the inspected frame, and what the others lack."""
+    have = set(info["buffers"])
+    if "position" in have:
+        have.add("depth")
+    blocked = {}
+    for op in operators().values():
+        lacks = [b for b in op.needs if b not in have]
+        if op.needs_camera and info["camera"] is None:
+            lacks.append("camera")
+        if lacks:
+            blocked[op.name] = lacks
+    return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}
+
+
+def _camera_lines(info: dict[str, Any]) -> list[str]:
+    cam = info["camera"]
+    lines = [f"  camera: {json.dumps(cam) if cam else 'none'}"]
+    if cam:
+        lines.append(f"  camera source: {info.get('camera_source') or 'unknown'}")
+        fit = info.get("camera_fit")
+        if fit and fit.get("pixels"):
+            outliers = f" ({fit['outliers']} outliers left out)" if fit["outliers"] else ""
+            lines.append(
+                f"  camera reprojection error against the position pass: RMS "
+                f"{fit['rms_px']:.2g} px, max {fit['max_px']:.2g} px over {fit['pixels']} "
+                f"pixels{outliers}"
+            )
+    return lines
+
+
+def _inspection_lines(info: dict[str, Any]) -> list[str]:
+    lines = [f"{info['file']}: {info['size'][0]}x{info['size'][1]}, preset {info['preset']}"]
+    lines.append(f"  preset: {info['preset_reason']}")
+    lines.append(f"  display window {info['display_window']}, data window {info['data_window']}")
+    for part in info["parts"]:
+        lines.append(
+            f"  part {part['name'] or '(unnamed)'}: {len(part['channels'])} channels, "
+            f"{part['compression']}{', tiled' if part['tiled'] else ''}"
+        )
+    lines.append("  buffers:")
+    for name, buf in info["buffers"].items():
+        lines.append(f"    {name:<20s} <- {buf['source']}")
+    lines += _camera_lines(info)
+    made = info.get("depict")
+    if made:
+        where = made.get("result") or "R,G,B,A"
+        lines.append(
+            f"  depict: result in {where} (original beauty: {made.get('original', '?')}), "
+            f"version {made.get('version', '?')}, input {made.get('input', '?')}"
+        )
+        if "pipeline" in made:
+            lines.append(f"  depict pipeline: {json.dumps(made['pipeline'])}")
+    lines += [f"  missing: {line}" for line in info.get("missing", [])]
+    ops = info["operators"]
+    if not ops["not_runnable"]:
+        lines.append("  operators: every one can run")
+    for name, lacks in ops["not_runnable"].items():
+        lines.append(f"  cannot run: {name} (needs {', '.join(lacks)})")
+    for key in ("problems", "warnings"):
+        lines += [f"  {key[:-1]}: {line}" for line in info.get(key, [])]
+    return lines
+
+
+def cmd_inspect(args: argparse.Namespace) -> int:
+    read = read_request(args)
+    try:
+        info = inspect(args.file, read.preset, read.camera, read.options)
+    except (LimitError, OptionError):
+        raise
+    except FrameError as exc:  # the pixels cannot be decoded: describe the header alone
+        info = _describe_header(args.file, exc)
+    info["operators"] = _runnable(info)
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        print("\n".join(printable(line) for line in _inspection_lines(info)))
+    return 0
+
+
+def _describe_header(path: str, error: Exception) -> dict[str, Any]:
+    """What ``inspect`` says of a file whose header reads but whose pixels do not."""
+    info = describe_layout(read_layout(path))
+    info["file"] = path
+    info["warnings"].append(f"pixels not described: {error}")
+    return info

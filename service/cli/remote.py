@@ -1,0 +1,102 @@
+"""The commands of ``depict`` that run on a Depict server (``--server URL`` or
+``DEPICT_SERVER``; the key from ``DEPICT_API_KEY``) through :class:`service.client.Client`,
+with the same flags as locally and the same output (the printing is the local command's)."""
+
+from __future__ import annotations
+
+import argparse
+
+from gbuffer.atomic import check_outputs
+from service.cli.analysis import (
+    compare_options,
+    pick_params,
+    print_comparison,
+    print_pick,
+    print_score,
+    score_options,
+)
+from service.cli.args import UsageError, mapping
+from service.cli.common import steps
+from service.client import Client
+
+
+def _spec(args: argparse.Namespace) -> object:
+    """The pipeline to send, validated here first (None: the server's default)."""
+    compiled = steps(args)
+    return None if compiled is None else compiled.spec
+
+
+def render(args: argparse.Namespace) -> int:
+    check_outputs([args.output], [args.mesh, args.camera])
+    if args.shading != "auto":
+        raise UsageError("--shading is not sent to a server (it renders with auto)")
+    with Client.from_env(args.server) as client:
+        client.render(
+            args.mesh,
+            args.output,
+            width=args.width,
+            height=args.height,
+            camera=args.camera,
+            azimuth=args.azimuth,
+            elevation=args.elevation,
+            lights=args.light,
+        )
+    print(f"wrote {args.output} ({args.width}x{args.height})")
+    return 0
+
+
+def enhance(args: argparse.Namespace) -> int:
+    check_outputs([args.output], [args.input, args.camera, args.pipeline])
+    buffers = mapping(args)
+    with Client.from_env(args.server) as client:
+        client.enhance(
+            args.input,
+            args.output,
+            pipeline=_spec(args),
+            preset=args.preset,
+            camera=args.camera,
+            mapping=buffers,
+            normal_space=args.normal_space,
+            debug_layers=args.debug_layers,
+            output_layer=args.output_layer,
+        )
+    print(f"wrote {args.output}")
+    return 0
+
+
+def score(args: argparse.Namespace) -> int:
+    spec = _spec(args)
+    options = score_options(args)
+    with Client.from_env(args.server) as client:
+        data = client.score(
+            args.file,
+            pipeline=spec,
+            preset=args.preset,
+            camera=args.camera,
+            mapping=mapping(args),
+            normal_space=args.normal_space,
+            **options,
+        )
+    return print_score(args, data)
+
+
+def compare(args: argparse.Namespace) -> int:
+    is_mesh, options = compare_options(args)
+    with Client.from_env(args.server) as client:
+        data = client.compare(
+            args.input,
+            options,
+            mesh=is_mesh,
+            sheet=args.sheet,
+            preset=args.preset,
+            camera=args.camera,
+        )
+    return print_comparison(args, data)
+
+
+def relief_pick(args: argparse.Namespace) -> int:
+    with Client.from_env(args.server) as client:
+        data = client.relief_pick(
+            args.file, args.x, args.y, pick_params(args), preset=args.preset, camera=args.camera
+        )
+    return print_pick(args, data)

@@ -1,0 +1,118 @@
+"""The one enhance path: read a frame, run a compiled pipeline step by step (timed), write it.
+
+``depict enhance``, ``POST /v1/enhance`` (on a worker process) and ``depict batch`` (on Dask
+workers) all call :func:`enhance` with the same typed requests, so they write the same bytes for
+the same input:
+
+* a :class:`service.pipeline.Pipeline`, parsed and validated once by the front end
+  (:func:`service.pipeline.compile`);
+* a :class:`ReadRequest`: the preset, a :class:`gbuffer.Camera` overriding the file's, the
+  :class:`gbuffer.ReadOptions` (mapping, normals' space) and the decode limits;
+* a :class:`WriteRequest`: debug layers, the result layer, a PNG preview instead of the EXR, and
+  the input's name recorded in the output.
+
+Python API::
+
+    from service import pipeline
+    from service.enhance import ReadRequest, enhance
+
+    result = enhance("shot.exr", "shot_out.exr", pipeline.compile([{"op": "radiance_scaling"}]),
+                     ReadRequest(preset="blender"))
+    print(result["op_s"])  # [("radiance_scaling", 0.21)]
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TypedDict
+
+from gbuffer.camera import Camera
+from gbuffer.frame import Frame
+from gbuffer.io import read as read_exr
+from gbuffer.io import write as write_exr
+from gbuffer.limits import Limits
+from gbuffer.presets import ReadOptions
+from gbuffer.preview import picture, write_png
+from service import pipeline
+from service.registry import Context
+
+
+@dataclass(frozen=True)
+class ReadRequest:
+    """How to read a frame: what ``--preset``, ``--camera``, ``--map`` and ``--normal-space`` (or
+    the form fields of the same names) say. ``limits``: what the header may claim (``None``: the
+    ``DEPICT_MAX_*`` variables when set)."""
+
+    preset: str = "auto"
+    camera: Camera | None = None
+    options: ReadOptions = field(default_factory=ReadOptions)
+    limits: Limits | None = None
+
+    def read(self, path: str | Path) -> Frame:
+        """The frame in ``path`` (:func:`gbuffer.read`)."""
+        return read_exr(
+            path, preset=self.preset, camera=self.camera, options=self.options, limits=self.limits
+        )
+
+
+@dataclass(frozen=True)
+class WriteRequest:
+    """What to write: intermediate layers too (``debug_layers``), the result layer
+    (``output_layer``, :mod:`service.output`), a tone-mapped PNG instead of the EXR (``preview``,
+    at ``exposure`` stops), and the input's name recorded in the output (``input_name``; default:
+    the name of the file read)."""
+
+    debug_layers: bool = False
+    output_layer: str | None = None
+    preview: bool = False
+    exposure: float = 0.0
+    input_name: str | None = None
+
+
+class Enhanced(TypedDict):
+    """What :func:`enhance` did: seconds per step (``op_s``), the image ``size`` (w, h), the
+    statistics the operators ``measured`` (to pin them for a sequence), the writer's ``warnings``
+    (e.g. a compression it could not keep) and the reader's (``read_warnings``: NaN pixels read
+    as holes, ...)."""
+
+    op_s: list[tuple[str, float]]
+    size: list[int]
+    measured: dict[str, float]
+    warnings: list[str]
+    read_warnings: list[str]
+
+
+def enhance(
+    in_path: str | Path,
+    out_path: str | Path,
+    steps: pipeline.Pipeline,
+    read: ReadRequest | None = None,
+    write: WriteRequest | None = None,
+    *,
+    pinned: dict[str, float] | None = None,
+    files: bool = True,
+) -> Enhanced:
+    """Read ``in_path``, run ``steps``, write the EXR (or the PNG preview) to ``out_path``.
+
+    ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
+    whether parameters may name image files on this machine (False for the HTTP service).
+    """
+    read, write = read or ReadRequest(), write or WriteRequest()
+    frame = read.read(in_path)
+    context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
+    out, op_s = pipeline.run_timed(frame, steps, context)
+    out = pipeline.finish(out, write.output_layer, write.input_name)
+    warnings: list[str] = []
+    if write.preview:
+        write_png(picture(out, "beauty", exposure=write.exposure), out_path)
+    else:
+        warnings = write_exr(out, out_path)
+    h, w = out.shape
+    return {
+        "op_s": op_s,
+        "size": [w, h],
+        "measured": dict(context.measured),
+        "warnings": warnings,
+        "read_warnings": list(getattr(frame.passthrough, "warnings", [])),
+    }

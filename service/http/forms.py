@@ -1,0 +1,110 @@
+"""Form fields into typed requests, checked off the event loop (a large field takes a while to
+parse, and other requests must not wait for it); a 422 problem naming the bad field.
+
+* ``pipeline`` -> a compiled :class:`service.pipeline.Pipeline` (parsed and validated once);
+* ``preset``, ``camera``, ``map``, ``normal_space`` -> :class:`ReadFields`, then, once the
+  upload is checked, a :class:`service.enhance.ReadRequest` carrying a :class:`gbuffer.Camera`;
+* JSON fields with a model (``scene``, ``options``): :func:`invalid` names the bad key.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import anyio
+from pydantic import ValidationError
+
+from gbuffer.camera import Camera
+from gbuffer.limits import Limits
+from gbuffer.presets import PRESETS, ReadOptions
+from service import pipeline
+from service.enhance import ReadRequest
+from service.errors import PipelineError
+from service.problems import Problem
+
+
+def json_field(name: str, text: str | None, expected: type | tuple[type, ...]) -> Any:
+    """A form field holding JSON (size and nesting bounded), or a 422 problem naming it."""
+    if text is None or text == "":
+        return None
+    try:
+        value = pipeline.loads(text, f"form field {name!r}")
+    except PipelineError as exc:
+        raise Problem("invalid-request", str(exc)) from None
+    if not isinstance(value, expected):
+        raise Problem("invalid-request", f"form field {name!r} must be a JSON {_kind(expected)}")
+    return value
+
+
+def _kind(expected: type | tuple[type, ...]) -> str:
+    types = expected if isinstance(expected, tuple) else (expected,)
+    names: dict[type, str] = {dict: "object", list: "array", str: "string"}
+    return " or ".join(names.get(t, t.__name__) for t in types)
+
+
+def invalid(exc: ValidationError, name: str) -> Problem:
+    """The 422 problem of JSON field ``name`` that its model refused: the first bad key
+    (``name.key: what is wrong``)."""
+    first = exc.errors()[0]
+    loc = ".".join(str(p) for p in first["loc"]) or name
+    return Problem("invalid-request", f"{name}.{loc}: {first['msg']}")
+
+
+def camera(name: str, value: dict[str, Any] | None) -> Camera | None:
+    """The camera of a JSON object, or a 422 naming ``name``."""
+    if value is None:
+        return None
+    try:
+        return Camera.from_dict(value)
+    except Exception as exc:  # any malformed value is the client's mistake
+        raise Problem("invalid-request", f"{name}: {exc}") from None
+
+
+async def pipeline_field(text: str | None) -> pipeline.Pipeline | None:
+    """The ``pipeline`` field compiled (422 when invalid), or None when absent."""
+    if not text:
+        return None
+    return await anyio.to_thread.run_sync(pipeline.compile, text)
+
+
+@dataclass(frozen=True)
+class ReadFields:
+    """The form fields saying how to read the uploaded frame, checked."""
+
+    preset: str
+    camera: Camera | None
+    mapping: dict[str, str]
+    normal_space: str | None
+
+    def request(self, limits: Limits) -> ReadRequest:
+        """The read request (the mapping's buffer names checked here, after the upload)."""
+        options = ReadOptions(
+            mapping=dict[str, str | list[str]](self.mapping), normal_space=self.normal_space
+        )
+        return ReadRequest(self.preset, self.camera, options, limits)
+
+
+def _read_fields(
+    preset: str, camera_text: str | None, map_text: str | None, normal_space: str | None
+) -> ReadFields:
+    if preset != "auto" and preset not in PRESETS:
+        raise Problem(
+            "invalid-request",
+            f"preset {preset!r} is unknown; valid presets: auto, {', '.join(PRESETS)}",
+        )
+    cam = camera("camera", json_field("camera", camera_text, dict))
+    mapping = json_field("map", map_text, dict) or {}
+    if not all(isinstance(v, str) for v in mapping.values()):
+        raise Problem("invalid-request", "form field 'map' must map buffer names to strings")
+    return ReadFields(preset, cam, mapping, normal_space)
+
+
+async def read_fields(
+    preset: str,
+    camera_text: str | None,
+    map_text: str | None = None,
+    normal_space: str | None = None,
+) -> ReadFields:
+    """The read fields checked off the event loop (422 naming the bad one)."""
+    return await anyio.to_thread.run_sync(_read_fields, preset, camera_text, map_text, normal_space)

@@ -1,0 +1,95 @@
+"""Inside the worker processes of the HTTP service (:class:`service.workers.WorkerPool`).
+
+:func:`warm_worker` runs once, before a worker's first job: every module a job needs is imported
+with this one (so a time limit never interrupts an import half-way), and a tiny OSMesa render
+proves the worker can render. :func:`run_job` runs around each job: job functions return a small
+dict, and errors come back as ``{"ok": False, "kind": KIND, "detail": TEXT}``
+(:mod:`service.problems` kinds), so no exception has to survive pickling.
+
+The jobs are :func:`enhance_job` and :func:`render_job` here, and the analysis jobs of
+:mod:`service.jobs`, the same functions the CLI runs.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import gc
+import logging
+import os
+import time
+from collections.abc import Callable
+from typing import Any
+
+import service.jobs  # noqa: F401  (the analysis jobs' modules, imported before the first job)
+from service import allocator
+from service.enhance import ReadRequest, WriteRequest, enhance
+from service.pipeline import Pipeline
+from service.problems import Problem, from_exception
+from service.scene import RenderRequest, render_to_file
+
+log = logging.getLogger("depict.jobs")
+
+
+def enhance_job(
+    in_path: str,
+    out_path: str,
+    steps: Pipeline,
+    read: ReadRequest,
+    write: WriteRequest,
+) -> dict[str, Any]:
+    """``POST /v1/enhance`` on a worker: :func:`service.enhance.enhance` with no file named by
+    a parameter read."""
+    return dict(enhance(in_path, out_path, steps, read, write, files=False))
+
+
+def render_job(mesh_path: str, out_path: str, scene: RenderRequest) -> dict[str, Any]:
+    """``POST /v1/render`` on a worker: :func:`service.scene.render_to_file`."""
+    return render_to_file(mesh_path, out_path, scene)
+
+
+def warm_worker() -> dict[str, Any]:
+    """A worker's start, before its first job: allocator settings (:mod:`service.allocator`)
+    and a tiny OSMesa render (the modules a job needs are imported with this one).
+
+    Returns ``{"osmesa": bool, "detail": ...}`` for ``/readyz``.
+    """
+    os.environ.setdefault("PYOPENGL_PLATFORM", "osmesa")
+    allocator.tune()
+    # The renderer (OpenGL) is imported here, in the workers, not in the server's process.
+    import trimesh
+
+    from gbuffer.render import render
+
+    try:
+        render(trimesh.creation.icosahedron(), 8, 8)
+    except Exception as exc:
+        return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
+    return {"osmesa": True}
+
+
+def _trim_memory() -> None:
+    """Give freed memory back to the system (glibc keeps large freed arenas otherwise)."""
+    gc.collect()
+    with contextlib.suppress(OSError, AttributeError):
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+
+
+def run_job(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
+    """Run ``fn(*args)`` in a worker; errors become problem kinds (tracebacks go to the log)."""
+    t0 = time.perf_counter()
+    try:
+        out = fn(*args)
+        out["ok"] = True
+    except Exception as exc:  # every error leaves the worker as data, never as a crash
+        problem = from_exception(exc)
+        if problem.kind == "internal" and type(exc) is ValueError:
+            # the project's convention: a plain ValueError names a bad parameter or input
+            problem = Problem("invalid-request", str(exc))
+        if problem.kind == "internal":
+            log.error("job failed", exc_info=exc)
+        out = {"ok": False, "kind": problem.kind, "detail": problem.detail}
+    finally:
+        _trim_memory()
+    out["job_s"] = time.perf_counter() - t0
+    return out

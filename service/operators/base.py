@@ -1,0 +1,150 @@
+"""What an operator is: its parameter model, the context a run passes it, its registry entry.
+
+:func:`register` adds an operator to :data:`REGISTRY`; the modules of :mod:`service.operators`
+call it for the built-in ones. :mod:`service.registry` is the catalogue the rest of the service
+reads (it imports the built-in operators first).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+
+from gbuffer.frame import Frame
+from service.errors import PipelineError
+
+
+class Params(BaseModel):
+    """Base of every operator's parameters: unknown keys are refused, values validated.
+
+    An operator may name sets of parameter values in ``PRESETS`` (e.g. ``"paper"``: the values
+    that reproduce its paper's figures) and declare a ``preset`` field listing them: a step's
+    ``preset`` fills in every parameter the step does not give itself.
+    """
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fill_preset(cls, data: Any) -> Any:
+        if isinstance(data, dict) and isinstance(data.get("preset"), str):
+            values = cls.PRESETS.get(data["preset"])
+            if values is not None:  # an unknown name is refused by the field's own choices
+                return {**values, **data}
+        return data
+
+
+@dataclass
+class Context:
+    """What a pipeline run passes to every operator besides its parameters.
+
+    ``debug_layers``: also write intermediate layers (curvature, σ, multi-scale normals, ...).
+    ``pinned``: statistics pinned for a whole sequence (white levels, normalisations), keyed by
+    ``"<op>.<name>"``; an operator whose parameter is ``auto`` reads it from here when present
+    and records what it measured in ``measured`` so a batch can pin it for later frames.
+    ``files``: whether parameters may name image files on this machine (matcaps, environment
+    maps, gain maps, ARMs); the HTTP service runs with ``files=False``.
+    """
+
+    debug_layers: bool = False
+    files: bool = True
+    pinned: dict[str, float] = field(default_factory=dict)
+    measured: dict[str, float] = field(default_factory=dict)
+
+    def statistic(self, key: str, compute: Callable[[], float]) -> float:
+        """The pinned value of ``key``, else ``compute()`` (recorded in ``measured``)."""
+        if key in self.pinned:
+            return self.pinned[key]
+        value = float(compute())
+        self.measured[key] = value
+        return value
+
+
+Apply = Callable[[Frame, Any, Context], None]
+
+
+@dataclass(frozen=True)
+class Operator:
+    """A registered operator. ``apply(frame, params, context)`` edits ``frame`` in place:
+    it may replace ``frame.buffers["beauty"]`` and add output layers with ``frame.set_layer``."""
+
+    name: str
+    summary: str
+    params: type[Params]
+    needs: tuple[str, ...]
+    writes: tuple[str, ...]
+    apply: Apply
+    needs_camera: bool = False
+
+    def parse(self, values: dict[str, Any]) -> Params:
+        """Validate ``values`` into the parameter model, or raise :class:`PipelineError`."""
+        try:
+            return self.params.model_validate(values)
+        except ValidationError as exc:
+            raise PipelineError(describe_validation(self, exc)) from None
+
+    def schema(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "summary": self.summary,
+            "needs": list(self.needs),
+            "writes": list(self.writes),
+            "params": self.params.model_json_schema(),
+        }
+
+
+REGISTRY: dict[str, Operator] = {}
+
+
+def register(
+    name: str,
+    *,
+    summary: str,
+    params: type[Params],
+    needs: tuple[str, ...],
+    writes: tuple[str, ...],
+    needs_camera: bool = False,
+) -> Callable[[Apply], Apply]:
+    """Decorator registering ``apply`` as operator ``name``."""
+
+    def wrap(apply: Apply) -> Apply:
+        if name in REGISTRY:
+            raise RuntimeError(f"operator {name!r} registered twice")
+        REGISTRY[name] = Operator(name, summary, params, needs, writes, apply, needs_camera)
+        return apply
+
+    return wrap
+
+
+def get(name: str) -> Operator:
+    """The registered operator ``name``, or a :class:`PipelineError` listing the valid names."""
+    try:
+        return REGISTRY[name]
+    except KeyError:
+        raise PipelineError(
+            f"unknown operator {name!r}; valid operators: {', '.join(sorted(REGISTRY))}"
+        ) from None
+
+
+def describe_validation(op: Operator, exc: ValidationError) -> str:
+    """One line per problem: ``op: param=value: what is wrong (valid parameters: ...)``."""
+    fields = op.params.model_fields
+    problems = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"]) or "params"
+        if err["type"] == "extra_forbidden":
+            problems.append(
+                f"{op.name}: unknown parameter {loc!r}; valid parameters: {', '.join(fields)}"
+            )
+            continue
+        value = err.get("input")
+        desc = (
+            fields[str(err["loc"][0])].description if err["loc"] and err["loc"][0] in fields else ""
+        )
+        hint = f" ({desc})" if desc else ""
+        problems.append(f"{op.name}: {loc}={value!r}: {err['msg']}{hint}")
+    return "; ".join(problems)
