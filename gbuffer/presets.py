@@ -585,12 +585,6 @@ class _Reader:
         return np.asarray(cv2.merge(planes), np.float32)
 
 
-@dataclass
-class _Found:
-    names: list[str]
-    space: str = ""
-
-
 def _find(
     reader: _Reader,
     buffer: str,
