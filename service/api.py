@@ -51,6 +51,7 @@ from starlette.responses import FileResponse, Response
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from gbuffer.errors import FrameError
+from gbuffer.presets import preset_help
 from service import jobs
 from service.logs import REQUEST_ID, configure_logging
 from service.metrics import Metrics
@@ -604,7 +605,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
         ] = None,
         preset: Annotated[
             str,
-            Form(description="renderer preset: auto, canonical, blender, arnold, vray, ..."),
+            Form(description=preset_help()),
         ] = "auto",
         camera: Annotated[str | None, Form(description="camera JSON, overrides the file's")] = None,
         map: Annotated[
