@@ -4,7 +4,7 @@ filtered normal, and the camera (the file's, or solved from world-space position
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import cv2
@@ -43,26 +43,31 @@ def camera_error(where: str, what: str, src: str, camera: Camera | None) -> Miss
 
 
 def to_camera_normals(n: np.ndarray, space: str, camera: Camera | None) -> np.ndarray:
-    if space == "camera":
-        return n
-    if space == "camera-lh":
-        n[..., 2] *= -1.0
-        return n
-    assert camera is not None and camera.world_to_camera is not None
-    rot = camera.world_to_camera[:3, :3]
-    normal_matrix = np.linalg.inv(rot).T.astype(np.float32)
-    return np.asarray(cv2.transform(n, normal_matrix), dtype=np.float32)
+    """Normals in camera space: world ones by the inverse transpose of the camera rotation,
+    left-handed ones (+z forward) with z flipped (in place)."""
+    return _to_camera(n, space, camera, lambda w2c: np.linalg.inv(w2c[:3, :3]).T)
 
 
 def to_camera_points(p: np.ndarray, space: str, camera: Camera | None) -> np.ndarray:
+    """Points in camera space: world ones by the camera matrix, left-handed ones with z
+    flipped (in place)."""
+    return _to_camera(p, space, camera, lambda w2c: w2c[:3, :])
+
+
+def _to_camera(
+    v: np.ndarray,
+    space: str,
+    camera: Camera | None,
+    matrix: Callable[[np.ndarray], np.ndarray],
+) -> np.ndarray:
     if space == "camera":
-        return p
+        return v
     if space == "camera-lh":
-        p[..., 2] *= -1.0
-        return p
+        v[..., 2] *= -1.0
+        return v
     assert camera is not None and camera.world_to_camera is not None
-    m = camera.world_to_camera[:3, :].astype(np.float32)
-    return np.asarray(cv2.transform(p, m), dtype=np.float32)
+    m = matrix(camera.world_to_camera).astype(np.float32)
+    return np.asarray(cv2.transform(v, m), dtype=np.float32)
 
 
 def camera_from_positions(
