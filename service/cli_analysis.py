@@ -90,8 +90,9 @@ def _shading_norm(text: str) -> str | float:
 
 
 def cmd_compare(args: argparse.Namespace) -> int:
+    from analysis.pictures import plot
+    from analysis.result import ComparisonResult
     from gbuffer.atomic import check_outputs
-    from service.compare import ComparisonResult, plot
 
     check_outputs([args.plot, args.sheet], [args.input, args.camera])
 
@@ -285,8 +286,9 @@ def add_analysis_commands(sub: Any) -> None:
 
 
 def _compare_arguments(p: argparse.ArgumentParser) -> None:
+    from analysis.compare import ALBEDOS
+    from analysis.methods import METHODS
     from ops.directions import N_DIRECTIONS
-    from service.compare import ALBEDOS, METHODS
 
     p.add_argument("input", help="a mesh (rendered with Depict) or an EXR with normals and depth")
     p.add_argument("--methods", default=",".join(METHODS), help="comma list of methods")

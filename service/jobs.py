@@ -47,9 +47,9 @@ def warm_worker() -> dict[str, Any]:
     allocator.tune()
     import trimesh
 
+    import analysis.compare  # noqa: F401
     import gbuffer.io
     import gbuffer.preview  # noqa: F401
-    import service.compare
     import service.pipeline  # noqa: F401
     from gbuffer.render import render
     from service.registry import operators
@@ -222,9 +222,9 @@ def score_job(
     files: bool = False,
 ) -> dict[str, Any]:
     """``depict score``: the congruence score (LLA Eq. 2) of the frame's beauty
-    (:func:`service.compare.score_frame`), after the pipeline ``spec_json`` when given."""
+    (:func:`analysis.score.score_frame`), after the pipeline ``spec_json`` when given."""
+    from analysis.score import score_frame
     from service import pipeline
-    from service.compare import score_frame
     from service.registry import Context
 
     frame = read_frame(in_path, read, limits)
@@ -253,14 +253,16 @@ def compare_job(
     mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``).
 
     ``options``: ``methods``, ``directions``, ``params``, ``albedo``, ``shading_norm``
-    (:func:`service.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
+    (:func:`analysis.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
     ``elevation``. Returns :meth:`ComparisonResult.to_dict`, with ``sheet``, plus
     ``sheet_png``: the contact sheet as a base64 PNG.
     """
     import base64
     import tempfile
 
-    from service.compare import METHODS, SHEET_DIRECTIONS, compare, contact_sheet, frame_from_mesh
+    from analysis.compare import compare, frame_from_mesh
+    from analysis.methods import METHODS
+    from analysis.pictures import SHEET_DIRECTIONS, contact_sheet
 
     opts = dict(options)
     if read is None:
