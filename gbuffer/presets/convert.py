@@ -18,7 +18,6 @@ from gbuffer.errors import FrameError
 from gbuffer.exr import ExrPassthrough, window
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.holes import hole_warnings, mark_holes
-from gbuffer.presets import geometry
 from gbuffer.presets.channels import (
     ChannelReader,
     channel_list,
@@ -30,6 +29,15 @@ from gbuffer.presets.channels import (
     sum_into,
 )
 from gbuffer.presets.detect import detect
+from gbuffer.presets.geometry import (
+    camera_error,
+    camera_from_positions,
+    check_facing,
+    file_camera,
+    length_trust,
+    to_camera_normals,
+    to_camera_points,
+)
 from gbuffer.presets.options import ReadOptions, read_options
 from gbuffer.presets.spec import LobeSpec, Preset
 from gbuffer.presets.table import PRESETS, find_preset
@@ -71,7 +79,7 @@ def to_frame(
     build = _Build.start(passthrough, _choose_preset(passthrough, preset), opts)
     build.grid(camera)
     build.background_and_depth()
-    build.camera_from_positions()
+    build.fit_camera()
     build.planar_depth()
     build.plain_buffers()
     build.normals()
@@ -192,7 +200,7 @@ class _Build:
         self.display_size = (dx1 - dx0 + 1, dy1 - dy0 + 1)
         self.origin = (grid[0] - dx0, grid[1] - dy0)
         if camera is None:
-            self.camera = geometry.file_camera(header, self.warnings)
+            self.camera = file_camera(header, self.warnings)
         else:
             self.camera = camera if camera.source else dataclasses.replace(camera, source="given")
         self.background = np.zeros(self.reader.shape, bool)
@@ -234,14 +242,14 @@ class _Build:
         check_finite(self.reader, names, arr, self.background, radiance=radiance)
         return arr
 
-    def camera_from_positions(self) -> None:
+    def fit_camera(self) -> None:
         """Step 4, camera: world-space positions solve it when none is known, or measure how
         well the known one fits them."""
         if "position" not in self.found:
             return
         self.position = self.load("position", self.found["position"])
         if self.spaces["position"] == "world":
-            self.camera = geometry.camera_from_positions(
+            self.camera = camera_from_positions(
                 self.camera,
                 self.position,
                 ~self.background,
@@ -293,10 +301,10 @@ class _Build:
         camera = self.camera
         if space == "world" and (camera is None or camera.world_to_camera is None):
             if self.opts.require_camera:
-                raise geometry.camera_error(self.reader.where, "normals", src, camera)
+                raise camera_error(self.reader.where, "normals", src, camera)
             self.warnings.append(f"normals {src} left out: world space and no camera")
             return
-        n = geometry.to_camera_normals(n, space, camera)
+        n = to_camera_normals(n, space, camera)
         length = np.sqrt(cv2.transform(n * n, np.ones((1, 3), np.float32)))
         length = np.asarray(length, np.float32).reshape(self.reader.shape)
         empty = length < 1e-6
@@ -304,15 +312,13 @@ class _Build:
         inv = np.zeros_like(length)
         np.divide(np.float32(1.0), length, out=inv, where=~(empty | self.background))
         n *= inv[..., None]
-        self.trust = geometry.trust(length, self.opts.normal_tolerance)
+        self.trust = length_trust(length, self.opts.normal_tolerance)
         self.trust[empty] = 0.0
         self.buffers["normal"] = n
         self.sources["normal"] = src + (f" ({space} -> camera)" if space != "camera" else "")
         if space == "world":
             shape = self.reader.shape
-            geometry.check_facing(
-                n, camera, shape, self.display_size, self.origin, src, self.warnings
-            )
+            check_facing(n, camera, shape, self.display_size, self.origin, src, self.warnings)
 
     def positions(self) -> None:
         """Step 8, positions: to camera space (0 on background); the depth when none was read."""
@@ -324,7 +330,7 @@ class _Build:
         if space == "world" and (camera is None or camera.world_to_camera is None):
             self.warnings.append(f"position {src} left out: world space and no camera")
             return
-        pos = geometry.to_camera_points(self.position, space, camera)
+        pos = to_camera_points(self.position, space, camera)
         pos[self.background] = 0.0
         self.buffers["position"] = pos
         self.sources["position"] = src + (f" ({space} -> camera)" if space != "camera" else "")

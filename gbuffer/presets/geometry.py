@@ -19,7 +19,7 @@ from gbuffer.presets.channels import describe
 CAMERA_DISAGREES_PX = 0.5
 
 
-def trust(length: np.ndarray, tol: float) -> np.ndarray:
+def length_trust(length: np.ndarray, tol: float) -> np.ndarray:
     """f(|n|) of the coverage formula (module docstring)."""
     low = np.float32(1.0 - tol)
     high = np.float32(1.0 + tol)
