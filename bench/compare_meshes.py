@@ -1,7 +1,7 @@
 """The LLA comparison bench on real meshes (Mestres et al. 2021, §7, Figs. 12-13).
 
 Renders each mesh (camera-space normals and depth, white surface), shades it with every method
-of :mod:`service.compare` under the fixed 21-direction sweep, scores each rendering with the
+of :mod:`analysis.methods` under the fixed 21-direction sweep, scores each rendering with the
 congruence score (LLA Eq. 2) and writes, into the output folder:
 
 - ``<mesh>.md`` / ``<mesh>.json``: the table (directions × methods, means) and the raw scores;
@@ -32,8 +32,11 @@ import time
 from pathlib import Path
 from typing import Any
 
+from analysis.compare import compare
+from analysis.methods import LABELS, METHODS
+from analysis.pictures import contact_sheet, plot
+from analysis.result import ComparisonResult
 from service.cli import args as cli_args
-from service.compare import LABELS, METHODS, ComparisonResult, compare, contact_sheet, plot
 
 #: Views (azimuth, elevation in degrees) that show each mesh's front (checked by eye).
 VIEWS: dict[str, tuple[float, float]] = {
@@ -173,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
         "--shading-norm",
         default="reference",
         choices=["reference", "per_image"],
-        help="scale of the shading strengths (service.compare)",
+        help="scale of the shading strengths (analysis.compare)",
     )
     ap.add_argument("--no-sheet", action="store_true", help="skip the contact sheets")
     ap.add_argument(
@@ -187,7 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     if not args.models.is_dir():
         print(f"models folder {args.models} is absent: nothing to compare", file=sys.stderr)
         return 2
-    from service.compare import frame_from_mesh
+    from analysis.compare import frame_from_mesh
 
     params = parse_sets(args.set)
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]

@@ -106,7 +106,7 @@ def mesh_frame(models: Path, name: str, size: int = SIZE) -> Frame:
     from gbuffer.render import auto_camera, load_mesh, render
 
     mesh = load_mesh(find_mesh(models, name))
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # as service.compare.frame_from_mesh
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # as analysis.compare.frame_from_mesh
     az, el = VIEWS.get(name, (30.0, 20.0))
     cam = auto_camera(mesh, width=size, height=size, azimuth_deg=az, elevation_deg=el)
     return render(mesh, size, size, camera=cam)

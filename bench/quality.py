@@ -64,10 +64,10 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from analysis.score import CONGRUENCE, score_image
 from gbuffer.frame import Frame
 from ops.congruence import CongruenceResult
 from ops.scaling import luminance
-from service.compare import DEFAULT_PARAMS, score_image
 
 F32 = NDArray[np.float32]
 Mask = NDArray[np.bool_]
@@ -277,9 +277,9 @@ def detail_gain(before: F32, after: F32, mask: Mask, height: int) -> float:
 
 def frame_congruence(frame: Frame, shading_norm: float | None = None) -> CongruenceResult:
     """LLA Eq. 2 of the frame's beauty, with the parameters of ``depict score``
-    (:func:`service.compare.score_frame`: the shape flow of the normals); ``shading_norm``
+    (:func:`analysis.score.score_frame`: the shape flow of the normals); ``shading_norm``
     puts the shading strength on another rendering's scale (the input's, for a result)."""
-    params = dict(DEFAULT_PARAMS["congruence"])
+    params = dict(CONGRUENCE)
     if shading_norm is not None:
         params["shading_norm"] = shading_norm
     return score_image(

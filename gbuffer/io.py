@@ -36,7 +36,14 @@ from gbuffer import exr
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
-from gbuffer.presets import PRESETS, ReadOptions, canonical_channels, detect, to_frame
+from gbuffer.presets import (
+    ReadOptions,
+    canonical_channels,
+    detect,
+    find_preset,
+    read_options,
+    to_frame,
+)
 
 #: Header keys an output attribute may not replace (they describe the pixels).
 PROTECTED_ATTRIBUTES = frozenset(
@@ -71,8 +78,8 @@ def read(
     Parameters
     ----------
     path : the EXR file.
-    preset : "auto" (detected from the header and channel names) or one of
-        :data:`gbuffer.presets.PRESETS` (blender, arnold, vray, renderman, karma, canonical).
+    preset : "auto" (detected from the header and channel names) or the name of one of
+        :data:`gbuffer.presets.PRESETS`.
     camera : a :class:`Camera`, its JSON dict, or a path to camera JSON; it overrides the
         file's camera.
     options : :class:`gbuffer.presets.ReadOptions` (or its dict): mapping and convention
@@ -258,10 +265,9 @@ def inspect(
     a data channel, ...) is still described, the reason in ``problems``. An unreadable file, an
     unknown preset or a bad explicit mapping still raise :class:`FrameError`."""
     cam = _camera_arg(camera)
-    opts = options if isinstance(options, ReadOptions) else ReadOptions.from_dict(options or {})
-    opts = dataclasses.replace(opts, require_camera=False, strict=False)
-    if preset != "auto" and preset not in PRESETS:
-        raise FrameError(f"preset={preset!r} is not known; valid: auto, {', '.join(PRESETS)}")
+    opts = dataclasses.replace(read_options(options), require_camera=False, strict=False)
+    if preset != "auto":
+        find_preset(preset)  # an unknown name is refused before the file is read
     passthrough = exr.read_parts(path, max_pixels)
     try:
         frame = to_frame(passthrough, preset, cam, opts)

@@ -17,18 +17,14 @@ from typing import Any
 
 import numpy as np
 
+from analysis.compare import compare, frame_from_mesh
+from analysis.methods import METHODS
+from analysis.pictures import SHEET_DIRECTIONS, contact_sheet
+from analysis.score import score_frame
 from gbuffer.errors import LimitError
 from gbuffer.limits import Limits
 from ops import relief as rl
 from service import pipeline
-from service.compare import (
-    METHODS,
-    SHEET_DIRECTIONS,
-    compare,
-    contact_sheet,
-    frame_from_mesh,
-    score_frame,
-)
 from service.enhance import ReadRequest
 from service.registry import Context
 
@@ -41,7 +37,7 @@ def score_job(
     files: bool = False,
 ) -> dict[str, Any]:
     """``depict score``: the congruence score (LLA Eq. 2) of the frame's beauty
-    (:func:`service.compare.score_frame`), after the pipeline ``steps`` when given."""
+    (:func:`analysis.score.score_frame`), after the pipeline ``steps`` when given."""
     frame = read.read(in_path)
     op_s: list[tuple[str, float]] = []
     if steps is not None:
@@ -69,7 +65,7 @@ def compare_job(
     ``limits.max_pixels``).
 
     ``options``: ``methods``, ``directions``, ``params``, ``albedo``, ``shading_norm``
-    (:func:`service.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
+    (:func:`analysis.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
     ``elevation``. Returns :meth:`ComparisonResult.to_dict`, with ``sheet``, plus
     ``sheet_png``: the contact sheet as a base64 PNG.
     """

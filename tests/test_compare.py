@@ -1,4 +1,4 @@
-"""The LLA comparison bench (service.compare): methods × directions, scores, tables, pictures."""
+"""The LLA comparison bench (analysis.compare): methods × directions, scores, tables, pictures."""
 
 from __future__ import annotations
 
@@ -10,21 +10,17 @@ import numpy as np
 import pytest
 import trimesh
 
+from analysis.compare import compare
+from analysis.methods import METHODS, resolve_params
+from analysis.pictures import contact_sheet, plot
+from analysis.result import ComparisonResult
+from analysis.score import score_frame
 from bench import compare_meshes
 from gbuffer.frame import Frame
 from gbuffer.render import auto_camera, render
 from ops.congruence import congruence
 from ops.directions import comparison_directions
 from ops.shading import lambert
-from service.compare import (
-    METHODS,
-    ComparisonResult,
-    compare,
-    contact_sheet,
-    plot,
-    resolve_params,
-    score_frame,
-)
 
 MODELS = Path(__file__).resolve().parents[2] / "shared" / "models"
 SIZE = 96
@@ -214,6 +210,26 @@ def test_score_frame_scores_the_beauty(frame: Frame) -> None:
     coarse = score_frame(frame, integration_scale=0.05)
     assert coarse["params"]["integration_scale"] == 0.05
     assert coarse["score"] != out["score"]
+
+
+def test_method_sections_are_their_operators_parameters(frame: Frame) -> None:
+    """Radiance Scaling is the registry's operator: its γ = 0 (σ ≡ 1) leaves the Lambert term."""
+    lam = compare(frame, ["lambert", "radiance_scaling"], directions=[3])
+    flat = compare(
+        frame, ["radiance_scaling"], directions=[3], params={"radiance_scaling": {"gamma": 0}}
+    )
+    assert lam.params["radiance_scaling"]["scenario"] == "phong"
+    assert flat.params["radiance_scaling"]["gamma"] == 0
+    np.testing.assert_allclose(
+        flat.image("radiance_scaling", 3), lam.image("lambert", 3), rtol=0, atol=1e-6
+    )
+    assert np.abs(lam.image("radiance_scaling", 3) - lam.image("lambert", 3)).max() > 0.05
+    with pytest.raises(ValueError, match="'lights' is set by the comparison"):
+        resolve_params({"light_alignment": {"lights": ["0,0,1"]}})
+    with pytest.raises(ValueError, match="'light' is set by the comparison"):
+        resolve_params({"light_warping": {"light": "0,0,1"}})
+    with pytest.raises(ValueError, match="Lambert takes no parameters"):
+        resolve_params({"lambert": {"gamma": 1}})
 
 
 def test_bad_arguments_raise_value_errors(frame: Frame) -> None:

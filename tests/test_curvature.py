@@ -384,7 +384,7 @@ def test_overlapping_spheres_are_cut_at_any_resolution(height: int) -> None:
 def spot_frames() -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, int]]:
     """spot.obj rendered 160x120 and 640x480 (normal, depth, mask, image height)."""
     pytest.importorskip("pyrender")
-    from service.compare import frame_from_mesh
+    from analysis.compare import frame_from_mesh
 
     out = {}
     for h in (120, 480):

@@ -20,12 +20,12 @@ import psutil
 import pytest
 import trimesh
 
+from analysis.score import score_frame
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from service.cli import main as cli
 from service.client import Client, DepictError
-from service.compare import score_frame
 from tests import exr_factory
 from tests.live_server import Server, free_port, live_servers
 

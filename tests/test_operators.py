@@ -16,12 +16,13 @@ import cv2
 import numpy as np
 import pytest
 
+from analysis.compare import frame_from_mesh
+from analysis.score import score_frame
 from gbuffer.errors import MissingBufferError, MissingCameraError
 from gbuffer.frame import LOBES, Frame
 from ops import shading
 from ops.shading import parse_light, shade_directions, shade_lobes
 from service import pipeline
-from service.compare import frame_from_mesh, score_frame
 from service.operators.common import DEFAULT_LIGHTS
 from service.registry import Context, PipelineError
 from tests import analytic

@@ -9,9 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
+from analysis.score import score_frame
 from bench import corpus, quality
 from gbuffer.frame import Frame
-from service.compare import score_frame
 
 
 @pytest.fixture(scope="module")

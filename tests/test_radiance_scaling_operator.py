@@ -63,7 +63,7 @@ def mesh_frame() -> Frame:
     from gbuffer.render import auto_camera, load_mesh, render
 
     mesh = load_mesh(path)
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # as service.compare.frame_from_mesh
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)  # as analysis.compare.frame_from_mesh
     cam = auto_camera(mesh, width=WIDTH, height=HEIGHT)
     return render(mesh, WIDTH, HEIGHT, camera=cam)  # with SSAO, for the "ao" scenario
 

@@ -14,11 +14,12 @@ import json
 from pathlib import Path
 from typing import Any
 
+from analysis.pictures import plot
+from analysis.result import ComparisonResult
 from gbuffer.atomic import atomic_path, check_outputs
 from service import arm
 from service.cli.args import UsageError, parse_sets
 from service.cli.common import read_request, steps
-from service.compare import ComparisonResult, plot
 from service.jobs import compare_job, pick_job, score_job
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")

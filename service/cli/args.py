@@ -7,6 +7,7 @@ import argparse
 import json
 import os
 import re
+from collections.abc import Callable
 from typing import Any
 
 
@@ -97,12 +98,33 @@ def add_pipeline_options(p: argparse.ArgumentParser, what: str = "a pipeline ste
     p.add_argument("--pipeline", metavar="PIPE.json", help="pipeline JSON instead of --op")
 
 
+class LazyHelp(str):
+    """A help text made when argparse shows it (it formats ``help % params``), so that what
+    making it imports costs building the parser (``depict --help``) nothing."""
+
+    make: Callable[[], str]
+
+    def __new__(cls, make: Callable[[], str]) -> LazyHelp:
+        text = super().__new__(cls, make.__name__)
+        text.make = make
+        return text
+
+    def __mod__(self, params: Any) -> str:
+        return self.make() % params
+
+
+def _preset_help() -> str:
+    from gbuffer.presets import preset_help
+
+    return preset_help()
+
+
 def add_read_options(p: argparse.ArgumentParser) -> None:
     """Flags for reading a frame: preset, camera and mapping overrides."""
     p.add_argument(
         "--preset",
         default="auto",
-        help="renderer preset: auto, canonical, blender, arnold, vray, renderman, karma",
+        help=LazyHelp(_preset_help),
     )
     p.add_argument("--camera", metavar="CAM.json", help="camera JSON (overrides the file's)")
     p.add_argument(

@@ -171,7 +171,8 @@ def add_analysis_commands(sub: Any) -> None:
 
 
 def _compare_arguments(p: argparse.ArgumentParser) -> None:
-    from service.compare import ALBEDOS, METHODS, N_DIRECTIONS
+    from analysis.compare import ALBEDOS, N_DIRECTIONS
+    from analysis.methods import METHODS
 
     p.add_argument("input", help="a mesh (rendered with Depict) or an EXR with normals and depth")
     p.add_argument("--methods", default=",".join(METHODS), help="comma list of methods")

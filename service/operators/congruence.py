@@ -13,11 +13,11 @@ from typing import Literal
 
 from pydantic import Field
 
+from analysis.score import CONGRUENCE, score_frame
 from gbuffer.frame import Frame
-from service.compare import DEFAULT_PARAMS, score_frame
 from service.operators.base import Context, Params, register
 
-_DEFAULTS = DEFAULT_PARAMS["congruence"]
+_DEFAULTS = CONGRUENCE
 
 
 class CongruenceParams(Params):

@@ -11,6 +11,7 @@ from fastapi import APIRouter, File, Form, Query, UploadFile
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.responses import FileResponse, Response
 
+from gbuffer.presets import preset_help
 from service import pipeline as pipelines
 from service.enhance import WriteRequest
 from service.http import forms, worker
@@ -77,7 +78,7 @@ async def enhance(
     ] = None,
     preset: Annotated[
         str,
-        Form(description="renderer preset: auto, canonical, blender, arnold, vray, ..."),
+        Form(description=preset_help()),
     ] = "auto",
     camera: Annotated[str | None, Form(description="camera JSON, overrides the file's")] = None,
     map: Annotated[
