@@ -116,7 +116,8 @@ def test_preview_inspect_and_score_of_an_output_show_the_result(
     assert depict("score", blender_out, "--json") == 0
     plain_score = json.loads(capsys.readouterr().out)["score"]
     assert depict("score", blender_out, "--json", "--map", "beauty=ViewLayer.Depict") == 0
-    assert json.loads(capsys.readouterr().out)["score"] == plain_score
+    # the same beauty either way (the score moves by ~1e-12 with how the arrays lie in memory)
+    assert json.loads(capsys.readouterr().out)["score"] == pytest.approx(plain_score, abs=1e-9)
 
 
 def test_a_second_enhance_replaces_the_result_and_keeps_the_original(
