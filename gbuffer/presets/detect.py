@@ -6,7 +6,6 @@ from __future__ import annotations
 from typing import Any
 
 from gbuffer.frame import Passthrough
-from gbuffer.presets.channels import flat_channels
 from gbuffer.presets.spec import FileView, Preset
 from gbuffer.presets.table import FALLBACK, PRESETS
 
@@ -30,7 +29,7 @@ def detect(parts: Any) -> tuple[str, str]:
     canonical names); the fallback is ``canonical``.
     """
     plist = list(parts.parts) if isinstance(parts, Passthrough) else list(parts)
-    file = FileView(plist, list(flat_channels(plist)))
+    file = FileView(plist)
     found = _by_header_key(file) or _by_software(file) or _by_channels(file)
     if found is None:
         return FALLBACK.name, "no renderer signature found; using Depict's canonical names"

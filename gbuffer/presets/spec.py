@@ -17,6 +17,8 @@ from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Literal
 
+from gbuffer.presets.channels import flat_channels
+
 Space = Literal["world", "camera", "camera-lh"]
 DepthKind = Literal["planar", "distance"]
 
@@ -40,11 +42,15 @@ class LobeSpec:
 
 @dataclass(frozen=True)
 class FileView:
-    """A file as the clues look at it: its parts' headers and its channel names (multi-part
-    layers as ``<part name>.<channel>``, :func:`gbuffer.presets.channels.flat_channels`)."""
+    """A file as the clues look at it: its parts' headers and channels."""
 
-    parts: Sequence[tuple[Mapping[str, Any], Any]]
-    names: Sequence[str]
+    parts: Sequence[tuple[dict[str, Any], dict[str, Any]]]
+
+    @cached_property
+    def names(self) -> list[str]:
+        """Channel names as presets see them (multi-part layers as ``<part name>.<channel>``,
+        :func:`gbuffer.presets.channels.flat_channels`)."""
+        return list(flat_channels(self.parts))
 
     @cached_property
     def keys(self) -> list[str]:
