@@ -288,6 +288,7 @@ def frame_congruence(frame: Frame, shading_norm: float | None = None) -> Congrue
         frame.mask,
         frame.buffers.get("normal"),
         int(frame.image_height),
+        weights=frame.colorspace.weights,
         **params,
     )
 

@@ -1,8 +1,10 @@
 """Linear scene-referred RGB <-> CIELAB, float32, vectorised, HDR-safe.
 
-Depict's radiance is linear RGB with Rec.709 / sRGB primaries and a D65 white (DESIGN.md). CIELAB
-is taken relative to a *white level*: a linear value equal to ``white`` in all three channels maps
-to L* = 100, a* = b* = 0. Values above the white level are not clipped: CIELAB's
+Depict's radiance is linear RGB in the frame's working space (:mod:`ops.colorspace`; by default
+Rec.709 / sRGB primaries and a D65 white, DESIGN.md); every function takes the space's RGB-to-XYZ
+matrix (``rgb_to_xyz``) and CIELAB is relative to that space's white. CIELAB is taken relative
+to a *white level*: a linear value equal to ``white`` in all three channels maps to L* = 100,
+a* = b* = 0. Values above the white level are not clipped: CIELAB's
 f(t) = t^(1/3) extends above 1, so L* > 100 and the round trip stays exact for HDR radiance.
 
 Why not ``cv2.cvtColor``: OpenCV's float ``COLOR_RGB2Lab`` applies the sRGB transfer curve, and
@@ -39,11 +41,13 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from ops.colorspace import REC709_RGB_TO_XYZ
 from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
 __all__ = [
+    "REC709_Y",
     "RGB_TO_XYZ",
     "auto_white",
     "lab_phi_to_rgb",
@@ -58,19 +62,11 @@ __all__ = [
     "scale_lab",
 ]
 
-#: Linear Rec.709/sRGB (D65) to CIE XYZ (IEC 61966-2-1), column vectors.
-RGB_TO_XYZ = np.array(
-    [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ],
-    dtype=np.float64,
-)
-#: The D65 white of that matrix (its row sums): XYZ of RGB (1, 1, 1).
-_WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)
+#: Linear Rec.709/sRGB (D65) to CIE XYZ (IEC 61966-2-1), column vectors: the default space.
+#: Another working space passes its own matrix (``rgb_to_xyz``, :mod:`ops.colorspace`).
+RGB_TO_XYZ = REC709_RGB_TO_XYZ
 #: Rec.709 luminance weights (the Y row).
-_LUMA = RGB_TO_XYZ[1]
+REC709_Y = RGB_TO_XYZ[1]
 
 _DELTA = 6.0 / 29.0
 _DELTA3 = _DELTA**3
@@ -124,14 +120,17 @@ def _unphi_inplace(u: np.ndarray) -> None:
     _cv.addWeighted(u, 1.0, lo, s, -s * _KNEE_PHI, dst=u)
 
 
-def _to_t(white: float) -> np.ndarray:
-    """linear RGB -> t = (X/Xn, Y/Yn, Z/Zn) of rgb / white (3×3 float32)."""
-    return (RGB_TO_XYZ / (_WHITE_XYZ[:, None] * white)).astype(np.float32)
+def _to_t(white: float, rgb_to_xyz: np.ndarray) -> np.ndarray:
+    """linear RGB -> t = (X/Xn, Y/Yn, Z/Zn) of rgb / white (3×3 float32); (Xn, Yn, Zn) is the
+    space's white, XYZ of RGB (1, 1, 1)."""
+    m = np.asarray(rgb_to_xyz, np.float64)
+    return (m / (m.sum(axis=1)[:, None] * white)).astype(np.float32)
 
 
-def _from_t(white: float) -> np.ndarray:
+def _from_t(white: float, rgb_to_xyz: np.ndarray) -> np.ndarray:
     """t -> linear RGB (3×3 float32), the inverse of :func:`_to_t`."""
-    return (np.linalg.inv(RGB_TO_XYZ) * (_WHITE_XYZ[None, :] * white)).astype(np.float32)
+    m = np.asarray(rgb_to_xyz, np.float64)
+    return (np.linalg.inv(m) * (m.sum(axis=1)[None, :] * white)).astype(np.float32)
 
 
 def _write(res: np.ndarray, out: np.ndarray) -> None:
@@ -158,21 +157,33 @@ def _flat(a: np.ndarray) -> np.ndarray:
     return a.reshape(a.shape[0], -1)
 
 
-def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Rec.709 relative luminance Y = 0.2127 R + 0.7152 G + 0.0722 B of linear RGB.
+def luminance(rgb: np.ndarray, weights: np.ndarray = REC709_Y) -> np.ndarray:
+    """Relative luminance Y = w_r R + w_g G + w_b B of linear RGB.
 
-    ``rgb`` has shape (..., 3); the result has the leading shape, float32.
+    ``weights``: the working space's Y row (:attr:`ops.colorspace.ColorSpace.weights`; default
+    Rec.709, 0.2127, 0.7152, 0.0722). ``rgb`` has shape (..., 3); the result has the leading
+    shape, float32.
     """
     arr = np.asarray(rgb, dtype=np.float32)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"rgb must have shape (..., 3), got {arr.shape}")
     flat = np.ascontiguousarray(arr.reshape(-1, 1, 3))
-    y = _cv.transform(flat, _LUMA[None, :].astype(np.float32))
+    y = _cv.transform(flat, _weights(weights))
     return np.asarray(y, dtype=np.float32).reshape(arr.shape[:-1])
 
 
-def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: float = 99.0) -> float:
-    """White level for CIELAB: the ``percentile`` of luminance over covered pixels.
+def _weights(weights: np.ndarray) -> np.ndarray:
+    return np.asarray(weights, np.float32).reshape(1, 3)
+
+
+def auto_white(
+    rgb: np.ndarray,
+    mask: np.ndarray | None = None,
+    percentile: float = 99.0,
+    weights: np.ndarray = REC709_Y,
+) -> float:
+    """White level for CIELAB: the ``percentile`` of luminance (``weights``: the working space's
+    Y row) over covered pixels.
 
     Computed on a strided subsample (every 4th row and column, at least 64k pixels kept where the
     image has them) for speed; a 99th percentile moves by well under 1 % from that. Pixels with
@@ -188,7 +199,7 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     h, w = arr.shape[:2]
     step = 4 if h * w >= 16 * 65536 else 1
     sub = np.ascontiguousarray(arr[::step, ::step])
-    y = _cv.transform(sub, _LUMA[None, :].astype(np.float32))
+    y = _cv.transform(sub, _weights(weights))
     ok = np.isfinite(y) & (y > 0.0)
     if mask is not None:
         m = np.asarray(mask)
@@ -202,16 +213,24 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     return white if white > 0.0 and np.isfinite(white) else 1.0
 
 
-def resolve_white(white: White, rgb: np.ndarray, mask: np.ndarray | None = None) -> float:
-    """``white`` as a number: ``"auto"`` -> :func:`auto_white`, a number -> itself (checked)."""
+def resolve_white(
+    white: White,
+    rgb: np.ndarray,
+    mask: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
+) -> float:
+    """``white`` as a number: ``"auto"`` -> :func:`auto_white` (luminance in the space of
+    ``rgb_to_xyz``), a number -> itself (checked)."""
     if isinstance(white, str):
         if white != "auto":
             raise ValueError(f"white must be 'auto' or a number > 0, got {white!r}")
-        return auto_white(rgb, mask)
+        return auto_white(rgb, mask, weights=np.asarray(rgb_to_xyz)[1])
     return _check_white(white)
 
 
-def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
+def rgb_to_lab_phi(
+    rgb: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
     """Linear RGB -> centred CIELAB cube-root coordinates φ = f(t) − 4/29, (H, W, 3) float32.
 
     With t = (X/Xn, Y/Yn, Z/Zn) of ``rgb / white``, φ = (f(t_x), f(t_y), f(t_z)) − 4/29, so that
@@ -223,7 +242,7 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     Computed as φ = cbrt(max(t, δ³)) + min(t, δ³)/(3δ²) − δ (the CIE linear segment below δ³).
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(_check_white(white))
+    m = _to_t(_check_white(white), rgb_to_xyz)
     h, w = arr.shape[:2]
     out = np.empty_like(arr)
 
@@ -237,7 +256,10 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
 
 
 def lab_phi_to_rgb(
-    phi: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
+    phi: np.ndarray,
+    white: float = 1.0,
+    out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
 ) -> np.ndarray:
     """Centred cube-root coordinates φ (see :func:`rgb_to_lab_phi`) -> linear RGB, float32.
 
@@ -246,7 +268,7 @@ def lab_phi_to_rgb(
     float32 array (or view) to write the result into; the result is returned either way.
     """
     arr = _check_rgb(phi, "phi")
-    m_inv = _from_t(_check_white(white))
+    m_inv = _from_t(_check_white(white), rgb_to_xyz)
     h, w = arr.shape[:2]
     res = np.empty_like(arr) if out is None else out
 
@@ -259,7 +281,12 @@ def lab_phi_to_rgb(
     return res
 
 
-def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+def lightness(
+    rgb: np.ndarray,
+    white: float = 1.0,
+    out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
+) -> np.ndarray:
     """CIELAB lightness L* = 116 f(Y/Yn) − 16 of linear RGB relative to ``white``, (H, W) float32.
 
     The L* channel of :func:`rgb_to_lab` without a*, b* (one 1×3 transform and one cube root per
@@ -267,7 +294,7 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     (or view) to write into; the result is returned either way.
     """
     arr = _check_rgb(rgb, "rgb")
-    kernel = lightness_rows(white)
+    kernel = lightness_rows(white, rgb_to_xyz)
     h, w = arr.shape[:2]
     if out is None:
         out = np.empty((h, w), np.float32)
@@ -287,12 +314,14 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     return res
 
 
-def lightness_rows(white: float = 1.0) -> Callable[[np.ndarray, np.ndarray], None]:
+def lightness_rows(
+    white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> Callable[[np.ndarray, np.ndarray], None]:
     """The strip kernel of :func:`lightness` for ``white``: ``fn(rgb, out)`` writes L* of
     ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
     C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
     which the dozen calls of :func:`lightness`'s checks per strip would add up."""
-    m = _to_t(_check_white(white))[1:2]
+    m = _to_t(_check_white(white), rgb_to_xyz)[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
         _write(_cv.transform(rgb, m, dst=out), out)
@@ -309,6 +338,7 @@ def scale_lab(
     *,
     keep: np.ndarray | None = None,
     out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
 ) -> np.ndarray:
     """Linear RGB whose CIELAB coordinates are those of ``rgb`` times ``k``: (k L*, k a*, k b*).
 
@@ -332,6 +362,8 @@ def scale_lab(
         Where non-zero, ``rgb`` is returned bit for bit.
     out : (H, W, 3) float32 array (or view) or None
         Where to write the result; it is returned either way.
+    rgb_to_xyz : 3×3
+        The working space (:mod:`ops.colorspace`); CIELAB is relative to its white.
     """
     arr = _check_rgb(rgb, "rgb")
     w = _check_white(white)
@@ -345,7 +377,7 @@ def scale_lab(
         def k_of(r: slice) -> KRows:
             return kk[r], None if kp_all is None else kp_all[r]
 
-    m, m_inv = _to_t(w), _from_t(w)
+    m, m_inv = _to_t(w, rgb_to_xyz), _from_t(w, rgb_to_xyz)
     res = np.empty_like(arr) if out is None else out
 
     def strip(r: slice) -> None:
@@ -380,8 +412,11 @@ def _rows_of(a: np.ndarray, shape: tuple[int, int], dtype: type, name: str) -> n
     return arr
 
 
-def rgb_to_lab(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
-    """Linear RGB (Rec.709 primaries, D65) -> CIELAB relative to the white level ``white``.
+def rgb_to_lab(
+    rgb: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
+    """Linear RGB (default Rec.709 primaries, D65; else the space of ``rgb_to_xyz``) -> CIELAB
+    relative to the white level ``white`` and the space's white.
 
     X, Y, Z = M · rgb / white, each divided by the D65 white (Xn, Yn, Zn);
     L* = 116 f(Y/Yn) − 16, a* = 500 (f(X/Xn) − f(Y/Yn)), b* = 200 (f(Y/Yn) − f(Z/Zn)),
@@ -399,10 +434,12 @@ def rgb_to_lab(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     -------
     (H, W, 3) float32 ``(L*, a*, b*)``.
     """
-    return _cv.transform(rgb_to_lab_phi(rgb, white), _PHI_TO_LAB)
+    return _cv.transform(rgb_to_lab_phi(rgb, white, rgb_to_xyz), _PHI_TO_LAB)
 
 
-def lab_to_rgb(lab: np.ndarray, white: float = 1.0) -> np.ndarray:
+def lab_to_rgb(
+    lab: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
     """CIELAB relative to the white level ``white`` -> linear RGB; inverse of :func:`rgb_to_lab`.
 
     f_y = (L* + 16)/116, f_x = f_y + a*/500, f_z = f_y − b*/200;
@@ -419,4 +456,4 @@ def lab_to_rgb(lab: np.ndarray, white: float = 1.0) -> np.ndarray:
     (H, W, 3) float32 linear RGB.
     """
     arr = _check_rgb(lab, "lab")
-    return lab_phi_to_rgb(_cv.transform(arr, _LAB_TO_PHI), white)
+    return lab_phi_to_rgb(_cv.transform(arr, _LAB_TO_PHI), white, rgb_to_xyz=rgb_to_xyz)

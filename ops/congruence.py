@@ -18,7 +18,8 @@ lowering the score.
 
 Implementation choices (the paper does not fix them):
 
-- Shading = Rec.709 luminance of linear RGB (``cv2.transform``).
+- Shading = luminance of linear RGB in its working space (Rec.709 weights by default,
+  ``cv2.transform``).
 - Shape = the **normals** when they are given: the structure tensor of the gradients of the
   camera-space normal (summed over its three components), i.e. how fast and in which direction
   the surface turns in the image. The paper computes the shape flow "using depth gradients" and
@@ -69,7 +70,7 @@ from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from ops.parallel import run_strips
 
@@ -196,6 +197,7 @@ def _covered_level(
     f: int,
     size: tuple[int, int],
     normal: F32 | None = None,
+    weights: F32 = REC709,
 ) -> list[F32]:
     """Covered luminance, covered depth and coverage (then, with ``normal``, the covered n_x,
     n_y, n_z), area-downsampled by ``f`` to ``size``.
@@ -224,7 +226,7 @@ def _covered_level(
             cv2.multiply(covf, (msk[r0:r1] > 0.5).astype(np.float32), dst=covf)
         cv2.multiply(depc, covf, dst=depc)
         if img.ndim == 3:
-            cv2.transform(img[r0:r1], REC709, dst=lum)
+            cv2.transform(img[r0:r1], weights, dst=lum)
             cv2.multiply(lum, covf, dst=lum)
         else:
             cv2.multiply(img[r0:r1], covf, dst=lum)
@@ -444,6 +446,7 @@ def congruence(
     depth_jump: float = 0.05,
     shading_norm: float | None = None,
     normal: NDArray[np.floating] | None = None,
+    weights: ArrayLike = REC709,
 ) -> CongruenceResult:
     """Congruence score between shading and shape flows (Mestres et al. 2021, §7, Eq. 2).
 
@@ -484,6 +487,9 @@ def congruence(
         Camera-space unit normals: the shape flow is then the structure tensor of the normal's
         gradients, which is 0 on planes (see the module docstring); without them, of the log
         depth's gradients.
+    weights : 3 floats
+        Luminance weights of the image's working space (:attr:`ops.colorspace.ColorSpace.
+        weights`; default Rec. 709): the shading is its luminance.
 
     Returns
     -------
@@ -527,7 +533,8 @@ def congruence(
     nrm = None if normal is None else np.asarray(normal, np.float32)
     if nrm is not None and nrm.shape != (h, w, 3):
         raise ValueError(f"normal must be (H, W, 3) matching depth {dep.shape}, got {nrm.shape}")
-    level = _covered_level(img, dep, mask, f1, size1, nrm)
+    lw = np.asarray(weights, np.float32).reshape(1, 3)
+    level = _covered_level(img, dep, mask, f1, size1, nrm, lw)
     lum0, dep0, cov0 = level[:3]
     # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small
     # copies (a sum accumulated in float64 cannot overflow: it is finite iff every value is)

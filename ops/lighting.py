@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.scaling import luminance
+from ops.scaling import REC709, Weights, luminance
 from ops.unsharp import surface_blur
 
 F32 = NDArray[np.float32]
@@ -38,19 +38,26 @@ def lighting_gain(
     *,
     sigma_scene: float,
     pixel_size: np.ndarray | float,
+    weights: Weights = REC709,
 ) -> F32:
     """The per-pixel factor that gives ``after`` the low-frequency luminance of ``before``::
 
         gain = LF(Y(before)) / LF(Y(after)),   LF = surface_blur(·, σ = sigma_scene)
 
     ``before`` and ``after`` are (H, W, 3) radiance (the part an operator changed: e.g. the sum
-    of the lobes it scaled); Y is Rec. 709 luminance. The gain is 1 on uncovered pixels and where
-    either is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
-    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
+    of the lobes it scaled); Y is luminance with the working space's ``weights`` (default
+    Rec. 709). The gain is 1 on uncovered pixels and where either is darker than 1e-6 at that
+    scale. See :func:`ops.unsharp.surface_blur` for ``depth``, ``normal``, ``mask``,
+    ``pixel_size`` and the scale in scene units.
     """
     lf_in, lf_out = (
         surface_blur(
-            luminance(x), depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
+            luminance(x, weights=weights),
+            depth,
+            normal,
+            mask,
+            sigma_scene=sigma_scene,
+            pixel_size=pixel_size,
         )
         for x in (before, after)
     )

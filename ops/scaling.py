@@ -17,7 +17,7 @@ evaluates Eq. 2 with ``e^{-γκ}``, so convexities brighten what is above α, as
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import cv2
 import numpy as np
@@ -27,10 +27,10 @@ from ops.bilinear import Upsampled, upsample_row
 from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
-#: Rec. 709 / sRGB luminance weights (linear RGB).
+#: Rec. 709 / sRGB luminance weights (linear RGB); another working space passes its own
+#: (:attr:`ops.colorspace.ColorSpace.weights`).
 REC709 = (0.2126, 0.7152, 0.0722)
-_LUMA = np.array([REC709], dtype=np.float32)  # (1, 3)
-_LUMA_W = (np.float32(REC709[0]), np.float32(REC709[1]), np.float32(REC709[2]))  # for kernels
+Weights = Sequence[float] | np.ndarray
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
 _ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
@@ -139,13 +139,23 @@ def sigma(kappa: ArrayLike, delta: ArrayLike, alpha: float, gamma: float) -> np.
 # -- reflectance mapping for renderer lobes (Eq. 4) ----------------------------------------------
 
 
-def luminance(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """Rec. 709 luminance ``scale·(0.2126 R + 0.7152 G + 0.0722 B)`` of (H, W, 3) -> (H, W)."""
+def _w32(weights: Weights) -> tuple[np.float32, np.float32, np.float32]:
+    """Luminance weights as three float32 (kernel arguments)."""
+    w = [np.float32(v) for v in np.asarray(weights, np.float64).ravel()]
+    if len(w) != 3:
+        raise ValueError(f"luminance weights must be 3 numbers, got {len(w)}")
+    return w[0], w[1], w[2]
+
+
+def luminance(rgb: np.ndarray, scale: float = 1.0, weights: Weights = REC709) -> np.ndarray:
+    """Luminance ``scale·(w_r R + w_g G + w_b B)`` of (H, W, 3) -> (H, W); ``weights``: the
+    working space's Y row (default Rec. 709: 0.2126, 0.7152, 0.0722)."""
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) RGB array, got shape {rgb.shape}")
     s32 = np.float32(scale)
-    w0, w1, w2 = _LUMA_W[0] * s32, _LUMA_W[1] * s32, _LUMA_W[2] * s32
+    lw = _w32(weights)
+    w0, w1, w2 = lw[0] * s32, lw[1] * s32, lw[2] * s32
     hgt, wid = rgb.shape[:2]
     out = np.empty((hgt, wid), np.float32)
     run_strips(hgt, lambda r0, r1: _luma_rows(rgb[r0:r1], w0, w1, w2, out[r0:r1]), _STRIP_ROWS)
@@ -160,15 +170,19 @@ def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
 
 
 def white_level(
-    values: np.ndarray, mask: np.ndarray | None = None, percentile: float = 99.0
+    values: np.ndarray,
+    mask: np.ndarray | None = None,
+    percentile: float = 99.0,
+    weights: Weights = REC709,
 ) -> float:
     """'auto' white level: the ``percentile`` of the covered pixels' values.
 
-    ``values`` is (H, W) or (H, W, 3) (its Rec. 709 luminance is used). Only finite values of
-    covered pixels (``mask`` > 0.5 or True; all pixels without a mask) count, so NaN/inf and the
-    background do not move it; a high percentile rather than the maximum ignores fireflies. When
-    nothing positive remains the level is 1.0 (δ̄ is then the light itself). Batch mode computes it
-    once and pins it for a sequence (DESIGN.md), so frames do not flicker.
+    ``values`` is (H, W) or (H, W, 3) (its luminance with ``weights`` is used). Only finite
+    values of covered pixels (``mask`` > 0.5 or True; all pixels without a mask) count, so
+    NaN/inf and the background do not move it; a high percentile rather than the maximum
+    ignores fireflies. When nothing positive remains the level is 1.0 (δ̄ is then the light
+    itself). Batch mode computes it once and pins it for a sequence (DESIGN.md), so frames do
+    not flicker.
 
     Parameters
     ----------
@@ -179,9 +193,10 @@ def white_level(
     if not 0.0 < p <= 100.0:
         raise ValueError(f"percentile={percentile!r} is outside the allowed range (0, 100]")
     vals, m8, wid = _counting(values, mask)
-    level = _banded_percentile(vals, m8, wid, p)
+    lw = _w32(weights)
+    level = _banded_percentile(vals, m8, wid, p, lw)
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
-        y = _count(vals, m8, wid)[2]
+        y = _count(vals, m8, wid, lw)[2]
         level = float(np.percentile(y, p, overwrite_input=True)) if y.size else 0.0
     return level if level > 0.0 else 1.0
 
@@ -210,7 +225,12 @@ def _counting(values: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, 
 
 
 def _count(
-    vals: np.ndarray, m8: np.ndarray, wid: int, lo: float = -_INF, hi: float = _INF
+    vals: np.ndarray,
+    m8: np.ndarray,
+    wid: int,
+    lw: tuple[np.float32, np.float32, np.float32],
+    lo: float = -_INF,
+    hi: float = _INF,
 ) -> tuple[int, int, np.ndarray]:
     """Over the counted pixels (finite values of covered pixels; RGB: their luminance): how
     many there are, how many are below ``lo``, and those in [lo, hi], in row order (1-D)."""
@@ -223,14 +243,20 @@ def _count(
     def strip(r0: int, r1: int) -> None:
         rows = m8[r0:r1] if m8.shape[0] else m8
         out = buf[r0 * wid : r1 * wid]
-        res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, out)
+        res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, lw, out)
 
     run_strips(hgt, strip, _STRIP_ROWS)
     pieces = [buf[a * wid : a * wid + n] for a, n in zip(starts, res[:, 2], strict=True)]
     return int(res[:, 0].sum()), int(res[:, 1].sum()), np.concatenate(pieces)
 
 
-def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> float | None:
+def _banded_percentile(
+    vals: np.ndarray,
+    m8: np.ndarray,
+    wid: int,
+    p: float,
+    lw: tuple[np.float32, np.float32, np.float32],
+) -> float | None:
     """``np.percentile`` (linear) of the counted values, exactly, without gathering them all:
     the counted values of every (H / 128)-th row bracket the two order statistics the
     percentile interpolates; one pass counts the values and those below the bracket and keeps
@@ -241,7 +267,7 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
         return None
     step = max(1, hgt // _SAMPLE_ROWS)
     sample = np.empty(((hgt + step - 1) // step) * wid, np.float32)
-    ns = _count_rows(vals, m8, wid, step, np.float32(-_INF), np.float32(_INF), sample)[2]
+    ns = _count_rows(vals, m8, wid, step, np.float32(-_INF), np.float32(_INF), lw, sample)[2]
     if ns < _SAMPLE_MIN:
         return None
     sample = sample[:ns]
@@ -250,7 +276,7 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
     margin = 8.0 * math.sqrt(ns * q * (1.0 - q)) + 32.0  # order-statistic spread, with room
     lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
     sample.partition([lo_r, hi_r])
-    n, n_below, band = _count(vals, m8, wid, sample[lo_r], sample[hi_r])
+    n, n_below, band = _count(vals, m8, wid, lw, sample[lo_r], sample[hi_r])
     g = (n - 1) * q  # numpy's virtual index for the linear method
     k = math.floor(g)
     if n < _BAND_MIN or k + 1 > n - 1 or not (n_below <= k and n_below + band.size > k + 1):
@@ -262,9 +288,10 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
 
 
 @kernel
-def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-def]
+def _count_rows(rows, m8, wid, step, lo, hi, lw, out):  # type: ignore[no-untyped-def]
     """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
-    uint8 coverage, or no rows): (counted, below ``lo``, packed into ``out``). The counts are
+    uint8 coverage, or no rows; ``lw`` the luminance weights): (counted, below ``lo``, packed
+    into ``out``). The counts are
     vectorised reductions that also flag the values in the band; only the 8-byte words of flags
     that hold one are looked at to pack them."""
     y = np.empty(wid, np.float32)
@@ -272,7 +299,7 @@ def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-de
     nw = (wid + 7) // 8
     flags = np.zeros(8 * nw, np.uint8)
     words = flags.view(np.uint64)
-    w0, w1, w2 = _LUMA_W
+    w0, w1, w2 = lw
     big = np.float32(np.inf)
     counted = below = k = 0
     for i in range(0, rows.shape[0], step):
@@ -300,16 +327,17 @@ def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-de
     return counted, below, k
 
 
-def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
+def reflectance_delta(light: np.ndarray, white: float, weights: Weights = REC709) -> np.ndarray:
     """δ̄ = luminance(light) / white clipped to [0, 1] (RS §5.3: δ̄_d = L̄(n) / L̄*).
 
     ``light`` is a lobe's incoming light without its colour (H, W, 3); ``white`` (> 0) the level
-    mapped to δ̄ = 1 (see :func:`white_level`). NaN gives 0, +inf 1.
+    mapped to δ̄ = 1 (see :func:`white_level`); ``weights`` the working space's luminance
+    weights. NaN gives 0, +inf 1.
     """
     w = float(white)
     if not (w > 0.0 and math.isfinite(w)):
         raise ValueError(f"white={white!r} is outside the allowed range (0, inf)")
-    return _clip01(luminance(light, 1.0 / w))
+    return _clip01(luminance(light, 1.0 / w, weights))
 
 
 # -- scaling renderer lobes -----------------------------------------------------------------------
@@ -336,6 +364,7 @@ def scale_lobes(
     mask: np.ndarray | None = None,
     beauty: np.ndarray | None = None,
     with_sigmas: bool = True,
+    weights: Weights = REC709,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Radiance Scaling as a post-process on renderer lobes (RS §5.3, Eq. 4)::
 
@@ -367,6 +396,7 @@ def scale_lobes(
         ``beauty + Σ_j (σ̄_j - 1) · lobe_j`` (the same sum, without forming the remainder).
     with_sigmas : bool
         Also return the σ of each lobe (else an empty dict, and one pass less to memory).
+    weights : the working space's luminance weights (δ̄ is a luminance).
 
     Returns
     -------
@@ -406,7 +436,7 @@ def scale_lobes(
     lobe_arr = {n: rgb(lobes[n], f"lobes[{n!r}]") for n in names}
     light_arr = {n: rgb(lights[n], f"lights[{n!r}]") if n in lights else lobe_arr[n] for n in names}
     levels = {
-        n: white_level(light_arr[n], mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
+        n: white_level(light_arr[n], mask, weights=weights) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
     if remainder is not None and beauty is not None:
@@ -426,8 +456,9 @@ def scale_lobes(
     # Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E): P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of
     # _sigma_from over max(α, 1 - α), so σ is exactly 1 where E = e^{-γκ} is 1; δ̄ = the light's
     # luminance over its white level (as reflectance_delta).
+    luma = np.array(_w32(weights), np.float32)
     coef = np.array(
-        [[*(_LUMA[0] / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
+        [[*(luma / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
         np.float32,
     ).reshape(nl, 5)
     lobe_t = tuple(lobe_arr[n] for n in names)

@@ -139,9 +139,10 @@ def _plane(name: str, a: Array | float, shape: tuple[int, int]) -> Array:
 # colour: lightness in, lightness out
 
 
-def _lightness(beauty: Array, white: float, out: Array | None = None) -> Array:
-    """L* (H, W) of linear RGB relative to ``white`` (a*, b* are never formed)."""
-    return color.lightness(beauty, white, out)
+def _lightness(beauty: Array, white: float, rgb_to_xyz: Array) -> Array:
+    """L* (H, W) of linear RGB relative to ``white`` in the space of ``rgb_to_xyz`` (a*, b*
+    are never formed)."""
+    return color.lightness(beauty, white, rgb_to_xyz=rgb_to_xyz)
 
 
 def _with_lightness(
@@ -150,6 +151,7 @@ def _with_lightness(
     new_lum: Array,
     white: float,
     keep: Array | None,
+    rgb_to_xyz: Array,
     out: Array | None = None,
 ) -> Array:
     """Linear RGB with L* replaced by ``new_lum`` and (a*, b*) scaled by k = new/old (§4).
@@ -160,7 +162,7 @@ def _with_lightness(
     """
     _cv.max(new_lum, 0.0, dst=new_lum)
     k = _cv.divide(new_lum, _cv.max(lum, _L_EPS), dst=new_lum)
-    return color.scale_lab(beauty, k, white, keep=keep, out=out)
+    return color.scale_lab(beauty, k, white, keep=keep, out=out, rgb_to_xyz=rgb_to_xyz)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1495,6 +1497,7 @@ def unsharp_masking(
     depth_sigma: float = 1.0,
     normal_sigma: float | None = 1.0,
     fine_px: float = 0.0,
+    rgb_to_xyz: Array = color.RGB_TO_XYZ,
 ) -> Array:
     """3D unsharp masking of a rendered image along its surfaces (Ritschel et al. 2008).
 
@@ -1548,6 +1551,8 @@ def unsharp_masking(
     depth_sigma, normal_sigma : see :func:`surface_blur`.
     fine_px : float
         σ of L*_f in pixels (≥ 0; 0: L* itself).
+    rgb_to_xyz : 3×3
+        The frame's working space (:mod:`ops.colorspace`): CIELAB through its XYZ and white.
 
     Returns
     -------
@@ -1574,14 +1579,14 @@ def unsharp_masking(
     valid, ps_range, box, fade_box = _valid(depth_a, ps, mask_a, c_fade * (1.0 - 1e-5))
     if box is None:
         return img.copy()
-    wl = color.resolve_white(white, img, valid.view(bool))
+    wl = color.resolve_white(white, img, valid.view(bool), rgb_to_xyz)
     # everything below works on the bounding box of the surface (the rest is returned as is)
     ys, xs = box
     sub_shape = (ys.stop - ys.start, xs.stop - xs.start)
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     ps = ps[box]
     img_box = img[box]
-    light = color.lightness_rows(wl)
+    light = color.lightness_rows(wl, rgb_to_xyz)
     surf, lum, first = _surface(
         depth_a[box],
         ps,
@@ -1654,10 +1659,10 @@ def unsharp_masking(
         return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
 
     if sub_shape == shape:
-        out = color.scale_lab(img_box, k_rows, wl)
+        out = color.scale_lab(img_box, k_rows, wl, rgb_to_xyz=rgb_to_xyz)
     else:
         out = _outside(img, box)
-        color.scale_lab(img_box, k_rows, wl, out=out[box])
+        color.scale_lab(img_box, k_rows, wl, out=out[box], rgb_to_xyz=rgb_to_xyz)
     # saturated colours can leave the RGB cube below 0 when their lightness drops: clip the
     # changed values (the pixels kept bit for bit are left as they came)
     np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != img))
@@ -1671,6 +1676,7 @@ def plain_unsharp_mask(
     *,
     white: float | Literal["auto"] = "auto",
     image_height: int | None = None,
+    rgb_to_xyz: Array = color.RGB_TO_XYZ,
 ) -> Array:
     """Plain 2-D unsharp masking of CIELAB lightness, for comparisons.
 
@@ -1690,6 +1696,7 @@ def plain_unsharp_mask(
     image_height : int or None
         Height the relative σ refers to (default: this image's height; pass the full frame's
         height when processing a crop).
+    rgb_to_xyz : 3×3, the working space (as :func:`unsharp_masking`).
     """
     img = _rgb("beauty", beauty)
     s = _finite("sigma", sigma, 0.0, 1.0)
@@ -1697,11 +1704,11 @@ def plain_unsharp_mask(
         raise ValueError(f"sigma={sigma!r} must be in (0, 1]")
     lam = _finite("amount", amount, -10.0, 10.0)
     hh = img.shape[0] if image_height is None else int(_positive("image_height", image_height))
-    wl = color.resolve_white(white, img, None)
-    lum = _lightness(img, wl)
+    wl = color.resolve_white(white, img, None, rgb_to_xyz)
+    lum = _lightness(img, wl, rgb_to_xyz)
     smooth = _blur(lum, s * hh)
     new_lum = _cv.scaleAdd(_cv.subtract(lum, smooth), lam, lum)
-    return _with_lightness(img, lum, new_lum, wl, None)
+    return _with_lightness(img, lum, new_lum, wl, None, rgb_to_xyz)
 
 
 #: Normalised depth D of the background in :func:`depth_unsharp_masking` (surfaces span [0, 1]).
@@ -1718,6 +1725,7 @@ def depth_unsharp_masking(
     image_height: int | None = None,
     mode: Literal["darken", "both"] = "darken",
     white: float | Literal["auto"] = "auto",
+    rgb_to_xyz: Array = color.RGB_TO_XYZ,
 ) -> Array:
     """Unsharp masking of the depth buffer (Luft, Colditz, Deussen, SIGGRAPH 2006).
 
@@ -1748,6 +1756,7 @@ def depth_unsharp_masking(
         Height σ refers to (default this image's).
     mode : "darken" or "both"
     white : "auto" or float
+    rgb_to_xyz : 3×3, the working space (as :func:`unsharp_masking`).
     """
     img = _rgb("beauty", beauty)
     shape = (int(img.shape[0]), int(img.shape[1]))
@@ -1779,16 +1788,16 @@ def depth_unsharp_masking(
     delta = _cv.subtract(_blur(dn, s * hh), dn)
     if mode == "darken":
         _cv.min(delta, 0.0, dst=delta)
-    wl = color.resolve_white(white, img, valid.view(bool))
+    wl = color.resolve_white(white, img, valid.view(bool), rgb_to_xyz)
     # colour work on the bounding box of the surface only (the rest is returned as is)
     box = _crop(valid)
     assert box is not None
     ys, xs = box
-    lum = _lightness(img[box], wl)
+    lum = _lightness(img[box], wl, rgb_to_xyz)
     new_lum = _cv.scaleAdd(delta[box], 100.0 * lam, lum)
     keep = _cv.compare(valid[box], 0, _cv.CMP_EQ)
     if (ys.stop - ys.start, xs.stop - xs.start) == shape:
-        return _with_lightness(img, lum, new_lum, wl, keep)
+        return _with_lightness(img, lum, new_lum, wl, keep, rgb_to_xyz)
     out = _outside(img, box)
-    _with_lightness(img[box], lum, new_lum, wl, keep, out=out[box])
+    _with_lightness(img[box], lum, new_lum, wl, keep, rgb_to_xyz, out=out[box])
     return out

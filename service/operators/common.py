@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
@@ -56,8 +56,9 @@ def statistic(ctx: Context, key: str, value: float | str, compute: Callable[[], 
     return ctx.statistic(key, compute)
 
 
-def user_image(ctx: Context, path: str, what: str, **kwargs: bool) -> np.ndarray:
-    """An image file named by a parameter, where this run may read files (not over HTTP)."""
+def user_image(ctx: Context, path: str, what: str, **kwargs: Any) -> np.ndarray:
+    """An image file named by a parameter, where this run may read files (not over HTTP);
+    ``kwargs``: those of :func:`service.images.load_image` (``space``: the frame's)."""
     if not ctx.files:
         raise PipelineError(
             f"{what}: image files cannot be named here ({path!r}); use a layer of the uploaded "
@@ -121,8 +122,9 @@ def kept_lighting_gain(
         frame.mask,
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
+        weights=frame.colorspace.weights,
     )
-    y0, y1 = luminance(before), luminance(after)
+    y0, y1 = (luminance(x, weights=frame.colorspace.weights) for x in (before, after))
     weight = np.abs(y1 - y0)
     np.divide(weight, np.float32(KEPT_CHANGE) * np.abs(y0), out=weight, where=y0 != 0)
     np.minimum(weight, np.float32(1.0), out=weight)

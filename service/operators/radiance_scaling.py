@@ -12,6 +12,7 @@ from gbuffer.frame import LOBES, Frame
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.bilinear import Upsampled
+from ops.colorspace import LINEAR_REC709, ColorSpace, convert
 from ops.masked import masked_gaussian
 from ops.scaling import luminance, scale_lobes, white_level
 from service.operators.base import Context, register
@@ -132,13 +133,18 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
 
 
 def _white(
-    ctx: Context, p: RadianceScalingParams, key: str, light: np.ndarray, mask: np.ndarray
+    ctx: Context,
+    p: RadianceScalingParams,
+    key: str,
+    light: np.ndarray,
+    mask: np.ndarray,
+    weights: np.ndarray,
 ) -> float:
     return statistic(
         ctx,
         f"radiance_scaling.white.{key}",
         p.white,
-        lambda: white_level(light, mask, percentile=p.white_percentile),
+        lambda: white_level(light, mask, p.white_percentile, weights),
     )
 
 
@@ -177,7 +183,8 @@ def _scale_renderer_lobes(
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
     lights = {n: _light(frame, p, frame.buffers.get(f"{n}.light", lobes[n])) for n in names}
     mask = frame.mask > 0
-    white = {n: _white(ctx, p, n, lights[n], mask) for n in names}
+    weights = frame.colorspace.weights
+    white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
     remainder = frame.buffers.get("remainder")
     if remainder is not None:  # beauty minus every lobe: add back the lobes left unscaled
         for lobe in LOBES:
@@ -194,6 +201,7 @@ def _scale_renderer_lobes(
         mask=mask,
         beauty=frame.buffers.get("beauty") if remainder is None else None,
         with_sigmas=ctx.debug_layers,
+        weights=weights,
     )
     if p.keep_lighting:
         beauty = _kept_lighting(frame, p, beauty, np.sum(list(lobes.values()), axis=0))
@@ -209,13 +217,14 @@ def _scale_beauty(
     beauty = frame.need("beauty", "scenario 'beauty'")
     light = beauty
     counted = frame.mask > 0
+    weights = frame.colorspace.weights
     if "albedo" in frame.buffers:
         albedo = frame.buffers["albedo"]
-        has_albedo = luminance(albedo) > MIN_ALBEDO
+        has_albedo = luminance(albedo, weights=weights) > MIN_ALBEDO
         light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
         counted &= has_albedo
     light = _light(frame, p, light)
-    white = _white(ctx, p, "beauty", light, counted)
+    white = _white(ctx, p, "beauty", light, counted, weights)
     scaled, sigmas = scale_lobes(
         {"beauty": beauty},
         {"beauty": light},
@@ -224,6 +233,7 @@ def _scale_beauty(
         p.gamma,
         white,
         with_sigmas=ctx.debug_layers,
+        weights=weights,
     )
     return _kept_lighting(frame, p, scaled, beauty), sigmas
 
@@ -234,10 +244,11 @@ def _camera_to_world(frame: Frame) -> np.ndarray | None:
     return np.linalg.inv(frame.camera.world_to_camera)[:3, :3]
 
 
-def _environment(p: RadianceScalingParams, ctx: Context) -> np.ndarray:
+def _environment(p: RadianceScalingParams, ctx: Context, space: ColorSpace) -> np.ndarray:
+    """The environment map in the frame's space (the built-in sky is linear Rec.709)."""
     if p.environment:
-        return user_image(ctx, p.environment, "environment")
-    return rs.sky_environment()
+        return user_image(ctx, p.environment, "environment", space=space)
+    return convert(rs.sky_environment(), LINEAR_REC709, space)
 
 
 def _deferred(
@@ -249,6 +260,7 @@ def _deferred(
 ) -> rs.Scaled:
     normal = frame.need("normal", f"scenario '{scenario}'")
     albedo = frame_albedo(frame, None)
+    space = frame.colorspace
     common: dict[str, Any] = {"alpha": p.alpha, "gain": p.gain}
     if scenario in ("phong", "sub_lambert", "toon", "ashikhmin_shirley"):
         lit = (normal, frame.positions(), frame.view_vectors(), p.parsed_lights(), curv)
@@ -279,7 +291,7 @@ def _deferred(
         if p.environment:
             to_world = _camera_to_world(frame)
             n_world = normal if to_world is None else rs.rotate_directions(normal, to_world)
-            irradiance = rs.sh_irradiance(_environment(p, ctx), n_world)
+            irradiance = rs.sh_irradiance(_environment(p, ctx, space), n_world)
         return rs.precomputed_diffuse(
             normal,
             curv,
@@ -287,20 +299,27 @@ def _deferred(
             irradiance=irradiance,
             albedo=albedo,
             gamma=p.gamma_of("diffuse"),
+            weights=space.weights,
             **common,
         )
     if scenario == "lit_sphere":
-        sphere = user_image(ctx, p.matcap, "matcap") if p.matcap else rs.studio_matcap()
-        return rs.lit_sphere(normal, curv, sphere, gamma=p.gamma_of("specular"), **common)
+        if p.matcap:
+            sphere = user_image(ctx, p.matcap, "matcap", space=space)
+        else:
+            sphere = convert(rs.studio_matcap(), LINEAR_REC709, space)
+        return rs.lit_sphere(
+            normal, curv, sphere, gamma=p.gamma_of("specular"), weights=space.weights, **common
+        )
     return rs.environment(
         normal,
         frame.view_vectors(),
         curv,
-        _environment(p, ctx),
+        _environment(p, ctx, space),
         mode=scenario,
         ior=p.ior,
         camera_to_world=_camera_to_world(frame),
         gamma=p.gamma_of("specular"),
+        weights=space.weights,
         **common,
     )
 
