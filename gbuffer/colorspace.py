@@ -18,6 +18,7 @@ are known).
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import os
 from collections.abc import Mapping
@@ -32,11 +33,22 @@ from ops.colorspace import (
     KNOWN,
     LINEAR_REC709,
     ColorSpace,
+    conversion,
     from_chromaticities,
     rgb_to_xyz,
 )
 
-__all__ = ["BUILTIN_CONFIG", "config", "config_name", "from_header", "named", "resolve"]
+__all__ = [
+    "BUILTIN_CONFIG",
+    "RAW_VIEW",
+    "View",
+    "config",
+    "config_name",
+    "display_processor",
+    "from_header",
+    "named",
+    "resolve",
+]
 
 #: OCIO's built-in config used when ``$OCIO`` is not set.
 BUILTIN_CONFIG = "ocio://studio-config-latest"
@@ -143,3 +155,69 @@ def resolve(
     if default:
         return named(default, f"preset default ({preset})")
     return LINEAR_REC709
+
+
+#: ``--view raw``: Depict's own exposure and hard clip (sRGB curve), no view transform.
+RAW_VIEW = "raw"
+
+
+@dataclasses.dataclass(frozen=True)
+class View:
+    """A display and a view of the OCIO config to look at scene-linear pictures through;
+    ``None``: the config's default display, and that display's default view. ``view="raw"``
+    (:data:`RAW_VIEW`) is Depict's exposure and hard clip instead (not the config's ``Raw``)."""
+
+    display: str | None = None
+    view: str | None = None
+
+    @property
+    def raw(self) -> bool:
+        return self.view == RAW_VIEW
+
+    def resolved(self) -> tuple[str, str]:
+        """(display, view) with the config's defaults filled in, or OptionError."""
+        cfg = config()
+        displays = list(cfg.getDisplays())
+        display = self.display or cfg.getDefaultDisplay()
+        if display not in displays:
+            raise OptionError(
+                f"display {display!r} is not in the OCIO config {config_name()!r}; displays: "
+                f"{', '.join(displays)}"
+            )
+        views = list(cfg.getViews(display))
+        view = self.view or cfg.getDefaultView(display)
+        if view not in views:
+            raise OptionError(
+                f"view {view!r} is not a view of display {display!r}; views: "
+                f"{', '.join(views)}, or {RAW_VIEW} (exposure and clip)"
+            )
+        return display, view
+
+
+def display_processor(space: ColorSpace, view: View) -> tuple[Any, np.ndarray | None]:
+    """The OCIO CPU processor from ``space`` to ``view``'s display, and the 3×3 matrix to apply
+    first (None when the config knows ``space`` by name; else to its ACES2065-1)."""
+    display, name = view.resolved()
+    return _processor(config_name(), space.name, space.matrix.tobytes(), display, name)
+
+
+@functools.cache
+def _processor(
+    config_key: str, name: str, matrix: bytes, display: str, view: str
+) -> tuple[Any, np.ndarray | None]:
+    cfg = _load(config_key)
+    cs = cfg.getColorSpace(name)
+    m = np.frombuffer(matrix, np.float64).reshape(3, 3)
+    pre: np.ndarray | None = None
+    if cs is None or not np.allclose(named(str(cs.getName()), "").matrix, m, atol=1e-6):
+        target = cfg.getRoleColorSpace("aces_interchange")
+        if not target:
+            raise OptionError(
+                f"the OCIO config {config_key!r} has no aces_interchange role to show "
+                f"{name!r} through"
+            )
+        src = ColorSpace(name, m)
+        pre = conversion(src, from_chromaticities("ACES2065-1", ACES_AP0, "")).astype(np.float32)
+        name = str(target)
+    transform = ocio.DisplayViewTransform(src=name, display=display, view=view)
+    return cfg.getProcessor(transform).getDefaultCPUProcessor(), pre

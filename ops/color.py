@@ -161,7 +161,7 @@ def luminance(rgb: np.ndarray, weights: np.ndarray = REC709_Y) -> np.ndarray:
     """Relative luminance Y = w_r R + w_g G + w_b B of linear RGB.
 
     ``weights``: the working space's Y row (:attr:`ops.colorspace.ColorSpace.weights`; default
-    Rec.709, 0.2127, 0.7152, 0.0722). ``rgb`` has shape (..., 3); the result has the leading
+    Rec.709, 0.2126729, 0.7151522, 0.072175). ``rgb`` has shape (..., 3); the result has the leading
     shape, float32.
     """
     arr = np.asarray(rgb, dtype=np.float32)

@@ -72,12 +72,13 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ops.colorspace import REC709_RGB_TO_XYZ
 from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
 
-#: Rec. 709 / sRGB luminance weights of linear RGB.
-REC709 = np.array([[0.2126, 0.7152, 0.0722]], dtype=np.float32)
+#: Rec. 709 / sRGB luminance weights of linear RGB (the Y row of IEC 61966-2-1's matrix).
+REC709 = REC709_RGB_TO_XYZ[1:2].astype(np.float32)
 
 # Relative floor under which a tensor is treated as zero (float32 rounding noise).
 _REL_FLOOR = 1e-10

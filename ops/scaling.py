@@ -24,12 +24,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ops.bilinear import Upsampled, upsample_row
+from ops.colorspace import REC709_RGB_TO_XYZ
 from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
-#: Rec. 709 / sRGB luminance weights (linear RGB); another working space passes its own
+#: Rec. 709 / sRGB luminance weights of linear RGB (the Y row of IEC 61966-2-1's matrix, as
+#: everywhere in Depict); another working space passes its own
 #: (:attr:`ops.colorspace.ColorSpace.weights`).
-REC709 = (0.2126, 0.7152, 0.0722)
+REC709 = tuple(float(w) for w in REC709_RGB_TO_XYZ[1])
 Weights = Sequence[float] | np.ndarray
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
@@ -149,7 +151,7 @@ def _w32(weights: Weights) -> tuple[np.float32, np.float32, np.float32]:
 
 def luminance(rgb: np.ndarray, scale: float = 1.0, weights: Weights = REC709) -> np.ndarray:
     """Luminance ``scale·(w_r R + w_g G + w_b B)`` of (H, W, 3) -> (H, W); ``weights``: the
-    working space's Y row (default Rec. 709: 0.2126, 0.7152, 0.0722)."""
+    working space's Y row (default Rec. 709: 0.2126729, 0.7151522, 0.072175)."""
     rgb = np.ascontiguousarray(rgb, dtype=np.float32)
     if rgb.ndim != 3 or rgb.shape[2] != 3:
         raise ValueError(f"expected an (H, W, 3) RGB array, got shape {rgb.shape}")

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TypedDict
 
 from gbuffer.camera import Camera
+from gbuffer.colorspace import View
 from gbuffer.frame import Frame
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
@@ -60,7 +61,8 @@ class ReadRequest:
 class WriteRequest:
     """What to write: intermediate layers too (``debug_layers``), the result layer
     (``output_layer``, :mod:`service.output`), a tone-mapped PNG instead of the EXR (``preview``,
-    at ``exposure`` stops), and the input's name recorded in the output (``input_name``; default:
+    at ``exposure`` stops, through ``view``: the OCIO config's default display and view unless
+    given), and the input's name recorded in the output (``input_name``; default:
     the name of the file read)."""
 
     debug_layers: bool = False
@@ -68,6 +70,7 @@ class WriteRequest:
     preview: bool = False
     exposure: float = 0.0
     input_name: str | None = None
+    view: View = field(default_factory=View)
 
 
 class Enhanced(TypedDict):
@@ -105,7 +108,7 @@ def enhance(
     out = pipeline.finish(out, write.output_layer, write.input_name)
     warnings: list[str] = []
     if write.preview:
-        write_png(picture(out, "beauty", exposure=write.exposure), out_path)
+        write_png(picture(out, "beauty", write.exposure, write.view), out_path)
     else:
         warnings = write_exr(out, out_path)
     h, w = out.shape

@@ -95,6 +95,16 @@ def add_frame_commands(sub: Any) -> None:
         default=0.0,
         help="exposure in stops (radiance), -20 to 20",
     )
+    p.add_argument(
+        "--display",
+        help="display of the OpenColorIO config to show radiance on (default: the config's, "
+        "sRGB for the built-in config)",
+    )
+    p.add_argument(
+        "--view",
+        help="view of that display (default: the display's default, ACES 2.0 SDR for the "
+        "built-in config); raw: exposure and a hard clip of the sRGB curve",
+    )
     add_read_options(p)
     p.set_defaults(command="service.cli.frames:cmd_preview")
 

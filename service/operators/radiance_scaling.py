@@ -211,8 +211,10 @@ def _scale_renderer_lobes(
 def _scale_beauty(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The beauty as a single lobe; its light is beauty / albedo where the frame has an albedo
-    (glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
+    """The beauty as a single lobe; its light is beauty / Y(albedo) where the frame has an albedo
+    (so δ̄'s luminance is Y(beauty) / Y(albedo): a ratio of luminances, the same in every
+    working space, where a channel-by-channel beauty / albedo would depend on the primaries;
+    glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
     count in the white level)."""
     beauty = frame.need("beauty", "scenario 'beauty'")
     light = beauty
@@ -220,8 +222,10 @@ def _scale_beauty(
     weights = frame.colorspace.weights
     if "albedo" in frame.buffers:
         albedo = frame.buffers["albedo"]
-        has_albedo = luminance(albedo, weights=weights) > MIN_ALBEDO
-        light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
+        y_albedo = luminance(albedo, weights=weights)
+        has_albedo = y_albedo > MIN_ALBEDO
+        inverse = 1.0 / np.maximum(y_albedo, MIN_ALBEDO)
+        light = np.where(has_albedo[..., None], beauty * inverse[..., None], beauty)
         counted &= has_albedo
     light = _light(frame, p, light)
     white = _white(ctx, p, "beauty", light, counted, weights)
