@@ -6,8 +6,10 @@ A frame's linear RGB space comes, in this order, from
    ``ReadOptions.colorspace``): a colour space of the OpenColorIO config;
 2. the EXR ``chromaticities`` attribute of the primary part (primaries and white: the matrix
    follows without OCIO, :func:`ops.colorspace.rgb_to_xyz`);
-3. the renderer preset's default (``Preset.colorspace``: Blender's scene-linear Rec.709);
-4. else linear Rec.709 (D65).
+3. the ``colorInteropID`` attribute (the ASWF colour interop ID, e.g. ``lin_ap1_scene``, that
+   OpenImageIO 3 writes; a name of the OCIO config);
+4. the renderer preset's default (``Preset.colorspace``: Blender's scene-linear Rec.709);
+5. else linear Rec.709 (D65).
 
 The OCIO config is the file ``$OCIO`` names when set, else OCIO's built-in studio config
 (:data:`BUILTIN_CONFIG`, ACES 2 views). A named space must be scene-referred and linear: its
@@ -130,9 +132,17 @@ def _chroma_name(chroma: tuple[float, ...]) -> str:
     return "chromaticities " + " ".join(f"{v:.4g}" for v in chroma)
 
 
+#: Header attribute naming the working space (the ASWF colour interop ID).
+INTEROP_ATTRIBUTE = "colorInteropID"
+
+
 def from_header(header: Mapping[str, Any]) -> ColorSpace | None:
-    """The space of an EXR header's ``chromaticities`` attribute, or None without one."""
+    """The space of an EXR header's ``chromaticities`` attribute, else of its
+    ``colorInteropID``, or None without either."""
     value = header.get("chromaticities")
+    interop = header.get(INTEROP_ATTRIBUTE)
+    if value is None and isinstance(interop, str) and interop:
+        return named(interop, f"{INTEROP_ATTRIBUTE} attribute")
     if value is None:
         return None
     try:
@@ -146,7 +156,8 @@ def resolve(
     explicit: str | None, header: Mapping[str, Any] | None, preset: str, default: str | None
 ) -> ColorSpace:
     """The working space: ``explicit`` (a name of the OCIO config), else the header's
-    chromaticities, else the preset's ``default`` name, else linear Rec.709."""
+    chromaticities or colour interop ID, else the preset's ``default`` name, else linear
+    Rec.709."""
     if explicit:
         return named(explicit, "--colorspace")
     found = from_header(header) if header is not None else None

@@ -95,6 +95,10 @@ def test_each_frame_names_its_space_and_where_it_came_from(
     chart(np.full((2, 3), 0.5), tmp_path / "plain.exr")
     plain = gbuffer.read(tmp_path / "plain.exr")
     assert (plain.preset, plain.colorspace.source) == ("canonical", "default")
+    channels = {c: np.full((4, 4), 0.5, np.float32) for c in "RGB"}
+    OpenEXR.File({"colorInteropID": "lin_ap1_scene"}, channels).write(str(tmp_path / "id.exr"))
+    tagged = gbuffer.read(tmp_path / "id.exr").colorspace
+    assert (tagged.name, tagged.source) == ("ACEScg", "colorInteropID attribute")
     acescg_copy(FIXTURE, tmp_path / "acescg.exr")
     code, text = _cli("inspect", str(tmp_path / "acescg.exr"))
     assert code == 0

@@ -165,15 +165,20 @@ def test_render_matches_local_cli(
 
 
 def test_preview_png(server: Server, files: dict[str, Path]) -> None:
-    response = httpx.post(
-        f"{server.url}/v1/enhance?preview=png",
-        files={"file": ("a.exr", files["canonical"].read_bytes())},
-        headers=AUTH,
-        timeout=60,
-    )
-    assert response.status_code == 200, response.text
-    assert response.headers["content-type"] == "image/png"
-    assert response.content[:8] == b"\x89PNG\r\n\x1a\n"
+    """The config's default view (ACES 2.0 SDR), or Depict's exposure and clip (``raw``)."""
+    pngs = []
+    for query in ("", "&view=raw"):
+        response = httpx.post(
+            f"{server.url}/v1/enhance?preview=png{query}",
+            files={"file": ("a.exr", files["canonical"].read_bytes())},
+            headers=AUTH,
+            timeout=60,
+        )
+        assert response.status_code == 200, response.text
+        assert response.headers["content-type"] == "image/png"
+        assert response.content[:8] == b"\x89PNG\r\n\x1a\n"
+        pngs.append(response.content)
+    assert pngs[0] != pngs[1]
 
 
 def test_python_client_and_score_match_local(server: Server, files: dict[str, Path]) -> None:
