@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import OpenImageIO as oiio
 
 from gbuffer.atomic import atomic_path
 from gbuffer.colorspace import RAW_VIEW, View, display_processor
@@ -119,8 +120,14 @@ def picture(
 
 
 def write_png(rgb: np.ndarray, path: str | Path) -> None:
-    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG, atomically."""
-    img = (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG (OpenImageIO), atomically."""
+    img = np.ascontiguousarray((np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
     with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR)):
-            raise FrameError(f"cannot write PNG {path}")
+        out = oiio.ImageOutput.create(str(tmp))
+        spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)
+        if out is None or not out.open(str(tmp), spec):
+            raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")
+        ok = out.write_image(img)
+        out.close()
+        if not ok:
+            raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")
