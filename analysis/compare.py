@@ -226,7 +226,12 @@ def _geometry(frame: Frame, albedo: str) -> Frame:
         "coverage": mask.astype(np.float32),
         "albedo": white,
     }
-    return Frame(buffers=buffers, display_size=frame.display_size, origin=frame.origin)
+    return Frame(
+        buffers=buffers,
+        display_size=frame.display_size,
+        origin=frame.origin,
+        colorspace=frame.colorspace,
+    )
 
 
 def _albedo(frame: Frame) -> F32:
