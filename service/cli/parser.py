@@ -79,13 +79,17 @@ def add_frame_commands(sub: Any) -> None:
     add_server_option(p)
     p.set_defaults(command="service.cli.render:cmd_render", remote="service.cli.remote:render")
 
-    p = sub.add_parser("inspect", help="what Depict sees in an EXR: preset, buffers, camera")
+    p = sub.add_parser(
+        "inspect", help="what Depict sees in an EXR: preset, buffers, camera, colour space"
+    )
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="stable JSON for other tools")
     add_read_options(p)
     p.set_defaults(command="service.cli.inspection:cmd_inspect")
 
-    p = sub.add_parser("preview", help="an 8-bit PNG of any layer")
+    p = sub.add_parser(
+        "preview", help="an 8-bit PNG of any layer, through an OCIO display and view"
+    )
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="output PNG")
     p.add_argument("--layer", default="beauty", help="buffer or layer (beauty, normal, ...)")
