@@ -21,6 +21,7 @@ from analysis.score import score_frame
 from gbuffer.colorspace import View
 from gbuffer.errors import FrameError
 from gbuffer.preview import display_encode, picture
+from ops import radiance_scaling as rs
 from ops.color import lightness, luminance, rgb_to_lab
 from ops.colorspace import (
     ACES_AP1,
@@ -175,6 +176,8 @@ def test_a_colour_checker_in_acescg_has_the_same_lightness(tmp_path: Path) -> No
 STEPS = [
     {"op": "radiance_scaling"},
     {"op": "radiance_scaling", "params": {"scenario": "beauty"}},
+    {"op": "radiance_scaling", "params": {"scenario": "lit_sphere"}},  # the built-in matcap
+    {"op": "radiance_scaling", "params": {"scenario": "mirror"}},  # the built-in sky
     {"op": "unsharp_masking"},
     {"op": "light_alignment"},
     {"op": "depth_unsharp_masking"},
@@ -200,6 +203,23 @@ def test_rec709_and_acescg_copies_enhance_the_same(
     assert np.abs(d0).mean() > 1e-4  # the operator did change the picture
     disagreement = np.abs(d1 - d0).sum() / np.abs(d0).sum()
     assert disagreement < 0.03, f"{step}: the changes differ by {disagreement:.1%}"
+
+
+def test_a_matcap_file_shades_both_copies_alike(
+    pair: tuple[gbuffer.Frame, gbuffer.Frame], tmp_path: Path
+) -> None:
+    """An 8-bit sRGB matcap (warm and saturated) is converted into each frame's space."""
+    sphere = np.clip(rs.studio_matcap(64) * np.array([1.0, 0.6, 0.3], np.float32), 0.0, 1.0)
+    encoded = np.where(sphere <= 0.0031308, 12.92 * sphere, 1.055 * sphere ** (1 / 2.4) - 0.055)
+    cv2.imwrite(str(tmp_path / "warm.png"), np.round(encoded[..., ::-1] * 255).astype(np.uint8))
+    step = {
+        "op": "radiance_scaling",
+        "params": {"scenario": "lit_sphere", "matcap": str(tmp_path / "warm.png")},
+    }
+    rec709, acescg = pair
+    covered = rec709.mask > 0
+    d0, d1 = _change(rec709, step)[covered], _change(acescg, step)[covered]
+    assert np.abs(d1 - d0).sum() / np.abs(d0).sum() < 0.03
 
 
 def test_rec709_and_acescg_copies_score_the_same(
