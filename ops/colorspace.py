@@ -137,6 +137,14 @@ class ColorSpace:
         return np.asarray(self.matrix.sum(axis=1), np.float64)
 
     @property
+    def chromaticities(self) -> Chromaticities:
+        """(x, y) of the primaries and of the white, the order of the EXR attribute."""
+        cols = [self.matrix[:, j] for j in range(3)] + [self.white]
+        xy = [(float(c[0] / c.sum()), float(c[1] / c.sum())) for c in cols]
+        r, g, b, w = xy
+        return (*r, *g, *b, *w)
+
+    @property
     def is_rec709(self) -> bool:
         return bool(np.array_equal(self.matrix, REC709_RGB_TO_XYZ))
 

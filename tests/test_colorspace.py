@@ -109,6 +109,14 @@ def test_each_frame_names_its_space_and_where_it_came_from(
     assert (info["name"], info["source"]) == ("Linear Rec.709 (sRGB)", "--colorspace")
 
 
+def test_an_output_records_the_space_the_user_named(tmp_path: Path) -> None:
+    out = tmp_path / "out.exr"
+    assert _cli("enhance", str(FIXTURE), "-o", str(out), "--colorspace", "ACEScg")[0] == 0
+    space = gbuffer.read(out).colorspace
+    assert (space.name, space.source) == ("ACEScg", "chromaticities attribute")
+    np.testing.assert_allclose(space.matrix, ACESCG.matrix, atol=1e-6)
+
+
 @pytest.mark.parametrize(
     ("name", "word"),
     [("no-such-space", "is not in the OCIO config"), ("srgb_tx", "is not linear")],
