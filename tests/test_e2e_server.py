@@ -192,6 +192,13 @@ def test_python_client_and_score_match_local(server: Server, files: dict[str, Pa
     assert 0.0 < remote["score"] <= 1.0
     assert remote["params"] == local["params"]
     assert remote["analysis_shape"] == local["analysis_shape"]
+    with Client(server.url, api_key=KEY) as client:  # the working space named by the client
+        acescg = client.score(files["canonical"], gradient_scale=0.004, colorspace="ACEScg")
+    local = score_frame(
+        read_exr(files["canonical"], options={"colorspace": "ACEScg"}), gradient_scale=0.004
+    )
+    assert acescg["score"] == pytest.approx(local["score"], rel=1e-9, abs=1e-12)
+    assert acescg["score"] != pytest.approx(remote["score"], rel=1e-9, abs=1e-12)
     with Client(server.url, api_key="wrong") as client, pytest.raises(DepictError) as err:
         client.operators()
     assert err.value.status == 401 and err.value.problem["type"].endswith(":unauthorized")
