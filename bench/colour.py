@@ -22,22 +22,50 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
+import PyOpenColorIO as ocio
 
 import gbuffer
 from analysis.score import score_frame
 from bench import corpus
 from bench.gallery import save, sheet
-from gbuffer.colorspace import View
+from gbuffer.colorspace import BUILTIN_CONFIG, View
 from gbuffer.frame import Frame
 from gbuffer.preview import picture
+from ops.colorspace import ACES_AP1
 from service import pipeline
-from tests.colour_files import acescg_copy, ocio_convert
 
 OPS = ("radiance_scaling", "unsharp_masking", "light_alignment", "depth_unsharp_masking")
 #: The corpus frame of the README's pictures.
 DOCS_FRAME = "still_life_240p_16spp"
 #: Stops above the frame's own exposure for the high-dynamic-range picture.
 HDR_STOPS = 2.5
+
+
+def ocio_convert(rgb: np.ndarray, src: str, dst: str) -> np.ndarray:
+    """``rgb`` (..., 3) from OCIO space ``src`` to ``dst`` by OpenColorIO itself (its built-in
+    config, not Depict's own matrices), float32."""
+    proc = (
+        ocio.Config.CreateFromFile(BUILTIN_CONFIG).getProcessor(src, dst).getDefaultCPUProcessor()
+    )
+    x = np.ascontiguousarray(np.asarray(rgb, np.float32)).copy()
+    proc.applyRGB(x)
+    return x
+
+
+def acescg_copy(src: str | Path, dst: str | Path) -> None:
+    """Write ``src`` (linear Rec.709) as ACEScg: every RGB(A) layer converted (normals, depth
+    and positions are stored as separate X/Y/Z channels and stay), chromaticities = AP1."""
+    with OpenEXR.File(str(src)) as f:
+        header = dict(f.header())
+        channels = {name: np.array(c.pixels) for name, c in f.channels().items()}
+    for name, pixels in channels.items():
+        if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
+            out = pixels.astype(np.float32)
+            out[..., :3] = ocio_convert(out[..., :3], "lin_rec709", "ACEScg")
+            channels[name] = out
+    header["chromaticities"] = ACES_AP1
+    OpenEXR.File(header, channels).write(str(dst))
 
 
 def _rec709(frame: Frame, rgb: np.ndarray) -> np.ndarray:

@@ -1,6 +1,5 @@
-"""Real EXR files of one picture in two working spaces: linear Rec.709 (no chromaticities, as
-renderers write it) and ACEScg (the colours converted by OpenColorIO, ``chromaticities`` set to
-AP1), for the colour-management tests and the README's figures."""
+"""Colour charts for the colour-management tests: the ColorChecker's sRGB values and chart
+frames (the ACEScg copies of whole files are :func:`bench.colour.acescg_copy`)."""
 
 from __future__ import annotations
 
@@ -8,12 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import OpenEXR
-import PyOpenColorIO as ocio
 
-from ops.colorspace import ACES_AP1
+from bench.colour import acescg_copy, ocio_convert
 
-#: OCIO's built-in studio config (what Depict uses without $OCIO).
-CONFIG = "ocio://studio-config-latest"
+__all__ = ["MACBETH_SRGB", "acescg_copy", "chart", "ocio_convert", "srgb_decode"]
 
 #: The 24 patches of the ColorChecker Classic, 8-bit sRGB (BabelColor's averages), row by row.
 MACBETH_SRGB = np.array(
@@ -33,29 +30,6 @@ def srgb_decode(values: np.ndarray) -> np.ndarray:
     """8-bit sRGB -> linear (IEC 61966-2-1)."""
     v = np.asarray(values, np.float64) / 255.0
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-
-
-def ocio_convert(rgb: np.ndarray, src: str, dst: str) -> np.ndarray:
-    """``rgb`` (..., 3) from OCIO space ``src`` to ``dst`` by OpenColorIO itself, float32."""
-    proc = ocio.Config.CreateFromFile(CONFIG).getProcessor(src, dst).getDefaultCPUProcessor()
-    x = np.ascontiguousarray(np.asarray(rgb, np.float32)).copy()
-    proc.applyRGB(x)
-    return x
-
-
-def acescg_copy(src: str | Path, dst: str | Path) -> None:
-    """Write ``src`` (linear Rec.709) as ACEScg: every RGB(A) layer converted (normals, depth
-    and positions are stored as separate X/Y/Z channels and stay), chromaticities = AP1."""
-    with OpenEXR.File(str(src)) as f:
-        header = dict(f.header())
-        channels = {name: np.array(c.pixels) for name, c in f.channels().items()}
-    for name, pixels in channels.items():
-        if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
-            out = pixels.astype(np.float32)
-            out[..., :3] = ocio_convert(out[..., :3], "lin_rec709", "ACEScg")
-            channels[name] = out
-    header["chromaticities"] = ACES_AP1
-    OpenEXR.File(header, channels).write(str(dst))
 
 
 def chart(rgb: np.ndarray, path: str | Path, chroma: tuple[float, ...] | None = None) -> None:
