@@ -14,11 +14,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 import OpenEXR
+import PyOpenColorIO as ocio
 import pytest
 
 import gbuffer
 from analysis.score import score_frame
-from gbuffer.colorspace import View
+from gbuffer.colorspace import View, named
 from gbuffer.errors import FrameError
 from gbuffer.preview import display_encode, picture
 from ops import radiance_scaling as rs
@@ -128,6 +129,19 @@ def test_a_bad_colorspace_is_one_line_and_exit_2(
     err = capsys.readouterr().err
     assert code == 2
     assert word in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_config_in_ocio_is_used(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    """$OCIO names the config: its displays and spaces, not the built-in studio config's."""
+    path = tmp_path / "raw.ocio"
+    path.write_text(ocio.Config.CreateRaw().serialize())
+    monkeypatch.setenv("OCIO", str(path))
+    assert View().resolved() == ("sRGB", "Raw")
+    assert named("ACEScg").name == "ACEScg"  # standard chromaticities need no config
+    with pytest.raises(FrameError, match=r"not in the OCIO config .*raw\.ocio"):
+        named("lin_rec709")
+    with pytest.raises(FrameError, match="not a scene-referred colour space"):
+        named("raw")
 
 
 # -- a colour chart -----------------------------------------------------------------------------
