@@ -21,7 +21,7 @@ import gbuffer
 from analysis.score import score_frame
 from gbuffer.colorspace import View, named
 from gbuffer.errors import FrameError
-from gbuffer.preview import display_encode, picture
+from gbuffer.preview import display_encode, picture, srgb_encode
 from ops import radiance_scaling as rs
 from ops.color import lightness, luminance, rgb_to_lab
 from ops.colorspace import (
@@ -29,6 +29,7 @@ from ops.colorspace import (
     LINEAR_REC709,
     REC709_RGB_TO_XYZ,
     conversion,
+    convert,
     from_chromaticities,
     rgb_to_xyz,
 )
@@ -260,6 +261,27 @@ def test_rec709_and_acescg_copies_preview_alike(
 ) -> None:
     a, b = (np.round(picture(f, "beauty", 0.0, view) * 255.0) for f in pair)
     assert float(np.percentile(np.abs(a - b), 99)) <= 2.0
+
+
+def test_a_space_the_config_lacks_previews_through_aces2065(
+    pair: tuple[gbuffer.Frame, gbuffer.Frame],
+) -> None:
+    """Primaries of no config space (Rec.2020's, nudged) reach the view through ACES2065-1."""
+    rec709 = pair[0]
+    odd = from_chromaticities("odd", (0.70, 0.29, 0.18, 0.79, 0.13, 0.05, 0.3127, 0.329), "test")
+    other = rec709.copy()
+    other.buffers["beauty"] = convert(rec709.buffers["beauty"], LINEAR_REC709, odd)
+    other.colorspace = odd
+    a, b = (np.round(picture(f, "beauty", 0.0, View()) * 255.0) for f in (rec709, other))
+    assert float(np.percentile(np.abs(a - b), 99)) <= 2.0
+
+
+def test_the_raw_view_is_the_former_exposure_and_clip(
+    pair: tuple[gbuffer.Frame, gbuffer.Frame],
+) -> None:
+    rec709 = pair[0]
+    raw = picture(rec709, "beauty", 1.5, View(view="raw"))
+    assert np.array_equal(raw, srgb_encode(rec709.buffers["beauty"], 1.5))
 
 
 def test_the_view_transform_keeps_highlights_the_clip_loses() -> None:
