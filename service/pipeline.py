@@ -27,6 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from gbuffer import holes
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from service.masks import apply_step
 from service.output import finish as place
 from service.registry import Context, Operator, Params, PipelineError, get
 
@@ -191,7 +192,7 @@ def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:
     if op.needs_camera:
         frame.need_camera(f"{op.name} needs the camera")
     try:
-        op.apply(frame, step.params, context)
+        apply_step(op, frame, step.params, context)  # restricted to the step's mask
     except FrameError:
         raise
     except ValueError as exc:  # ops/ names a bad value in a ValueError

@@ -15,6 +15,7 @@ from pydantic import Field
 
 from analysis.score import CONGRUENCE, score_frame
 from gbuffer.frame import Frame
+from service.masks import MASK_FIELDS
 from service.operators.base import Context, Params, register
 
 _DEFAULTS = CONGRUENCE
@@ -72,6 +73,8 @@ class CongruenceParams(Params):
     ),
 )
 def apply_congruence(frame: Frame, p: CongruenceParams, ctx: Context) -> None:
-    result = score_frame(frame, maps=True, **p.model_dump(exclude_none=True))
+    result = score_frame(
+        frame, maps=True, **p.model_dump(exclude_none=True, exclude=set(MASK_FIELDS))
+    )
     frame.outputs.update(result["layers"])
     frame.attributes["depict/congruence"] = float(result["score"])

@@ -37,11 +37,11 @@ from ops import curvature as curv_ops
 from ops.scaling import luminance
 from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
 from service.errors import PipelineError
+from service.masks import layer_plane
 from service.operators.base import Context, Params, register
 from service.operators.common import (
     Auto,
     kept_lighting_gain,
-    layer_plane,
     pixel_sizes,
     relative_pixel_sizes,
     relative_scene_sigma,
@@ -207,7 +207,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             ctx,
             f"unsharp_masking.white.{p.signal}",
             p.white,
-            lambda: color.auto_white(signal, covered),
+            lambda: color.auto_white(signal, ctx.counted(covered)),
         )
     gain = _gain_map(frame, p, ctx)
     relief = _relief(frame, p, sigma, pixel_size)
