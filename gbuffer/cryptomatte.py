@@ -150,23 +150,28 @@ def matte(frame: Frame, layer: Layer, ids: list[int]) -> np.ndarray:
     return np.clip(out, 0.0, 1.0)
 
 
-def find_layer(
-    frame: Frame, layer_name: str | None, patterns: list[str]
-) -> tuple[Layer, dict[str, int]]:
-    """The layer named ``layer_name`` (full or short name; ``None``: the first whose manifest
-    has a name matching ``patterns``) and the matching manifest entries; FrameError naming what
-    the file has when nothing matches."""
+def named_layers(frame: Frame, layer_name: str | None) -> list[Layer]:
+    """The layers named ``layer_name`` (full or short name; ``None``: every layer, object
+    layers first); FrameError naming what the file has when there is none."""
     found = layers(frame)
     if not found:
         raise FrameError(
             "the file has no Cryptomatte layer (no cryptomatte/<key>/name in its header)"
         )
-    if layer_name is not None:
-        named = [x for x in found if layer_name in (x.name, x.short)]
-        if not named:
-            have = ", ".join(x.name for x in found)
-            raise FrameError(f"no Cryptomatte layer {layer_name!r}; the file has: {have}")
-        found = named
+    named = [x for x in found if layer_name in (None, x.name, x.short)]
+    if not named:
+        have = ", ".join(x.name for x in found)
+        raise FrameError(f"no Cryptomatte layer {layer_name!r}; the file has: {have}")
+    return named
+
+
+def find_layer(
+    frame: Frame, layer_name: str | None, patterns: list[str]
+) -> tuple[Layer, dict[str, int]]:
+    """The layer named ``layer_name`` (:func:`named_layers`; ``None``: the first whose manifest
+    has a name matching ``patterns``) and the matching manifest entries; FrameError naming what
+    the file has when nothing matches."""
+    found = named_layers(frame, layer_name)
     for candidate in found:
         chosen = candidate.select(patterns)
         if chosen:

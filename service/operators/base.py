@@ -34,8 +34,7 @@ class Params(BaseModel):
     mask: str | None = Field(
         None,
         max_length=4096,
-        description=f"restrict the step to a matte, out = in + m·(op(in) − in), pixels of m = 0 "
-        f"kept bit for bit: {MASK_SYNTAX}",
+        description=f"restrict the step to a matte (pixels of m = 0 stay bit-exact): {MASK_SYNTAX}",
     )
     mask_feather: float = Field(
         0.0, ge=0.0, le=0.5, description="σ of a Gaussian softening the mask, per image height"
@@ -46,6 +45,14 @@ class Params(BaseModel):
         description="measure the step's statistics (white levels, percentiles) inside the mask "
         "only, so a small object is not normalised by the rest of the frame",
     )
+
+    @field_validator("mask", mode="before")
+    @classmethod
+    def _mask_list(cls, value: Any) -> Any:
+        """A list (what ``--set mask=cryptomatte:a,b`` parses to) is the comma list it was."""
+        if isinstance(value, list):
+            return ",".join(str(v) for v in value)
+        return value
 
     @field_validator("mask")
     @classmethod
