@@ -1,22 +1,22 @@
 """Masks: restrict any pipeline step to objects, materials or any layer of the frame.
 
 Every operator takes ``mask`` (:data:`MASK_SYNTAX`), ``mask_feather``, ``mask_amount`` and
-``mask_stats`` (:class:`service.operators.base.Params`). :func:`apply_step` runs the step and
-blends every layer it writes with what was there before (zero for a layer it adds)::
+``mask_stats`` (:class:`service.operators.base.Params`). :meth:`Operator.run
+<service.operators.base.Operator.run>` runs a step and blends every layer it writes with what
+was there before (:func:`blend_layers`; zero for a layer it adds)::
 
     out = in + m · (op(in) − in)
 
 where ``m`` (:func:`matte`) is the mask's coverage in [0, 1] (exact at anti-aliased edges for
 Cryptomatte), feathered and scaled by ``mask_amount``. Pixels where m = 0 keep their input bit
 for bit; where m = 1 they are the step's result bit for bit. With ``mask_stats`` the step's
-statistics (white levels, percentiles) are measured where m > 0 only (:attr:`Context.region`).
+statistics (white levels, percentiles) are measured where m > 0 only (``Context.region``).
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -25,9 +25,6 @@ from gbuffer import cryptomatte
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from service.errors import PipelineError
-
-if TYPE_CHECKING:
-    from service.operators.base import Context, Operator, Params
 
 MASK_SYNTAX = (
     "a layer or channel of the file (`mask`, `mask.Y`, `ViewLayer.AO.R`) or a one-channel "
@@ -147,7 +144,7 @@ def blend(before: np.ndarray | None, after: np.ndarray, m: np.ndarray) -> np.nda
     return np.asarray(np.where(w <= 0.0, old, np.where(w >= 1.0, after, mixed)), np.float32)
 
 
-def _blend_pool(pool: dict[str, np.ndarray], before: dict[str, np.ndarray], m: np.ndarray) -> None:
+def blend_layers(pool: dict[str, np.ndarray], before: dict[str, np.ndarray], m: np.ndarray) -> None:
     """Blend every array of ``pool`` the step replaced or added; those it dropped fade out."""
     for name, after in list(pool.items()):
         old = before.get(name)
@@ -157,23 +154,3 @@ def _blend_pool(pool: dict[str, np.ndarray], before: dict[str, np.ndarray], m: n
     for name, old in before.items():
         if name not in pool and old.shape[:2] == m.shape:
             pool[name] = blend(old, np.zeros(old.shape, np.float32), m)
-
-
-def apply_step(op: Operator, frame: Frame, params: Params, context: Context) -> None:
-    """``op.apply(frame, params, context)``, restricted to the step's ``mask`` when it has one
-    (operators do not change arrays in place, so an array the step kept is the same object)."""
-    text = getattr(params, "mask", None)
-    if text is None:
-        op.apply(frame, params, context)
-        return
-    m = matte(frame, text, params.mask_feather, params.mask_amount)
-    buffers, outputs = dict(frame.buffers), dict(frame.outputs)
-    region = context.region
-    if params.mask_stats:
-        context.region = m > 0 if region is None else region & (m > 0)
-    try:
-        op.apply(frame, params, context)
-    finally:
-        context.region = region
-    _blend_pool(frame.buffers, buffers, m)
-    _blend_pool(frame.outputs, outputs, m)

@@ -27,7 +27,6 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from gbuffer import holes
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
-from service.masks import apply_step
 from service.output import finish as place
 from service.registry import Context, Operator, Params, PipelineError, get
 
@@ -192,7 +191,7 @@ def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:
     if op.needs_camera:
         frame.need_camera(f"{op.name} needs the camera")
     try:
-        apply_step(op, frame, step.params, context)  # restricted to the step's mask
+        op.run(frame, step.params, context)  # apply, restricted to the step's mask
     except FrameError:
         raise
     except ValueError as exc:  # ops/ names a bad value in a ValueError

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from gbuffer.frame import Frame
 from service.errors import PipelineError
-from service.masks import MASK_SYNTAX
+from service.masks import MASK_SYNTAX, blend_layers, matte
 from service.masks import parse as parse_mask
 
 
@@ -118,6 +118,25 @@ class Operator:
     writes: tuple[str, ...]
     apply: Apply
     needs_camera: bool = False
+
+    def run(self, frame: Frame, params: Params, context: Context) -> None:
+        """``apply``, restricted to the step's ``mask`` when it has one (:mod:`service.masks`):
+        every array the step replaced, added or dropped is blended with the one before.
+        Operators do not change arrays in place, so an array the step kept is the same object."""
+        if params.mask is None:
+            self.apply(frame, params, context)
+            return
+        m = matte(frame, params.mask, params.mask_feather, params.mask_amount)
+        buffers, outputs = dict(frame.buffers), dict(frame.outputs)
+        region = context.region
+        if params.mask_stats:
+            context.region = m > 0 if region is None else region & (m > 0)
+        try:
+            self.apply(frame, params, context)
+        finally:
+            context.region = region
+        blend_layers(frame.buffers, buffers, m)
+        blend_layers(frame.outputs, outputs, m)
 
     def parse(self, values: dict[str, Any]) -> Params:
         """Validate ``values`` into the parameter model, or raise :class:`PipelineError`."""

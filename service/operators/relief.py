@@ -28,7 +28,7 @@ from ops import relief as rl
 from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
 from service.errors import PipelineError
-from service.masks import apply_step, layer_plane
+from service.masks import layer_plane
 from service.operators.base import Context, get, register
 from service.operators.common import Auto, channels, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
@@ -219,7 +219,7 @@ def _effect(frame: Frame, step: EffectStep, ctx: Context) -> np.ndarray:
     copy = frame.copy()
     for buffer in op.needs:
         copy.need(buffer, f"needed by {op.name} (the mask effect)")
-    apply_step(op, copy, op.parse(step.params), ctx)
+    op.run(copy, op.parse(step.params), ctx)
     return copy.need("beauty", f"the result of {op.name}")
 
 
