@@ -129,7 +129,7 @@ def matte(frame: Frame, text: str, feather: float = 0.0, amount: float = 1.0) ->
         m = np.float32(1.0) - m
     if feather > 0.0:
         sigma = feather * frame.image_height
-        m = cv2.GaussianBlur(m, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE)
+        m = np.asarray(cv2.GaussianBlur(m, (0, 0), sigma, borderType=cv2.BORDER_REPLICATE))
     if amount != 1.0:
         m = m * np.float32(amount)
     return np.asarray(np.clip(m, 0.0, 1.0), np.float32)

@@ -163,9 +163,9 @@ def test_blender_coverage_sums_to_one_and_matches_the_index_pass(blender: Frame)
 
 
 def test_unknown_names_and_layers_list_what_the_file_has(blender: Frame) -> None:
-    with pytest.raises(FrameError, match="no Cryptomatte name matches 'Nope'.*Suzanne"):
+    with pytest.raises(FrameError, match=r"no Cryptomatte name matches 'Nope'.*Suzanne"):
         cryptomatte.find_layer(blender, None, ["Nope"])
-    with pytest.raises(FrameError, match="no Cryptomatte layer 'CryptoAsset'.*CryptoObject"):
+    with pytest.raises(FrameError, match=r"no Cryptomatte layer 'CryptoAsset'.*CryptoObject"):
         cryptomatte.find_layer(blender, "CryptoAsset", ["Suzanne"])
     plain = gbuffer.read(FIXTURE.parent / "cycles_multilayer.exr")
     with pytest.raises(FrameError, match="no Cryptomatte layer"):
@@ -176,9 +176,7 @@ def test_id_picture_colours_each_object(blender: Frame) -> None:
     picture = cryptomatte.id_picture(blender, cryptomatte.layers(blender)[0])
     assert picture.shape == (*blender.shape, 3) and picture.dtype == np.float32
     index = blender.layer("ViewLayer.IndexOB")["X"] == 3
-    m = cryptomatte.matte(
-        blender, cryptomatte.layers(blender)[0], [cryptomatte.id_bits("Suzanne")]
-    )
+    m = cryptomatte.matte(blender, cryptomatte.layers(blender)[0], [cryptomatte.id_bits("Suzanne")])
     colours = np.unique(picture[(m >= 1.0) & index].round(4), axis=0)
     assert len(colours) == 1  # one colour inside Suzanne, another on the ground
     assert not np.allclose(colours[0], picture[-1, 0])
