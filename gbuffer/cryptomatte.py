@@ -23,6 +23,7 @@ from typing import Any
 import mmh3
 import numpy as np
 
+from gbuffer import exr
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 
@@ -48,13 +49,14 @@ def id_float(name: str) -> float:
 
 @dataclass(frozen=True)
 class Layer:
-    """One Cryptomatte layer of a file: its header key, name, manifest (name -> id bits) and the
-    (id channel, coverage channel) names of every rank, rank 0 first."""
+    """One Cryptomatte layer of a file: its header key, name, manifest (name -> id bits), the
+    (id channel, coverage channel) names of every rank, rank 0 first, and the part holding them."""
 
     key: str
     name: str
     manifest: dict[str, int]
     ranks: tuple[tuple[str, str], ...]
+    part: int = 0
 
     @property
     def short(self) -> str:
@@ -111,31 +113,44 @@ def _ranks(name: str, channels: dict[str, Any]) -> tuple[tuple[str, str], ...]:
     return tuple(ranks)
 
 
+def _same_grid(frame: Frame, index: int) -> bool:
+    """Whether part ``index`` of the frame's file has the primary part's data window."""
+    parts, primary = frame.passthrough.parts, frame.passthrough.primary
+    if index == primary:
+        return True
+    (header, channels), (main, main_channels) = parts[index], parts[primary]
+    return exr.window(header, "dataWindow", channels) == exr.window(
+        main, "dataWindow", main_channels
+    )
+
+
 def layers(frame: Frame) -> list[Layer]:
-    """The Cryptomatte layers of the frame's file (primary part), object layers first."""
-    if not frame.passthrough.parts:
-        return []
-    header, channels = frame.passthrough.parts[frame.passthrough.primary]
+    """The Cryptomatte layers of the frame's file (in any part on the frame's pixel grid),
+    object layers first."""
     path = getattr(frame.passthrough, "path", "")
     directory = Path(path).parent if path else None
-    found = []
-    for attr, value in header.items():
-        parts = attr.split("/")
-        if len(parts) != 3 or parts[0] != "cryptomatte" or parts[2] != "name":
+    found: dict[str, Layer] = {}
+    for index, (header, channels) in enumerate(frame.passthrough.parts):
+        if not _same_grid(frame, index):
             continue
-        ranks = _ranks(str(value), channels)
-        if ranks:
-            found.append(Layer(parts[1], str(value), _manifest(header, parts[1], directory), ranks))
+        for attr, value in header.items():
+            key = attr.split("/")
+            if len(key) != 3 or key[0] != "cryptomatte" or key[2] != "name" or value in found:
+                continue
+            ranks = _ranks(str(value), channels)
+            if ranks:
+                manifest = _manifest(header, key[1], directory)
+                found[str(value)] = Layer(key[1], str(value), manifest, ranks, index)
 
     def order(layer: Layer) -> int:
         kinds = [k for k in _KIND_ORDER if k in layer.short.lower()]
         return _KIND_ORDER.index(kinds[0]) if kinds else len(_KIND_ORDER)
 
-    return sorted(found, key=order)
+    return sorted(found.values(), key=order)
 
 
-def _pixels(frame: Frame, channel: str) -> np.ndarray:
-    value = frame.passthrough.parts[frame.passthrough.primary][1][channel]
+def _pixels(frame: Frame, layer: Layer, channel: str) -> np.ndarray:
+    value = frame.passthrough.parts[layer.part][1][channel]
     return np.asarray(getattr(value, "pixels", value))
 
 
@@ -144,9 +159,11 @@ def matte(frame: Frame, layer: Layer, ids: list[int]) -> np.ndarray:
     wanted = np.asarray(sorted(set(ids)), np.uint32)
     out = np.zeros(frame.shape, np.float32)
     for id_channel, coverage_channel in layer.ranks:
-        bits = np.ascontiguousarray(_pixels(frame, id_channel), np.float32).view(np.uint32)
+        bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         hit = np.isin(bits, wanted)
-        out += np.where(hit, _pixels(frame, coverage_channel).astype(np.float32), np.float32(0))
+        out += np.where(
+            hit, _pixels(frame, layer, coverage_channel).astype(np.float32), np.float32(0)
+        )
     return np.clip(out, 0.0, 1.0)
 
 
@@ -188,9 +205,9 @@ def coverage_by_name(frame: Frame, layer: Layer) -> dict[str, float]:
     """Pixels covered by each manifest name (summed coverage over every rank), largest first."""
     totals: dict[int, float] = {}
     for id_channel, coverage_channel in layer.ranks:
-        bits = np.ascontiguousarray(_pixels(frame, id_channel), np.float32).view(np.uint32)
+        bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         values, inverse = np.unique(bits.ravel(), return_inverse=True)
-        sums = np.bincount(inverse, weights=_pixels(frame, coverage_channel).ravel())
+        sums = np.bincount(inverse, weights=_pixels(frame, layer, coverage_channel).ravel())
         for value, total in zip(values.tolist(), sums.tolist(), strict=True):
             totals[value] = totals.get(value, 0.0) + total
     named = {name: round(totals.get(bits, 0.0), 2) for name, bits in layer.manifest.items()}
@@ -210,8 +227,8 @@ def id_picture(frame: Frame, layer: Layer) -> np.ndarray:
     weighted by its coverage, summed over the ranks."""
     out = np.zeros((*frame.shape, 3), np.float32)
     for id_channel, coverage_channel in layer.ranks:
-        bits = np.ascontiguousarray(_pixels(frame, id_channel), np.float32).view(np.uint32)
+        bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         rgb = np.dstack([(bits >> s) & 0xFF for s in (0, 8, 16)]).astype(np.float32) / 255.0
-        coverage = _pixels(frame, coverage_channel).astype(np.float32)[..., None]
+        coverage = _pixels(frame, layer, coverage_channel).astype(np.float32)[..., None]
         out += (0.25 + 0.75 * rgb) * np.where(bits[..., None] == 0, 0.0, coverage)
     return np.clip(out, 0.0, 1.0)

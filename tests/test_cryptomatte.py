@@ -17,6 +17,7 @@ import gbuffer
 from gbuffer import cryptomatte
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from service.cli import main as cli
 from tests import exr_factory
 
 FIXTURE = Path(__file__).parent / "fixtures" / "blender" / "cryptomatte.exr"
@@ -58,10 +59,14 @@ def spec_coverages(h: int, w: int) -> dict[str, np.ndarray]:
     return cov
 
 
-def write_spec_file(path: Path, *, sidecar: bool = False) -> dict[str, np.ndarray]:
+def write_spec_file(
+    path: Path, *, sidecar: bool = False, multipart: bool = False, with_gbuffer: bool = True
+) -> dict[str, np.ndarray]:
     """A canonical G-buffer plus a Cryptomatte layer ``uCryptoObject`` written by the
     specification: ranks sorted by coverage, two channel groups (00, 01), manifest in the
-    header or in a sidecar JSON. Returns the coverage of each name."""
+    header or in a sidecar JSON; in the G-buffer's part, or in a part of its own
+    (``multipart``); ``with_gbuffer`` False: the mattes alone. Returns the coverage of each
+    name."""
     scene = exr_factory.make_scene()
     h, w = scene.shape
     cov = spec_coverages(h, w)
@@ -70,7 +75,7 @@ def write_spec_file(path: Path, *, sidecar: bool = False) -> dict[str, np.ndarra
     order = np.argsort(-stack_cov, axis=0, kind="stable")
     ranked_cov = np.take_along_axis(stack_cov, order, 0)
     ranked_id = np.where(ranked_cov > 0, np.take_along_axis(stack_id, order, 0), 0.0)
-    channels: dict[str, Any] = exr_factory.canonical_channels(scene)
+    channels: dict[str, Any] = {}
     for rank in range(4):  # two groups of two ranks; the fourth rank is empty
         group, (id_c, cov_c) = divmod(rank, 2)[0], ("rg", "ba")[rank % 2]
         ids = ranked_id[rank] if rank < 3 else np.zeros((h, w), np.float32)
@@ -90,16 +95,26 @@ def write_spec_file(path: Path, *, sidecar: bool = False) -> dict[str, np.ndarra
         (path.parent / "sidecar" / "objects.json").write_text(json.dumps(manifest))
     else:
         header["cryptomatte/0a1b2c3/manifest"] = json.dumps(manifest, ensure_ascii=False)
-    exr_factory.write_exr(path, header, channels)
+    gbuffer_channels = exr_factory.canonical_channels(scene) if with_gbuffer else {}
+    if multipart:
+        zip_only = {"compression": OpenEXR.ZIP_COMPRESSION}
+        parts = [
+            OpenEXR.Part(zip_only, gbuffer_channels, "rgba"),
+            OpenEXR.Part(header, channels, "crypto"),
+        ]
+        OpenEXR.File(parts).write(str(path))
+    else:
+        exr_factory.write_exr(path, header, {**gbuffer_channels, **channels})
     return cov
 
 
-@pytest.mark.parametrize("sidecar", [False, True])
-def test_spec_file_decodes_exactly(tmp_path: Path, sidecar: bool) -> None:
-    cov = write_spec_file(tmp_path / "spec.exr", sidecar=sidecar)
+@pytest.mark.parametrize(("sidecar", "multipart"), [(False, False), (True, False), (False, True)])
+def test_spec_file_decodes_exactly(tmp_path: Path, sidecar: bool, multipart: bool) -> None:
+    cov = write_spec_file(tmp_path / "spec.exr", sidecar=sidecar, multipart=multipart)
     frame = gbuffer.read(tmp_path / "spec.exr")
     (layer,) = cryptomatte.layers(frame)
     assert layer.name == "uCryptoObject" and len(layer.ranks) == 4
+    assert layer.part == (1 if multipart else 0) and frame.has("normal")
     assert set(layer.manifest) == set(NAMES)
     for patterns, expected in (
         (["tree"], cov["tree"]),
@@ -111,6 +126,15 @@ def test_spec_file_decodes_exactly(tmp_path: Path, sidecar: bool) -> None:
         np.testing.assert_array_equal(m, np.clip(expected, 0, 1))
     named = cryptomatte.coverage_by_name(frame, layer)
     assert named == {n: pytest.approx(float(cov[n].sum()), abs=0.01) for n in NAMES}
+
+
+def test_a_file_of_mattes_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cov = write_spec_file(tmp_path / "mattes.exr", with_gbuffer=False)
+    png = tmp_path / "tree.png"
+    assert cli(["mask", str(tmp_path / "mattes.exr"), "cryptomatte:tree", "-o", str(png)]) == 0
+    inside = int((cov["tree"] >= 1).sum())
+    assert f"{inside} pixels inside" in capsys.readouterr().out
+    assert (cv2.imread(str(png), cv2.IMREAD_GRAYSCALE) == 255).sum() == inside
 
 
 def test_sidecar_outside_the_file_directory_is_refused(tmp_path: Path) -> None:
