@@ -124,11 +124,12 @@ def _same_grid(frame: Frame, index: int) -> bool:
     )
 
 
-def layers(frame: Frame) -> list[Layer]:
+def layers(frame: Frame, sidecars: bool = True) -> list[Layer]:
     """The Cryptomatte layers of the frame's file (in any part on the frame's pixel grid),
-    object layers first."""
+    object layers first. ``sidecars``: read sidecar manifests beside the file (not for a file
+    uploaded to the HTTP service)."""
     path = getattr(frame.passthrough, "path", "")
-    directory = Path(path).parent if path else None
+    directory = Path(path).parent if path and sidecars else None
     found: dict[str, Layer] = {}
     for index, (header, channels) in enumerate(frame.passthrough.parts):
         if not _same_grid(frame, index):
@@ -167,10 +168,10 @@ def matte(frame: Frame, layer: Layer, ids: list[int]) -> np.ndarray:
     return np.clip(out, 0.0, 1.0)
 
 
-def named_layers(frame: Frame, layer_name: str | None) -> list[Layer]:
+def named_layers(frame: Frame, layer_name: str | None, sidecars: bool = True) -> list[Layer]:
     """The layers named ``layer_name`` (full or short name; ``None``: every layer, object
     layers first); FrameError naming what the file has when there is none."""
-    found = layers(frame)
+    found = layers(frame, sidecars)
     if not found:
         raise FrameError(
             "the file has no Cryptomatte layer (no cryptomatte/<key>/name in its header)"
@@ -183,12 +184,12 @@ def named_layers(frame: Frame, layer_name: str | None) -> list[Layer]:
 
 
 def find_layer(
-    frame: Frame, layer_name: str | None, patterns: list[str]
+    frame: Frame, layer_name: str | None, patterns: list[str], sidecars: bool = True
 ) -> tuple[Layer, dict[str, int]]:
     """The layer named ``layer_name`` (:func:`named_layers`; ``None``: the first whose manifest
     has a name matching ``patterns``) and the matching manifest entries; FrameError naming what
     the file has when nothing matches."""
-    found = named_layers(frame, layer_name)
+    found = named_layers(frame, layer_name, sidecars)
     for candidate in found:
         chosen = candidate.select(patterns)
         if chosen:

@@ -101,10 +101,10 @@ def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
     )
 
 
-def _raw(frame: Frame, spec: MaskSpec, text: str) -> np.ndarray:
+def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool) -> np.ndarray:
     if spec.kind == "cryptomatte":
         try:
-            layer, chosen = cryptomatte.find_layer(frame, spec.layer, list(spec.names))
+            layer, chosen = cryptomatte.find_layer(frame, spec.layer, list(spec.names), files)
         except FrameError as exc:
             raise PipelineError(f"mask {text!r}: {exc}") from None
         return cryptomatte.matte(frame, layer, list(chosen.values()))
@@ -117,14 +117,17 @@ def _raw(frame: Frame, spec: MaskSpec, text: str) -> np.ndarray:
     return np.clip(np.nan_to_num(plane, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
 
 
-def matte(frame: Frame, text: str, feather: float = 0.0, amount: float = 1.0) -> np.ndarray:
+def matte(
+    frame: Frame, text: str, feather: float = 0.0, amount: float = 1.0, files: bool = True
+) -> np.ndarray:
     """(H, W) float32 in [0, 1]: the mask ``text`` on ``frame``, inverted when it says so,
-    blurred by a Gaussian of σ = ``feather`` × the image height, times ``amount``."""
+    blurred by a Gaussian of σ = ``feather`` × the image height, times ``amount``. ``files``:
+    whether a Cryptomatte sidecar manifest beside the file may be read (not over HTTP)."""
     try:
         spec = parse(text)
     except ValueError as exc:
         raise PipelineError(str(exc)) from None
-    m = np.ascontiguousarray(_raw(frame, spec, text), np.float32)
+    m = np.ascontiguousarray(_raw(frame, spec, text, files), np.float32)
     if spec.invert:
         m = np.float32(1.0) - m
     if feather > 0.0:

@@ -17,7 +17,9 @@ import gbuffer
 from gbuffer import cryptomatte
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from service import pipeline
 from service.cli import main as cli
+from service.registry import Context, PipelineError
 from tests import exr_factory
 
 FIXTURE = Path(__file__).parent / "fixtures" / "blender" / "cryptomatte.exr"
@@ -135,6 +137,18 @@ def test_a_file_of_mattes_alone(tmp_path: Path, capsys: pytest.CaptureFixture[st
     inside = int((cov["tree"] >= 1).sum())
     assert f"{inside} pixels inside" in capsys.readouterr().out
     assert (cv2.imread(str(png), cv2.IMREAD_GRAYSCALE) == 255).sum() == inside
+
+
+def test_sidecars_are_not_read_where_files_are_not(tmp_path: Path) -> None:
+    """The HTTP service runs with ``files=False``: an upload's sidecar path is not followed."""
+    cov = write_spec_file(tmp_path / "spec.exr", sidecar=True)
+    frame = gbuffer.read(tmp_path / "spec.exr")
+    steps = [{"op": "curvature", "params": {"mask": "cryptomatte:tree"}}]
+    with pytest.raises(PipelineError, match=r"names: none \(no manifest\)"):
+        pipeline.run(frame, steps, context=Context(files=False))
+    out = pipeline.run(frame, steps, context=Context(files=True))
+    h = out.layer("curvature")["H"]
+    assert not h[cov["tree"] == 0].any() and h[cov["tree"] == 1].any()
 
 
 def test_sidecar_outside_the_file_directory_is_refused(tmp_path: Path) -> None:

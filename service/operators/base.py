@@ -127,7 +127,7 @@ class Operator:
         if params.mask is None:
             self.apply(frame, params, context)
             return
-        m = matte(frame, params.mask, params.mask_feather, params.mask_amount)
+        m = matte(frame, params.mask, params.mask_feather, params.mask_amount, context.files)
         buffers, outputs = dict(frame.buffers), dict(frame.outputs)
         region = context.region
         if params.mask_stats:
