@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -25,10 +26,12 @@ from gbuffer import cryptomatte
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from service.errors import PipelineError
+from service.images import load_image
 
 MASK_SYNTAX = (
     "a layer or channel of the file (`mask`, `mask.Y`, `ViewLayer.AO.R`) or a one-channel "
-    "buffer (`ao`, `coverage`); `cryptomatte:NAME[,NAME...]` (fnmatch wildcards such as "
+    "buffer (`ao`, `coverage`), or a grey image file (a painted mask, resized to the frame; "
+    "not over HTTP); `cryptomatte:NAME[,NAME...]` (fnmatch wildcards such as "
     "`rock*`; the layer is chosen automatically, objects first, or named: "
     "`cryptomatte/CryptoMaterial:NAME`); `index:LAYER=V[,V...]` (an object or material index "
     "pass, e.g. `index:ViewLayer.IndexOB=3`); a leading `!` inverts the mask"
@@ -101,6 +104,17 @@ def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
     )
 
 
+def plane(frame: Frame, name: str, what: str, files: bool) -> np.ndarray:
+    """:func:`layer_plane`, or the grey image file ``name`` (a painted mask or gain map; values
+    as stored, 8/16-bit scaled to [0, 1]) resized to the frame, where this run may read files
+    and the file exists."""
+    if not (files and Path(name).is_file()):
+        return layer_plane(frame, name, what)
+    img = load_image(name, srgb=False, grey=True)
+    h, w = frame.shape
+    return np.asarray(cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
+
+
 def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool) -> np.ndarray:
     if spec.kind == "cryptomatte":
         try:
@@ -108,13 +122,13 @@ def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool) -> np.ndarray:
         except FrameError as exc:
             raise PipelineError(f"mask {text!r}: {exc}") from None
         return cryptomatte.matte(frame, layer, list(chosen.values()))
-    plane = layer_plane(frame, spec.layer or "", f"mask {text!r}")
+    values = plane(frame, spec.layer or "", f"mask {text!r}", files and spec.kind == "layer")
     if spec.kind == "index":
-        hit = np.zeros(plane.shape, bool)
+        hit = np.zeros(values.shape, bool)
         for value in spec.values:
-            hit |= np.abs(plane - np.float32(value)) < 0.5
+            hit |= np.abs(values - np.float32(value)) < 0.5
         return hit.astype(np.float32)
-    return np.clip(np.nan_to_num(plane, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    return np.clip(np.nan_to_num(values, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
 
 
 def matte(

@@ -95,6 +95,27 @@ def test_index_pass_and_layer_masks(frame: Frame) -> None:
     np.testing.assert_array_equal(matte(frame, "coverage"), frame.buffers["coverage"])
 
 
+def test_a_painted_mask_image(frame: Frame, tmp_path: Path) -> None:
+    """A grey PNG painted at half the frame's size: resized to it, values scaled to [0, 1]."""
+    h, w = frame.shape
+    paint = np.zeros((h // 2, w // 2), np.uint8)
+    cv2.circle(paint, (w // 4, h // 4), h // 8, 255, -1)
+    path = tmp_path / "paint.png"
+    cv2.imwrite(str(path), paint)
+    m = matte(frame, str(path))
+    expected = cv2.resize(paint.astype(np.float32) / 255, (w, h), interpolation=cv2.INTER_LINEAR)
+    np.testing.assert_allclose(m, expected, atol=1e-6)
+    out = run(frame, "light_alignment", mask=str(path))
+    changed = (out.buffers["beauty"] != frame.buffers["beauty"]).any(axis=-1)
+    assert changed.sum() > 100 and not changed[m == 0].any()
+    with pytest.raises(PipelineError, match="no layer"):  # where files may not be read: HTTP
+        pipeline.run(
+            frame,
+            [{"op": "light_alignment", "params": {"mask": str(path)}}],
+            context=Context(files=False),
+        )
+
+
 def test_a_mask_from_an_earlier_step_output(frame: Frame) -> None:
     """Layers written by an earlier step are masks too (the curvature's mean curvature here)."""
     out = pipeline.run(
