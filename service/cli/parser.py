@@ -88,7 +88,11 @@ def add_frame_commands(sub: Any) -> None:
     p = sub.add_parser("preview", help="an 8-bit PNG of any layer")
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="output PNG")
-    p.add_argument("--layer", default="beauty", help="buffer or layer (beauty, normal, ...)")
+    p.add_argument(
+        "--layer",
+        default="beauty",
+        help="buffer or layer (beauty, normal, ...); cryptomatte[/LAYER]: the Cryptomatte ids",
+    )
     p.add_argument(
         "--exposure",
         type=bounded(float, -20.0, 20.0),
