@@ -10,7 +10,8 @@ was there before (:func:`blend_layers`; zero for a layer it adds)::
 where ``m`` (:func:`matte`) is the mask's coverage in [0, 1] (exact at anti-aliased edges for
 Cryptomatte), feathered and scaled by ``mask_amount``. Pixels where m = 0 keep their input bit
 for bit; where m = 1 they are the step's result bit for bit. With ``mask_stats`` the step's
-automatic white levels are measured where m > 0 only (``Context.region``).
+statistics (automatic white levels, the congruence score) are measured where m > 0 only
+(``Context.region``).
 """
 
 from __future__ import annotations

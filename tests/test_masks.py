@@ -143,6 +143,18 @@ def test_mask_stats_measure_inside_the_mask(frame: Frame, op: str) -> None:
     assert everywhere != whole  # the emitter no longer counts
 
 
+def test_congruence_of_one_object(frame: Frame) -> None:
+    def score(**params: Any) -> float:
+        out = pipeline.run(frame, [{"op": "congruence", "params": params}])
+        return float(out.attributes["depict/congruence"])
+
+    whole = score()  # (a score moves by ~1e-12 with the arrays' memory layout)
+    assert score(mask=SUZANNE) == pytest.approx(whole, rel=1e-9)  # the frame's score
+    hero = score(mask=SUZANNE, mask_stats=True)
+    assert hero != pytest.approx(whole, rel=1e-3) and 0.0 < hero < 1.0
+    assert score(mask="coverage", mask_stats=True) == pytest.approx(whole, rel=1e-9)
+
+
 @pytest.mark.parametrize(
     ("spec", "words"),
     [

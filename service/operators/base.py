@@ -42,9 +42,9 @@ class Params(BaseModel):
     mask_amount: float = Field(1.0, ge=0.0, le=1.0, description="the mask times this")
     mask_stats: bool = Field(
         False,
-        description="measure the step's automatic white level (the percentile of `white: auto` "
-        "of radiance_scaling and unsharp_masking) inside the mask only, so a small object is "
-        "not normalised by the rest of the frame",
+        description="measure the step's statistics inside the mask only (the automatic white "
+        "level of radiance_scaling and unsharp_masking, the congruence score and its "
+        "normalisation), so a small object is not normalised by the rest of the frame",
     )
 
     @field_validator("mask", mode="before")
