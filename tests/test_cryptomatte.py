@@ -5,6 +5,8 @@ written by the specification here, and a real Blender Cycles render with Cryptom
 from __future__ import annotations
 
 import json
+import shutil
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -218,3 +220,20 @@ def test_id_picture_colours_each_object(blender: Frame) -> None:
     colours = np.unique(picture[(m >= 1.0) & index].round(4), axis=0)
     assert len(colours) == 1  # one colour inside Suzanne, another on the ground
     assert not np.allclose(colours[0], picture[-1, 0])
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="Debian's blender is not installed")
+def test_the_fixture_script_renders_the_fixture(blender: Frame, tmp_path: Path) -> None:
+    """make_cryptomatte.py in Blender gives the committed file again: the same channels and
+    manifests, the same mattes (Cycles reruns differ by float rounding only)."""
+    script = FIXTURE.parent / "make_cryptomatte.py"
+    cmd = ["blender", "-b", "--factory-startup", "--python", str(script), "--", str(tmp_path)]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stdout[-2000:] + done.stderr[-2000:]
+    again = gbuffer.read(tmp_path / "cryptomatte.exr")
+    assert sorted(again.passthrough.parts[0][1]) == sorted(blender.passthrough.parts[0][1])
+    for old, new in zip(cryptomatte.layers(blender), cryptomatte.layers(again), strict=True):
+        assert (old.name, old.manifest) == (new.name, new.manifest)
+        for name, bits in old.manifest.items():
+            a, b = (cryptomatte.matte(f, x, [bits]) for f, x in ((blender, old), (again, new)))
+            assert float(np.abs(a - b).max()) < 1e-3, name
