@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import OpenEXR
 
-from gbuffer import exr
+from gbuffer import cryptomatte, exr
 from gbuffer.camera import Camera
 from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
@@ -335,7 +335,8 @@ def describe(frame: Frame) -> dict[str, Any]:
     operators need and the frame lacks), ``depict`` (what Depict wrote into a file it made:
     version, input, pipeline, result layer, original layer, history; null otherwise),
     ``colorspace`` (the working space of the radiance: name, source, luminance weights, white,
-    RGB-to-XYZ; :mod:`gbuffer.colorspace`), ``warnings``.
+    RGB-to-XYZ; :mod:`gbuffer.colorspace`), ``cryptomatte`` (each Cryptomatte layer: name, ranks,
+    the pixels each manifest name covers), ``warnings``.
     """
     pt = frame.passthrough
     assert frame.display_size is not None
@@ -386,6 +387,7 @@ def describe(frame: Frame) -> dict[str, Any]:
         "colorspace": frame.colorspace.describe(),
         "missing": _missing(frame),
         "depict": _provenance(pt.parts[pt.primary][0]) if pt.parts else None,
+        "cryptomatte": cryptomatte.describe(frame),
         "warnings": list(getattr(pt, "warnings", [])),
     }
 

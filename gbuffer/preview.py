@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 import OpenImageIO as oiio
 
+from gbuffer import cryptomatte
 from gbuffer.atomic import atomic_path
 from gbuffer.colorspace import RAW_VIEW, View, display_processor
 from gbuffer.errors import FrameError
@@ -95,7 +96,11 @@ def picture(
     frame: Frame, layer: str = "beauty", exposure: float = 0.0, view: View = RAW
 ) -> np.ndarray:
     """An (H, W, 3) float32 RGB picture in [0, 1] of a canonical buffer or a file layer;
-    radiance through ``view`` from the frame's working space (:func:`display_encode`)."""
+    radiance through ``view`` from the frame's working space (:func:`display_encode`);
+    ``cryptomatte`` (or ``cryptomatte/LAYER``): a false-colour view of the Cryptomatte ids."""
+    if layer == "cryptomatte" or layer.startswith("cryptomatte/"):
+        chosen = cryptomatte.named_layers(frame, layer.partition("/")[2] or None)[0]
+        return cryptomatte.id_picture(frame, chosen)
     if layer in frame.buffers:
         data = frame.buffers[layer]
         if layer == "normal":

@@ -97,6 +97,7 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
         "colorspace",
         "missing",
         "depict",
+        "cryptomatte",
         "problems",
         "operators",
         "warnings",

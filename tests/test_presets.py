@@ -486,6 +486,7 @@ def test_describe_is_json(tmp_path: Path, scene: F.Scene) -> None:
         "colorspace",
         "missing",
         "depict",
+        "cryptomatte",
         "warnings",
     ]
     assert info["colorspace"]["source"] == "default"  # V-Ray writes no chromaticities here

@@ -144,7 +144,7 @@ def _white(
         ctx,
         f"radiance_scaling.white.{key}",
         p.white,
-        lambda: white_level(light, mask, p.white_percentile, weights),
+        lambda: white_level(light, ctx.counted(mask), p.white_percentile, weights),
     )
 
 
