@@ -1,0 +1,148 @@
+"""The viewer's work on the service's worker processes (:meth:`service.http.deps.Services.run`,
+so within its queue and time limits): what a frame holds, pictures of its layers, and previews.
+
+Previews run on a copy of the frame downscaled to the preview height (:func:`downscale`), made
+once per frame and height and kept in the frame's folder (``small_<height>.pkl``, with the
+score of the input at that size). Every size of the operators is relative to the image height,
+so a look tuned on the preview carries to the full-resolution frame, which
+``GET /v1/frames/{id}/enhanced.exr`` enhances exactly as ``depict enhance`` does
+(:func:`service.http.worker.enhance_job`).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import pickle
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from analysis.score import score_frame
+from gbuffer.atomic import atomic_path
+from gbuffer.errors import FrameError
+from gbuffer.frame import Frame, Passthrough
+from gbuffer.io import inspect
+from gbuffer.preview import picture, write_png
+from service import pipeline
+from service.enhance import ReadRequest
+from service.registry import Context, runnable
+
+#: The layer name of the per-pixel congruence score (LLA Eq. 2) in pictures.
+SCORE_MAP = "score_map"
+#: Buffers resampled by nearest neighbour (averaging them across a silhouette would invent
+#: surfaces between the object and what lies behind it).
+_NEAREST = ("depth", "position")
+
+
+def downscale(frame: Frame, height: int) -> Frame:
+    """``frame`` resampled to ``height`` rows (area averaging, normals renormalised), its display
+    window and origin scaled with it, without the file's passthrough; ``frame`` itself when it
+    is not taller."""
+    h, w = frame.shape
+    if height >= h:
+        return replace(frame, passthrough=Passthrough(), holes=None, hole_beauty=None)
+    f = height / h
+    size = (max(1, round(w * f)), height)
+    buffers = {}
+    for name, data in frame.buffers.items():
+        how = cv2.INTER_NEAREST if name in _NEAREST else cv2.INTER_AREA
+        small = cv2.resize(data, size, interpolation=how).astype(np.float32)
+        if name == "normal":
+            length = np.linalg.norm(small, axis=2, keepdims=True)
+            small = np.divide(small, length, out=np.zeros_like(small), where=length > 1e-6)
+        buffers[name] = small.reshape(size[1], size[0], *data.shape[2:])
+    assert frame.display_size is not None
+    dw, dh = frame.display_size
+    return replace(
+        frame,
+        buffers=buffers,
+        display_size=(max(1, round(dw * f)), max(1, round(dh * f))),
+        origin=(round(frame.origin[0] * f), round(frame.origin[1] * f)),
+        outputs={},
+        passthrough=Passthrough(),
+        holes=None,
+        hole_beauty=None,
+    )
+
+
+def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
+    """What ``depict inspect --json`` says of the uploaded frame, with the layers the viewer
+    can show (its buffers and the score map)."""
+    info = inspect(source, read.preset, read.camera, read.options)
+    info["operators"] = runnable(info)
+    scored = "depth" in info["buffers"]
+    info["layers"] = [*info["buffers"], *([SCORE_MAP] if scored else [])]
+    return {"info": info}
+
+
+def _small(folder: Path, height: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
+    """The frame at ``height`` rows and the score of its beauty (None without depth), made on
+    first use and kept in the frame's folder."""
+    cache = folder / f"small_{height}.pkl"
+    if cache.is_file():
+        with open(cache, "rb") as f:
+            loaded: tuple[Frame, dict[str, Any] | None] = pickle.load(f)  # our own file
+        return loaded
+    small = downscale(read.read(folder / "in.exr"), height)
+    try:
+        score: dict[str, Any] | None = score_frame(small, maps=True)
+    except FrameError:  # no depth: nothing to score against
+        score = None
+    with atomic_path(cache) as tmp, open(tmp, "wb") as f:
+        pickle.dump((small, score), f, protocol=pickle.HIGHEST_PROTOCOL)
+    return small, score
+
+
+def _png(rgb: np.ndarray, path: Path) -> str:
+    """The picture as a base64 PNG (written to ``path`` on the way)."""
+    write_png(rgb, path)
+    return base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
+    shown = frame.copy()
+    shown.outputs = dict(score["layers"])
+    return picture(shown, "congruence")
+
+
+def layer_job(folder: str, height: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
+    """A picture of ``layer`` of the frame at the preview height, written to ``out`` (PNG)."""
+    small, score = _small(Path(folder), height, read)
+    if layer == SCORE_MAP:
+        if score is None:
+            raise FrameError("the frame has no depth: no score map")
+        write_png(_score_picture(small, score), out)
+    else:
+        write_png(picture(small, layer), out)
+    return {"size": list(small.shape[::-1])}
+
+
+def preview_job(
+    folder: str,
+    height: int,
+    steps: pipeline.Pipeline,
+    read: ReadRequest,
+    work: str,
+    exposure: float,
+) -> dict[str, Any]:
+    """``steps`` on the frame at the preview height: the result and its score map as base64
+    PNGs, and the congruence score of the input and of the result (on the input's scale)."""
+    small, before = _small(Path(folder), height, read)
+    out, op_s = pipeline.run_timed(small, steps, Context(files=False))
+    answer: dict[str, Any] = {
+        "image": _png(picture(out, "beauty", exposure), Path(work) / "after.png"),
+        "size": list(out.shape[::-1]),
+        "op_s": op_s,
+        "score": None,
+        "score_map": None,
+        "pipeline": json.loads(steps.spec.model_dump_json()),
+    }
+    if before is not None:
+        after = score_frame(out, maps=True, shading_norm=before["shading_norm"])
+        answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
+        answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
+    return answer
