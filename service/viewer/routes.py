@@ -29,6 +29,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from starlette.responses import FileResponse, RedirectResponse, Response
 
 import service
+from gbuffer.presets import PRESETS
 from service import pipeline as pipelines
 from service.enhance import ReadRequest, WriteRequest
 from service.http import forms, worker
@@ -110,6 +111,15 @@ async def _keep(server: Server, frame: StoredFrame) -> dict[str, Any]:
         raise
     frames.admit(frame)
     return _answer(frame, server)
+
+
+@router.get(
+    "/v1/presets",
+    summary="The renderer presets a frame can be read with (besides auto)",
+    responses=openapi_responses(401),
+)
+async def presets() -> list[str]:
+    return list(PRESETS)
 
 
 @router.post(

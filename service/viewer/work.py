@@ -24,6 +24,7 @@ import numpy as np
 from analysis.score import score_frame
 from gbuffer.atomic import atomic_path
 from gbuffer.errors import FrameError
+from gbuffer.exr import read_layout
 from gbuffer.frame import Frame, Passthrough
 from gbuffer.io import inspect
 from gbuffer.preview import picture, write_png
@@ -69,11 +70,41 @@ def downscale(frame: Frame, height: int) -> Frame:
     )
 
 
+#: Primaries and white point (x, y each: red, green, blue, white) of the usual colour spaces.
+_PRIMARIES = {
+    "Rec.709 / sRGB primaries": (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290),
+    "ACES2065-1 (AP0)": (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767),
+    "ACEScg (AP1)": (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767),
+    "Rec.2020": (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290),
+}
+#: String attributes where renderers and tools name the colour space.
+_COLOUR_NAMES = ("colorSpace", "colorspace", "oiio:ColorSpace", "interpretation")
+
+
+def colour_space(source: str) -> str:
+    """The colour space the header states: its ``chromaticities`` matched against the usual
+    primaries, or a colour space name; OpenEXR's default (Rec.709 primaries) when none."""
+    attributes = read_layout(source).parts[0].attributes
+    for name in _COLOUR_NAMES:
+        raw = attributes.get(name)
+        if raw is not None and raw.type == "string":
+            return f"{raw.data.decode('utf-8', 'replace')} ({name} attribute)"
+    raw = attributes.get("chromaticities")
+    if raw is None or len(raw.data) != 32:
+        return "not stated: linear Rec.709 primaries assumed (OpenEXR's default)"
+    values = np.frombuffer(raw.data, "<f4")
+    for label, primaries in _PRIMARIES.items():
+        if np.allclose(values, primaries, atol=2e-3):
+            return f"{label} (chromaticities attribute)"
+    return "chromaticities " + ", ".join(f"{v:.4g}" for v in values)
+
+
 def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
     """What ``depict inspect --json`` says of the uploaded frame, with the layers the viewer
     can show (its buffers and the score map)."""
     info = inspect(source, read.preset, read.camera, read.options)
     info["operators"] = runnable(info)
+    info["colour_space"] = colour_space(source)
     scored = "depth" in info["buffers"]
     info["layers"] = [*info["buffers"], *([SCORE_MAP] if scored else [])]
     return {"info": info}
