@@ -156,14 +156,20 @@ async def upload(
     "/v1/frames/example",
     summary="Keep the bundled example frame (a render of a cow) for the viewer",
     response_model=FrameInfo,
-    responses=openapi_responses(401, 404, 429, 503, 504),
+    responses=openapi_responses(401, 404, 413, 429, 503, 504),
 )
 async def example(server: Server) -> dict[str, Any]:
     if not EXAMPLE_MESH.is_file():
         raise Problem("not-found", "this installation has no example mesh (examples/spot.obj)")
+    width, height = EXAMPLE_SIZE
+    if width * height > server.settings.max_pixels:
+        raise Problem(
+            "limit",
+            f"the example is {width}x{height} pixels, over "
+            f"DEPICT_MAX_PIXELS={server.settings.max_pixels}",
+        )
     frame_id, folder = store(server).new_folder()
     frame = StoredFrame(frame_id, folder, "spot.exr", ReadRequest(limits=server.settings.limits), 0)
-    width, height = EXAMPLE_SIZE
     scene = RenderRequest(width=width, height=height, camera=None, azimuth=30.0, elevation=20.0)
     try:
         await server.run("render", worker.render_job, str(EXAMPLE_MESH), str(frame.source), scene)
@@ -265,7 +271,7 @@ async def enhanced(
     server: Server,
     work: Work,
     pipeline: Annotated[
-        str | None, Query(description="pipeline JSON (default: radiance_scaling)", max_length=65536)
+        str | None, Query(description="pipeline JSON (default: radiance_scaling)", max_length=4096)
     ] = None,
 ) -> Response:
     frame = store(server).get(frame_id)

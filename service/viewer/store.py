@@ -56,13 +56,12 @@ class FrameStore:
         self.max_bytes = max_bytes
         self.max_frames = max_frames
         self._frames: OrderedDict[str, StoredFrame] = OrderedDict()
-        root.mkdir(parents=True, exist_ok=True)
 
     def new_folder(self) -> tuple[str, Path]:
         """A fresh id and its (empty) folder, for an upload being received."""
         frame_id = secrets.token_urlsafe(16)
         folder = self.root / frame_id
-        folder.mkdir()
+        folder.mkdir(parents=True)
         return frame_id, folder
 
     def admit(self, frame: StoredFrame) -> None:
