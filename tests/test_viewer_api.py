@@ -90,7 +90,7 @@ def test_preview_is_downscaled_scored_and_follows_the_parameters(
     frame: dict[str, Any], api: httpx.Client
 ) -> None:
     url = f"/v1/frames/{frame['id']}/preview"
-    first = api.post(url, json={"pipeline": RS, "height": 60}).json()
+    first = api.post(url, json={"pipeline": RS, "height": 60, "score_map": True}).json()
     other = api.post(url, json={"pipeline": {"steps": [{"op": "radiance_scaling"}]}, "height": 60})
     a, b = png(b64decode(first["image"])), png(b64decode(other.json()["image"]))
     assert a.shape == (60, 80, 3) and first["size"] == [80, 60]
@@ -99,6 +99,7 @@ def test_preview_is_downscaled_scored_and_follows_the_parameters(
     assert 0 < score["before"] < 1 and 0 < score["after"] < 1 and score["before"] != score["after"]
     assert png(b64decode(first["score_map"])).shape == (60, 80, 3)
     assert first["pipeline"]["steps"][0]["params"] == {"gamma": 4.0}
+    assert other.json()["score_map"] is None  # not asked for
     tall = api.post(url, json={"pipeline": RS, "height": 4000}).json()
     assert tall["size"] == [160, 120]  # never above the frame's own height
 

@@ -69,6 +69,7 @@ class PreviewRequest(BaseModel):
     )
     height: int = Field(540, ge=16, le=4320, description="preview height (not above the frame's)")
     exposure: float = Field(0.0, ge=-20.0, le=20.0, description="preview exposure, stops")
+    score_map: bool = Field(False, description="also answer the result's per-pixel score map")
 
 
 class Preview(BaseModel):
@@ -79,7 +80,9 @@ class Preview(BaseModel):
         description="congruence score of the input and the result (on the input's scale); "
         "null without depth"
     )
-    score_map: str | None = Field(description="the result's per-pixel score, base64 PNG")
+    score_map: str | None = Field(
+        description="the result's per-pixel score, base64 PNG (when asked for)"
+    )
     pipeline: dict[str, Any] = Field(description="the pipeline as run")
     job_s: float = Field(description="seconds on the worker")
 
@@ -254,7 +257,8 @@ async def preview(
     height = min(body.height, frame.info["size"][1])
     lock = await _latest(request, frame)
     try:
-        args = (str(frame.folder), height, steps, frame.read, str(work.path), body.exposure)
+        folder, work_dir = str(frame.folder), str(work.path)
+        args = (folder, height, steps, frame.read, work_dir, body.exposure, body.score_map)
         return await server.run("preview", jobs.preview_job, *args)
     finally:
         lock.release()

@@ -119,13 +119,18 @@ def _small(folder: Path, height: int, read: ReadRequest) -> tuple[Frame, dict[st
             loaded: tuple[Frame, dict[str, Any] | None] = pickle.load(f)  # our own file
         return loaded
     small = downscale(read.read(folder / "in.exr"), height)
-    try:
-        score: dict[str, Any] | None = score_frame(small, maps=True)
-    except FrameError:  # no depth: nothing to score against
-        score = None
+    score = _score(small)
     with atomic_path(cache) as tmp, open(tmp, "wb") as f:
         pickle.dump((small, score), f, protocol=pickle.HIGHEST_PROTOCOL)
     return small, score
+
+
+def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | None:
+    """:func:`analysis.score.score_frame`, or None when the frame has no depth to score against."""
+    try:
+        return score_frame(frame, maps=maps, **params)
+    except FrameError:
+        return None
 
 
 def _png(rgb: np.ndarray, path: Path) -> str:
@@ -142,8 +147,9 @@ def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
 
 def layer_job(folder: str, height: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
     """A picture of ``layer`` of the frame at the preview height, written to ``out`` (PNG)."""
-    small, score = _small(Path(folder), height, read)
+    small, _ = _small(Path(folder), height, read)
     if layer == SCORE_MAP:
+        score = _score(small, maps=True)
         if score is None:
             raise FrameError("the frame has no depth: no score map")
         write_png(_score_picture(small, score), out)
@@ -159,9 +165,11 @@ def preview_job(
     read: ReadRequest,
     work: str,
     exposure: float,
+    score_map: bool,
 ) -> dict[str, Any]:
-    """``steps`` on the frame at the preview height: the result and its score map as base64
-    PNGs, and the congruence score of the input and of the result (on the input's scale)."""
+    """``steps`` on the frame at the preview height: the result as a base64 PNG, the congruence
+    score of the input and of the result (on the input's scale) and, with ``score_map``, the
+    result's per-pixel score as a base64 PNG."""
     small, before = _small(Path(folder), height, read)
     out, op_s = pipeline.run_timed(small, steps, Context(files=False))
     answer: dict[str, Any] = {
@@ -173,7 +181,8 @@ def preview_job(
         "pipeline": json.loads(steps.spec.model_dump_json()),
     }
     if before is not None:
-        after = score_frame(out, maps=True, shading_norm=before["shading_norm"])
+        after = score_frame(out, maps=score_map, shading_norm=before["shading_norm"])
         answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
-        answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
+        if score_map:
+            answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
     return answer

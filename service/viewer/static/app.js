@@ -122,7 +122,7 @@ function previewHeight() {
 let timer = null;
 let controller = null;
 
-function schedulePreview(delay = 60) {
+function schedulePreview(delay = 40) {
   clearTimeout(timer);
   timer = setTimeout(preview, delay);
   updateCommands();
@@ -142,7 +142,10 @@ async function preview() {
   setStatus("computing preview…", "busy");
   $("progress").hidden = false;
   try {
-    const body = JSON.stringify({ pipeline: pipeline(), height: previewHeight(), exposure: Number($("exposure").value) || 0 });
+    const body = JSON.stringify({
+      pipeline: pipeline(), height: previewHeight(), exposure: Number($("exposure").value) || 0,
+      score_map: state.layer === "score_map",
+    });
     const response = await api(`/v1/frames/${state.frame.id}/preview`, {
       method: "POST", body, signal: mine.signal, headers: { "Content-Type": "application/json" },
     });
@@ -287,7 +290,12 @@ function wire() {
     localStorage.setItem(SAVED, JSON.stringify({ ...savedPresets(), [name]: pipeline() }));
     fillPresets();
   });
-  $("layer").addEventListener("change", () => { state.layer = $("layer").value; showLayer().catch((e) => setStatus(e.message, "error")); });
+  $("layer").addEventListener("change", () => {
+    const mapBefore = state.layer === "score_map";
+    state.layer = $("layer").value;
+    showLayer().then(() => { if (mapBefore !== (state.layer === "score_map")) schedulePreview(0); })
+      .catch((e) => setStatus(e.message, "error"));
+  });
   for (const b of document.querySelectorAll(".modes button")) {
     b.addEventListener("click", () => setMode(b.dataset.mode));
   }
