@@ -146,7 +146,7 @@ function lightControl(name, schema, value, set) {
   const isList = schema.type === "array";
   const dflt = schema.default;
   const asText = (v) => (Array.isArray(v) ? v.join("; ") : v ?? "");
-  const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: asText(dflt) || "-0.4,0.6,0.7" });
+  const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: asText(dflt) || "the operator's default" });
   input.value = asText(value);
   const parse = (t) => {
     const items = t.split(";").map((s) => s.trim()).filter(Boolean);
@@ -174,10 +174,12 @@ function choiceControl(name, options, value, dflt, set) {
 function listControl(name, schema, value, set) {
   const items = schema.items || {};
   if (items.enum) {
+    const unknown = value === undefined && schema.default === undefined; // the operator decides
     const chosen = new Set(value ?? schema.default ?? []);
-    return el("span", { class: "checks" }, items.enum.map((o) => {
+    return el("span", { class: "checks", title: unknown ? "the operator's default" : "" }, items.enum.map((o) => {
       const box = el("input", { type: "checkbox", "aria-label": `${name} ${o}` });
       box.checked = chosen.has(o);
+      box.indeterminate = unknown;
       box.addEventListener("change", () => {
         box.checked ? chosen.add(o) : chosen.delete(o);
         set(items.enum.filter((x) => chosen.has(x)));
@@ -186,7 +188,8 @@ function listControl(name, schema, value, set) {
     }));
   }
   const numeric = items.type === "number" || items.type === "integer";
-  const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: (schema.default || []).join(", ") });
+  const placeholder = schema.default ? schema.default.join(", ") : "the operator's default";
+  const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder });
   input.value = (value || []).join(", ");
   input.addEventListener("change", () => {
     const parts = input.value.split(",").map((s) => s.trim()).filter(Boolean);
