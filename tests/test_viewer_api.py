@@ -104,6 +104,16 @@ def test_preview_is_downscaled_scored_and_follows_the_parameters(
     assert tall["size"] == [160, 120]  # never above the frame's own height
 
 
+@pytest.mark.parametrize("op", ["unsharp_masking", "light_alignment", "apparent_relief"])
+def test_every_kind_of_operator_previews_on_a_downscaled_path_traced_frame(
+    frame: dict[str, Any], api: httpx.Client, op: str
+) -> None:
+    body = {"pipeline": {"steps": [{"op": op}]}, "height": 60}
+    r = api.post(f"/v1/frames/{frame['id']}/preview", json=body)
+    assert r.status_code == 200, r.text
+    assert png(b64decode(r.json()["image"])).shape == (60, 80, 3)
+
+
 def test_enhanced_exr_is_the_clis_bit_for_bit(
     frame: dict[str, Any], api: httpx.Client, tmp_path: Path
 ) -> None:

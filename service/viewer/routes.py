@@ -50,8 +50,6 @@ EXAMPLE_SIZE = (960, 720)
 
 FrameId = Annotated[str, PathParam(pattern=ID_PATTERN.strip("^$"), description="frame id")]
 Height = Annotated[int, Query(ge=16, le=4320, description="picture height, pixels")]
-#: One preview of a frame at a time (a newer one waits, and drops the ones between).
-_LOCKS: dict[str, asyncio.Lock] = {}
 
 
 class FrameInfo(BaseModel):
@@ -201,7 +199,6 @@ async def frame_info(frame_id: FrameId, server: Server) -> dict[str, Any]:
 )
 async def forget(frame_id: FrameId, server: Server) -> Response:
     store(server).remove(frame_id)
-    _LOCKS.pop(frame_id, None)
     return Response(status_code=204)
 
 
@@ -233,7 +230,7 @@ async def _latest(request: Request, frame: StoredFrame) -> asyncio.Lock:
     went away. Returns the lock, held."""
     frame.latest_preview += 1
     ticket = frame.latest_preview
-    lock = _LOCKS.setdefault(frame.id, asyncio.Lock())
+    lock = frame.previewing
     await lock.acquire()
     if ticket != frame.latest_preview or await request.is_disconnected():
         lock.release()

@@ -10,6 +10,7 @@ limit. Expired frames are removed on every store operation, so no background tas
 
 from __future__ import annotations
 
+import asyncio
 import re
 import secrets
 import shutil
@@ -30,7 +31,8 @@ _ID = re.compile(ID_PATTERN)
 @dataclass
 class StoredFrame:
     """One uploaded frame: its folder, the client's file name, how to read it, what ``inspect``
-    found, and the number of the latest preview asked for (older ones are dropped)."""
+    found, the number of the latest preview asked for (older ones are dropped) and the lock that
+    lets one preview of it run at a time."""
 
     id: str
     folder: Path
@@ -40,6 +42,7 @@ class StoredFrame:
     info: dict[str, Any] = field(default_factory=dict)
     last_used: float = field(default_factory=time.monotonic)
     latest_preview: int = 0
+    previewing: asyncio.Lock = field(default_factory=asyncio.Lock)
 
     @property
     def source(self) -> Path:

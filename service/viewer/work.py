@@ -34,15 +34,17 @@ from service.registry import Context, runnable
 
 #: The layer name of the per-pixel congruence score (LLA Eq. 2) in pictures.
 SCORE_MAP = "score_map"
-#: Buffers resampled by nearest neighbour (averaging them across a silhouette would invent
-#: surfaces between the object and what lies behind it).
-_NEAREST = ("depth", "position")
+#: The geometry buffers, resampled by nearest neighbour so that each pixel keeps one source
+#: pixel's depth, position, normal and coverage together, as a renderer's centre sample does
+#: (averaging them across a silhouette would invent surfaces between the object and what lies
+#: behind it); the radiance buffers are averaged over the pixel's area.
+_NEAREST = ("depth", "position", "normal", "coverage")
 
 
 def downscale(frame: Frame, height: int) -> Frame:
-    """``frame`` resampled to ``height`` rows (area averaging, normals renormalised), its display
-    window and origin scaled with it, without the file's passthrough; ``frame`` itself when it
-    is not taller."""
+    """``frame`` resampled to ``height`` rows (:data:`_NEAREST` for the geometry, area averages
+    for the rest), its display window and origin scaled with it, without the file's
+    passthrough; ``frame`` itself when it is not taller."""
     h, w = frame.shape
     if height >= h:
         return replace(frame, passthrough=Passthrough(), holes=None, hole_beauty=None)
@@ -52,9 +54,6 @@ def downscale(frame: Frame, height: int) -> Frame:
     for name, data in frame.buffers.items():
         how = cv2.INTER_NEAREST if name in _NEAREST else cv2.INTER_AREA
         small = cv2.resize(data, size, interpolation=how).astype(np.float32)
-        if name == "normal":
-            length = np.linalg.norm(small, axis=2, keepdims=True)
-            small = np.divide(small, length, out=np.zeros_like(small), where=length > 1e-6)
         buffers[name] = small.reshape(size[1], size[0], *data.shape[2:])
     assert frame.display_size is not None
     dw, dh = frame.display_size
