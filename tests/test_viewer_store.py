@@ -18,11 +18,11 @@ BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.ex
 
 
 def put(store: FrameStore, size: int) -> StoredFrame:
-    frame_id, folder = store.new_folder()
-    (folder / "in.exr").write_bytes(b"x" * size)
-    frame = StoredFrame(frame_id, folder, "f.exr", ReadRequest(), size)
-    store.admit(frame)
-    return frame
+    with store.new_folder() as (frame_id, folder):
+        (folder / "in.exr").write_bytes(b"x" * size)
+        frame = StoredFrame(frame_id, folder, "f.exr", ReadRequest(), size)
+        store.admit(frame)
+        return frame
 
 
 def test_least_recently_used_goes_first_when_the_size_cap_is_reached(tmp_path: Path) -> None:
@@ -57,6 +57,14 @@ def test_frames_expire_after_their_last_use(tmp_path: Path) -> None:
     with pytest.raises(Problem) as err:
         store.get(old.id)
     assert err.value.kind == "not-found" and "upload it again" in err.value.detail
+
+
+def test_a_failed_upload_leaves_no_folder(tmp_path: Path) -> None:
+    store = FrameStore(tmp_path, ttl_s=60, max_bytes=1000, max_frames=10)
+    with pytest.raises(OSError), store.new_folder() as (_, folder):
+        (folder / "in.exr").write_bytes(b"partial")
+        raise OSError("the client went away")
+    assert not list(tmp_path.iterdir()) and len(store) == 0
 
 
 def test_unknown_and_malformed_ids_are_not_found(tmp_path: Path) -> None:

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import asyncio
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import anyio
-from fastapi import APIRouter, File, Form, Query, Request, UploadFile
+from fastapi import APIRouter, File, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field
@@ -34,6 +34,7 @@ from service import pipeline as pipelines
 from service.enhance import ReadRequest, WriteRequest
 from service.http import forms, worker
 from service.http.deps import Server, Work
+from service.http.routes.analysis import CameraField, MapField, NormalSpace, Preset
 from service.http.routes.frames import COMMON, binary
 from service.http.uploads import EXR_MEDIA_TYPE, receive_exr, scrubbed
 from service.problems import Problem, openapi_responses
@@ -100,17 +101,12 @@ def _answer(frame: StoredFrame, server: Server) -> dict[str, Any]:
 
 async def _keep(server: Server, frame: StoredFrame) -> dict[str, Any]:
     """Inspect the received frame on a worker, then keep it."""
-    frames = store(server)
-    try:
-        with scrubbed(frame.folder, {frame.source: frame.name}):
-            out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read)
-        frame.info = out["info"]
-        frame.info["file"] = frame.name
-        frame.size_bytes = frame.source.stat().st_size
-    except BaseException:
-        frames.discard(frame.folder)
-        raise
-    frames.admit(frame)
+    with scrubbed(frame.folder, {frame.source: frame.name}):
+        out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read)
+    frame.info = out["info"]
+    frame.info["file"] = frame.name
+    frame.size_bytes = frame.source.stat().st_size
+    store(server).admit(frame)
     return _answer(frame, server)
 
 
@@ -132,25 +128,19 @@ async def presets() -> list[str]:
 async def upload(
     file: Annotated[UploadFile, File(description="the EXR frame (G-buffer)")],
     server: Server,
-    preset: Annotated[str, Form(description="renderer preset (as for /v1/enhance)")] = "auto",
-    camera: Annotated[str | None, Form(description="camera JSON, overrides the file's")] = None,
-    map: Annotated[str | None, Form(description="JSON object buffer -> channels")] = None,
-    normal_space: Annotated[
-        Literal["world", "camera"] | None, Form(description="override the normals' space")
-    ] = None,
+    preset: Preset = "auto",
+    camera: CameraField = None,
+    map: MapField = None,
+    normal_space: NormalSpace = None,
 ) -> dict[str, Any]:
     fields = await forms.read_fields(preset, camera, map, normal_space)
     limits = server.settings.limits
-    frame_id, folder = store(server).new_folder()
     name = Path(file.filename or "frame.exr").name or "frame.exr"
-    frame = StoredFrame(frame_id, folder, name, fields.request(limits), 0)
-    try:
+    with store(server).new_folder() as (frame_id, folder):
+        frame = StoredFrame(frame_id, folder, name, fields.request(limits), 0)
         with scrubbed(folder, {frame.source: name}):
             await receive_exr(file, frame.source, limits)
-    except BaseException:
-        store(server).discard(folder)
-        raise
-    return await _keep(server, frame)
+        return await _keep(server, frame)
 
 
 @router.post(
@@ -169,15 +159,12 @@ async def example(server: Server) -> dict[str, Any]:
             f"the example is {width}x{height} pixels, over "
             f"DEPICT_MAX_PIXELS={server.settings.max_pixels}",
         )
-    frame_id, folder = store(server).new_folder()
-    frame = StoredFrame(frame_id, folder, "spot.exr", ReadRequest(limits=server.settings.limits), 0)
     scene = RenderRequest(width=width, height=height, camera=None, azimuth=30.0, elevation=20.0)
-    try:
+    read = ReadRequest(limits=server.settings.limits)
+    with store(server).new_folder() as (frame_id, folder):
+        frame = StoredFrame(frame_id, folder, "spot.exr", read, 0)
         await server.run("render", worker.render_job, str(EXAMPLE_MESH), str(frame.source), scene)
-    except BaseException:
-        store(server).discard(folder)
-        raise
-    return await _keep(server, frame)
+        return await _keep(server, frame)
 
 
 @router.get(

@@ -11,11 +11,13 @@ limit. Expired frames are removed on every store operation, so no background tas
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import re
 import secrets
 import shutil
 import time
 from collections import OrderedDict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -60,12 +62,18 @@ class FrameStore:
         self.max_frames = max_frames
         self._frames: OrderedDict[str, StoredFrame] = OrderedDict()
 
-    def new_folder(self) -> tuple[str, Path]:
-        """A fresh id and its (empty) folder, for an upload being received."""
+    @contextlib.contextmanager
+    def new_folder(self) -> Iterator[tuple[str, Path]]:
+        """A fresh id and its (empty) folder, for a frame being received; the folder is removed
+        when the block fails."""
         frame_id = secrets.token_urlsafe(16)
         folder = self.root / frame_id
         folder.mkdir(parents=True)
-        return frame_id, folder
+        try:
+            yield frame_id, folder
+        except BaseException:
+            self.discard(folder)
+            raise
 
     def admit(self, frame: StoredFrame) -> None:
         """Keep ``frame`` (its folder holds the checked upload): 413 when it alone is over the
