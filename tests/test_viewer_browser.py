@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import json
 import shutil
+import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+import httpx
 import pytest
 
 from service.cli import main as cli
@@ -20,6 +23,8 @@ from tests.live_server import Server, live_server
 CHROMIUM = Path("/usr/bin/chromium")
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
 KEY = "browser-key"
+#: A preview that keeps the only worker busy for seconds.
+HEAVY = {"steps": [{"op": "light_alignment"}] * 12}
 
 playwright = pytest.importorskip("playwright.sync_api", reason="the playwright package is absent")
 if not CHROMIUM.is_file():
@@ -127,3 +132,60 @@ def test_load_tune_compare_download(page: Any, server: Server, tmp_path: Path) -
     foreign = [u for u in requests if not u.startswith((server.url, "blob:", "data:"))]
     assert not foreign, foreign
     assert not errors, errors
+
+
+@pytest.fixture(scope="module")
+def busy_server() -> Iterator[Server]:
+    """One worker and no queue: a second job at a time is refused (429)."""
+    with live_server({"DEPICT_WORKERS": "1", "DEPICT_QUEUE": "0"}) as s:
+        yield s
+
+
+def test_example_light_sphere_score_map_and_busy(page: Any, busy_server: Server) -> None:
+    errors: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(f"page error: {e}"))
+    page.goto(f"{busy_server.url}/ui/")
+    page.wait_for_selector("#add-op option[value=exaggerated_shading]", state="attached")
+    page.click("#example")
+    wait_preview(page, 0)
+    assert "spot.exr (960×720)" in page.text_content("#info")
+
+    count = previews(page)
+    page.select_option("#add-op", "exaggerated_shading")
+    page.click("#add-step")
+    wait_preview(page, count)
+    shaded = page.evaluate(AFTER_HASH)
+    count = previews(page)
+    sphere = page.locator('li[data-op="exaggerated_shading"] canvas.sphere').bounding_box()
+    page.mouse.click(sphere["x"] + 0.8 * sphere["width"], sphere["y"] + 0.5 * sphere["height"])
+    wait_preview(page, count)
+    light = page.input_value('li[data-op="exaggerated_shading"] [data-param="light"] input')
+    x, y, z = (float(v) for v in light.split(","))
+    assert x > 0.5 and abs(y) < 0.05 and x * x + y * y + z * z == pytest.approx(1, abs=1e-2)
+    lit = page.evaluate(AFTER_HASH)
+    assert lit != shaded
+
+    count = previews(page)
+    page.select_option("#layer", "score_map")
+    wait_preview(page, count)
+    assert page.evaluate(AFTER_HASH) != lit  # the result's score map, not the result
+    assert errors == [], errors
+
+    other = httpx.post(f"{busy_server.url}/v1/frames/example", timeout=120).json()["id"]
+    heavy = threading.Thread(
+        target=httpx.post,
+        args=(f"{busy_server.url}/v1/frames/{other}/preview",),
+        kwargs={"json": {"pipeline": HEAVY, "height": 720}, "timeout": 300},
+    )
+    heavy.start()
+    time.sleep(1.0)  # the heavy preview is on the only worker now
+    count = previews(page)
+    page.locator(
+        'li[data-op="exaggerated_shading"] [data-param="contrast"] input[type=range]'
+    ).fill("300")
+    page.wait_for_function("document.getElementById('status').textContent.startsWith('busy')")
+    assert "busy" in page.get_attribute("#status", "class")
+    heavy.join()
+    wait_preview(page, count)  # retried after Retry-After, and shown
+    assert all("429" in e for e in errors), errors  # the refusal, nothing else

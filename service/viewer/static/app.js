@@ -188,13 +188,16 @@ function renderSteps() {
       state.steps.splice(Math.max(0, Math.min(state.steps.length, i + d)), 0, s);
       renderSteps(); schedulePreview();
     };
+    const fold = () => { step.folded = !step.folded; renderSteps(); };
     const head = el("div", { class: "step-head" },
+      el("button", { type: "button", class: "fold", title: "show or hide the parameters", onclick: fold }, step.folded ? "▸" : "▾"),
       el("span", { class: "grow", title: op.summary }, step.op),
       el("button", { type: "button", title: "up", onclick: move(-1) }, "↑"),
       el("button", { type: "button", title: "down", onclick: move(1) }, "↓"),
       el("button", { type: "button", title: "defaults", onclick: () => { step.params = {}; renderSteps(); schedulePreview(); } }, "reset"),
       el("button", { type: "button", title: "remove", onclick: () => { state.steps.splice(i, 1); renderSteps(); schedulePreview(); } }, "✕"));
-    return el("li", { "data-op": step.op }, head, stepForm(op, step.params, () => schedulePreview()));
+    const form = step.folded ? null : stepForm(op, step.params, () => schedulePreview());
+    return el("li", { "data-op": step.op }, head, form);
   }));
 }
 
@@ -275,6 +278,7 @@ function wire() {
     if (e.dataTransfer.files[0]) upload(e.dataTransfer.files[0]);
   });
   $("add-step").addEventListener("click", () => {
+    for (const s of state.steps) s.folded = true; // the new step's form in view
     state.steps.push({ op: $("add-op").value, params: {} });
     renderSteps(); schedulePreview();
   });

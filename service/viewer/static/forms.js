@@ -198,6 +198,17 @@ function listControl(name, schema, value, set) {
   return input;
 }
 
+// A number or a word (`auto`) without bounds: a text field, empty for the default.
+function autoControl(name, schema, value, set) {
+  const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: String(schema.default ?? "") });
+  input.value = value === undefined ? "" : String(value);
+  input.addEventListener("change", () => {
+    const text = input.value.trim();
+    set(text === "" ? undefined : Number.isFinite(Number(text)) ? Number(text) : text);
+  });
+  return input;
+}
+
 function jsonControl(name, value, set) {
   const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: "JSON" });
   input.value = value === undefined ? "" : JSON.stringify(value);
@@ -223,6 +234,7 @@ function control(name, schema, value, set) {
     return numberControl(name, schema, value, set);
   }
   if (listSchema) return listControl(name, listSchema, value, set);
+  if (k.number && k.auto !== null) return autoControl(name, schema, value, set);
   if (schema.type === "string" || (k.other && k.other.type === "string")) {
     const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: schema.default ?? "" });
     input.value = value ?? "";
