@@ -15,6 +15,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import Any
 
 import httpx
 
@@ -29,12 +30,10 @@ PREVIEW_HEIGHT = 540  # the page's default
 ENV = {"DEPICT_WORKERS": "1", "DEPICT_TIMEOUT_S": "600"}
 
 
-def slider_ms(page: object) -> tuple[list[float], list[str]]:
+def slider_ms(page: Any) -> tuple[list[float], list[str]]:
     """Milliseconds from each γ slider move to the new preview on the page, and the page's own
     status lines."""
-    gamma = page.locator(  # type: ignore[attr-defined]
-        'li[data-op="radiance_scaling"] [data-param="gamma"] input[type=range]'
-    )
+    gamma = page.locator('li[data-op="radiance_scaling"] [data-param="gamma"] input[type=range]')
     times, statuses = [], []
     for i in range(REPEAT):
         seen = previews(page)
@@ -42,7 +41,7 @@ def slider_ms(page: object) -> tuple[list[float], list[str]]:
         gamma.fill(str(500 + 20 * i))  # γ from 1 up, a new value each time
         wait_preview(page, seen)
         times.append((time.perf_counter() - t0) * 1e3)
-        statuses.append(page.text_content("#status"))  # type: ignore[attr-defined]
+        statuses.append(page.text_content("#status"))
     return times, statuses
 
 
