@@ -6,7 +6,8 @@ Debian's Chromium through Playwright, with the default pipeline (Radiance Scalin
 times, the γ slider moves and the time until the page shows the new preview is measured: the
 page's debounce (40 ms), the request, the job on the worker (the pipeline on the 960x540 copy,
 its PNG, the congruence score), the answer and its display. Also the preview
-request alone (no browser) at several preview heights, with the worker's share.
+request alone (no browser) at several preview heights, with the worker's share; and how far
+each operator on the half-size copy is from its full-resolution result shrunk to half size.
 """
 
 from __future__ import annotations
@@ -18,11 +19,16 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 
 from bench.common import HD
 from bench.viewer_browser import previews, viewer, wait_preview
+from gbuffer.frame import Frame
 from gbuffer.io import write
 from gbuffer.render import load_mesh, render
+from service import pipeline
+from service.registry import Context
+from service.viewer.work import downscale
 
 ROOT = Path(__file__).resolve().parent.parent
 REPEAT = 10
@@ -62,11 +68,25 @@ def api_ms(url: str, frame_id: str, height: int) -> tuple[float, float]:
     return statistics.median(trips), statistics.median(jobs)
 
 
+def carried(frame: Frame, op: str) -> float:
+    """How far ``op`` on the half-size copy is from its full-resolution result shrunk to half
+    size, as a fraction of the operator's own effect there (mean absolute differences)."""
+    steps = pipeline.compile([{"op": op}])
+    full, _ = pipeline.run_timed(frame, steps, Context())
+    preview, _ = pipeline.run_timed(downscale(frame, 2), steps, Context())
+    reference = downscale(full, 2).buffers["beauty"]
+    effect = np.abs(reference - downscale(frame, 2).buffers["beauty"]).mean()
+    return float(np.abs(preview.buffers["beauty"] - reference).mean() / effect)
+
+
 def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="bench-viewer-"))
     frame = work / "spot_1080p.exr"
     h, w = HD
-    write(render(load_mesh(ROOT / "examples" / "spot.obj"), w, h), frame)
+    rendered = render(load_mesh(ROOT / "examples" / "spot.obj"), w, h)
+    write(rendered, frame)
+    for op in ("radiance_scaling", "light_alignment", "unsharp_masking"):
+        print(f"{op} on the 960x540 copy vs its 1080p result shrunk: {carried(rendered, op):.2f}")
     print(f"input {frame.name}: {w}x{h}, {frame.stat().st_size / 2**20:.1f} MiB; one worker")
     with viewer(frame, ENV) as (page, url):
         times, statuses = slider_ms(page)

@@ -14,7 +14,7 @@ from gbuffer.io import read
 from gbuffer.render import load_mesh, render
 from service import pipeline
 from service.registry import Context
-from service.viewer.work import colour_space, downscale
+from service.viewer.work import colour_space, downscale, shrink_factor
 from tests import exr_factory
 from tests.live_server import ROOT
 
@@ -29,7 +29,7 @@ def test_downscale_keeps_source_geometry_averages_radiance_and_keeps_the_camera(
     sphere: Path,
 ) -> None:
     frame = read(sphere)
-    small = downscale(frame, 48)
+    small = downscale(frame, 2)
     assert small.shape == (48, 64) and small.display_size == (64, 48)
     assert small.camera == frame.camera and not small.passthrough.parts
     covered = np.isfinite(small.buffers["depth"])
@@ -38,7 +38,11 @@ def test_downscale_keeps_source_geometry_averages_radiance_and_keeps_the_camera(
     depths = set(np.unique(frame.buffers["depth"][np.isfinite(frame.buffers["depth"])]))
     assert set(np.unique(small.buffers["depth"][covered])) <= depths  # never a blend across edges
     assert small.buffers["beauty"].mean() == pytest.approx(frame.buffers["beauty"].mean(), rel=0.02)
-    same = downscale(frame, 96)
+    assert np.array_equal(small.buffers["normal"], frame.buffers["normal"][1::2, 1::2])
+    assert small.buffers["beauty"][0, 0] == pytest.approx(
+        frame.buffers["beauty"][:2, :2].mean((0, 1))
+    )
+    same = downscale(frame, 1)
     assert same.buffers is frame.buffers and not same.passthrough.parts
 
 
@@ -47,17 +51,24 @@ def cow() -> Frame:
     return render(load_mesh(ROOT / "examples" / "spot.obj"), 800, 600)
 
 
+@pytest.mark.parametrize(
+    ("height", "asked", "factor"), [(1080, 540, 2), (960, 540, 2), (720, 540, 1), (2160, 540, 4)]
+)
+def test_shrink_factor_is_the_nearest_whole_number(height: int, asked: int, factor: int) -> None:
+    assert shrink_factor(height, asked) == factor
+    assert shrink_factor(height, 10 * height) == 1
+
+
 @pytest.mark.parametrize("op", ["radiance_scaling", "light_alignment", "unsharp_masking"])
 def test_a_look_tuned_on_the_preview_carries_to_the_full_frame(cow: Frame, op: str) -> None:
     """An operator on the half-size copy vs the full-size result downscaled: the two differ far
     less than either differs from the input (sizes are relative to the image height)."""
     steps = pipeline.compile([{"op": op}])
-    half = cow.shape[0] // 2
     full, _ = pipeline.run_timed(cow, steps, Context())
-    on_preview, _ = pipeline.run_timed(downscale(cow, half), steps, Context())
-    reference = downscale(full, half).buffers["beauty"]
+    on_preview, _ = pipeline.run_timed(downscale(cow, 2), steps, Context())
+    reference = downscale(full, 2).buffers["beauty"]
     carried = np.abs(on_preview.buffers["beauty"] - reference).mean()
-    effect = np.abs(reference - downscale(cow, half).buffers["beauty"]).mean()
+    effect = np.abs(reference - downscale(cow, 2).buffers["beauty"]).mean()
     assert effect > 0 and carried < 0.3 * effect, (carried, effect)
 
 

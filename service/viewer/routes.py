@@ -66,7 +66,13 @@ class PreviewRequest(BaseModel):
         default_factory=lambda: {"steps": [{"op": "radiance_scaling"}]},
         description='pipeline JSON: {"steps": [{"op": NAME, "params": {...}}]}',
     )
-    height: int = Field(540, ge=16, le=4320, description="preview height (not above the frame's)")
+    height: int = Field(
+        540,
+        ge=16,
+        le=4320,
+        description="preview height asked for: the frame's height divided by the nearest whole "
+        "number (never above the frame's)",
+    )
     exposure: float = Field(0.0, ge=-20.0, le=20.0, description="preview exposure, stops")
     score_map: bool = Field(False, description="also answer the result's per-pixel score map")
 
@@ -207,8 +213,10 @@ async def layer_png(
         have = ", ".join(frame.info.get("layers", []))
         raise Problem("not-found", f"the frame has no layer {layer!r}; layers: {have}")
     out = work.path / "layer.png"
-    h = min(height, frame.info["size"][1])
-    await server.run("layer", jobs.layer_job, str(frame.folder), h, layer, frame.read, str(out))
+    factor = jobs.shrink_factor(frame.info["size"][1], height)
+    await server.run(
+        "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
+    )
     return FileResponse(out, media_type="image/png")
 
 
@@ -238,11 +246,11 @@ async def preview(
 ) -> dict[str, Any]:
     frame = store(server).get(frame_id)
     steps = await anyio.to_thread.run_sync(pipelines.compile, body.pipeline)
-    height = min(body.height, frame.info["size"][1])
+    factor = jobs.shrink_factor(frame.info["size"][1], body.height)
     lock = await _latest(request, frame)
     try:
         folder, work_dir = str(frame.folder), str(work.path)
-        args = (folder, height, steps, frame.read, work_dir, body.exposure, body.score_map)
+        args = (folder, factor, steps, frame.read, work_dir, body.exposure, body.score_map)
         return await server.run("preview", jobs.preview_job, *args)
     finally:
         lock.release()

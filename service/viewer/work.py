@@ -1,10 +1,11 @@
 """The viewer's work on the service's worker processes (:meth:`service.http.deps.Services.run`,
 so within its queue and time limits): what a frame holds, pictures of its layers, and previews.
 
-Previews run on a copy of the frame downscaled to the preview height (:func:`downscale`), made
-once per frame and height and kept in the frame's folder (``small_<height>.pkl``, with the
-score of the input at that size). Every size of the operators is relative to the image height,
-so a look tuned on the preview carries to the full-resolution frame, which
+Previews run on a copy of the frame shrunk by a whole number near the ratio of its height to the
+preview height (:func:`shrink_factor`, :func:`downscale`), made once per frame and factor and
+kept in the frame's folder (``small_<factor>.pkl``, with the score of the input at that size).
+Every size of the operators is relative to the image height, so a look tuned on the preview
+carries to the full-resolution frame, which
 ``GET /v1/frames/{id}/enhanced.exr`` enhances exactly as ``depict enhance`` does
 (:func:`service.http.worker.enhance_job`).
 """
@@ -34,34 +35,45 @@ from service.registry import Context, runnable
 
 #: The layer name of the per-pixel congruence score (LLA Eq. 2) in pictures.
 SCORE_MAP = "score_map"
-#: The geometry buffers, resampled by nearest neighbour so that each pixel keeps one source
-#: pixel's depth, position, normal and coverage together, as a renderer's centre sample does
-#: (averaging them across a silhouette would invent surfaces between the object and what lies
-#: behind it); the radiance buffers are averaged over the pixel's area.
-_NEAREST = ("depth", "position", "normal", "coverage")
+#: The geometry buffers: each preview pixel keeps one source pixel's depth, position, normal and
+#: coverage together, as a renderer's centre sample does (averaging them across a silhouette
+#: would invent surfaces between the object and what lies behind it, and averaged normals are
+#: not what the operators' surface filters expect); the radiance buffers are block averages.
+_GEOMETRY = ("depth", "position", "normal", "coverage")
 
 
-def downscale(frame: Frame, height: int) -> Frame:
-    """``frame`` resampled to ``height`` rows (:data:`_NEAREST` for the geometry, area averages
-    for the rest), its display window and origin scaled with it, without the file's
-    passthrough; ``frame`` itself when it is not taller."""
-    h, w = frame.shape
-    if height >= h:
+def shrink_factor(frame_height: int, height: int) -> int:
+    """The whole number the frame's height is divided by for a preview about ``height`` rows
+    high: the nearest to the ratio (a whole number, so that the geometry is sampled at the same
+    place of every block: a fractional step would alternate between two spacings, and the
+    operators' derivatives would show the pattern)."""
+    return max(1, round(frame_height / max(1, height)))
+
+
+def downscale(frame: Frame, factor: int) -> Frame:
+    """``frame`` shrunk by ``factor`` (blocks of factor × factor pixels: the centre pixel of
+    :data:`_GEOMETRY`, the mean of the rest), its display window and origin with it, without
+    the file's passthrough; the same buffers when ``factor`` is 1."""
+    if factor <= 1:
         return replace(frame, passthrough=Passthrough(), holes=None, hole_beauty=None)
-    f = height / h
-    size = (max(1, round(w * f)), height)
+    h, w = frame.shape
+    rows, cols = max(1, h // factor), max(1, w // factor)
+    centre = factor // 2
     buffers = {}
     for name, data in frame.buffers.items():
-        how = cv2.INTER_NEAREST if name in _NEAREST else cv2.INTER_AREA
-        small = cv2.resize(data, size, interpolation=how).astype(np.float32)
-        buffers[name] = small.reshape(size[1], size[0], *data.shape[2:])
+        if name in _GEOMETRY:
+            small = data[centre : rows * factor : factor, centre : cols * factor : factor]
+        else:
+            block = data[: rows * factor, : cols * factor]
+            small = cv2.resize(block, (cols, rows), interpolation=cv2.INTER_AREA)
+        buffers[name] = np.ascontiguousarray(small, np.float32).reshape(rows, cols, *data.shape[2:])
     assert frame.display_size is not None
     dw, dh = frame.display_size
     return replace(
         frame,
         buffers=buffers,
-        display_size=(max(1, round(dw * f)), max(1, round(dh * f))),
-        origin=(round(frame.origin[0] * f), round(frame.origin[1] * f)),
+        display_size=(max(1, dw // factor), max(1, dh // factor)),
+        origin=(frame.origin[0] // factor, frame.origin[1] // factor),
         outputs={},
         passthrough=Passthrough(),
         holes=None,
@@ -109,15 +121,15 @@ def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
     return {"info": info}
 
 
-def _small(folder: Path, height: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
-    """The frame at ``height`` rows and the score of its beauty (None without depth), made on
+def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
+    """The frame shrunk by ``factor`` and the score of its beauty (None without depth), made on
     first use and kept in the frame's folder."""
-    cache = folder / f"small_{height}.pkl"
+    cache = folder / f"small_{factor}.pkl"
     if cache.is_file():
         with open(cache, "rb") as f:
             loaded: tuple[Frame, dict[str, Any] | None] = pickle.load(f)  # our own file
         return loaded
-    small = downscale(read.read(folder / "in.exr"), height)
+    small = downscale(read.read(folder / "in.exr"), factor)
     score = _score(small)
     with atomic_path(cache) as tmp, open(tmp, "wb") as f:
         pickle.dump((small, score), f, protocol=pickle.HIGHEST_PROTOCOL)
@@ -144,9 +156,9 @@ def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
     return picture(shown, "congruence")
 
 
-def layer_job(folder: str, height: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
-    """A picture of ``layer`` of the frame at the preview height, written to ``out`` (PNG)."""
-    small, _ = _small(Path(folder), height, read)
+def layer_job(folder: str, factor: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
+    """A picture of ``layer`` of the frame shrunk by ``factor``, written to ``out`` (PNG)."""
+    small, _ = _small(Path(folder), factor, read)
     if layer == SCORE_MAP:
         score = _score(small, maps=True)
         if score is None:
@@ -159,17 +171,17 @@ def layer_job(folder: str, height: int, layer: str, read: ReadRequest, out: str)
 
 def preview_job(
     folder: str,
-    height: int,
+    factor: int,
     steps: pipeline.Pipeline,
     read: ReadRequest,
     work: str,
     exposure: float,
     score_map: bool,
 ) -> dict[str, Any]:
-    """``steps`` on the frame at the preview height: the result as a base64 PNG, the congruence
+    """``steps`` on the frame shrunk by ``factor``: the result as a base64 PNG, the congruence
     score of the input and of the result (on the input's scale) and, with ``score_map``, the
     result's per-pixel score as a base64 PNG."""
-    small, before = _small(Path(folder), height, read)
+    small, before = _small(Path(folder), factor, read)
     out, op_s = pipeline.run_timed(small, steps, Context(files=False))
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure), Path(work) / "after.png"),
