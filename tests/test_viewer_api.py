@@ -23,6 +23,7 @@ from service.cli import main as cli
 from tests.live_server import Server, live_server
 
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
+CRYPTO = BLENDER.with_name("cryptomatte.exr")
 KEY = "viewer-key"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 RS = {"steps": [{"op": "radiance_scaling", "params": {"gamma": 4.0}}]}
@@ -112,6 +113,24 @@ def test_every_kind_of_operator_previews_on_a_downscaled_path_traced_frame(
     r = api.post(f"/v1/frames/{frame['id']}/preview", json=body)
     assert r.status_code == 200, r.text
     assert png(b64decode(r.json()["image"])).shape == (60, 80, 3)
+
+
+def test_a_masked_step_previews_with_the_files_cryptomatte(api: httpx.Client) -> None:
+    """The preview's copy carries the file's channels shrunk as the geometry is, so a step
+    restricted to a Cryptomatte object changes that object and leaves the rest as it was."""
+    with open(CRYPTO, "rb") as f:
+        frame = api.post("/v1/frames", files={"file": (CRYPTO.name, f)}).json()
+    url = f"/v1/frames/{frame['id']}/preview"
+    rs = {"op": "radiance_scaling", "params": {"gamma": 4.0}}
+    masked = {"steps": [{**rs, "params": {"gamma": 4.0, "mask": "cryptomatte:Suzanne*"}}]}
+    before = png(api.get(f"/v1/frames/{frame['id']}/layers/beauty.png?height=120").content)
+    shown = {}
+    for name, pipe in (("masked", masked), ("whole", {"steps": [rs]})):
+        r = api.post(url, json={"pipeline": pipe, "height": 120})
+        assert r.status_code == 200, r.text
+        shown[name] = np.all(png(b64decode(r.json()["image"])) == before, axis=2).mean()
+    assert shown["masked"] < 1.0  # Suzanne changed
+    assert shown["whole"] < shown["masked"] - 0.02  # the rest did not (the whole step: 7 %)
 
 
 def test_enhanced_exr_is_the_clis_bit_for_bit(

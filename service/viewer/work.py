@@ -42,6 +42,16 @@ SCORE_MAP = "score_map"
 _GEOMETRY = ("depth", "position", "normal", "coverage")
 
 
+#: Parameters that may name a layer of the file (a mask, a gain map, an ARM, ...): a preview
+#: whose steps set one also loads the file's channels.
+FILE_PARAMETERS = frozenset({"mask", "gain_map", "unlit", "arm", "toon"})
+
+
+def reads_file_layers(steps: pipeline.Pipeline) -> bool:
+    """Whether a step sets a parameter of :data:`FILE_PARAMETERS`."""
+    return any(FILE_PARAMETERS & set(step.params) for step in steps.spec.steps)
+
+
 def shrink_factor(frame_height: int, height: int) -> int:
     """The whole number the frame's height is divided by for a preview about ``height`` rows
     high: the nearest to the ratio (a whole number, so that the geometry is sampled at the same
@@ -123,17 +133,49 @@ def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
 
 def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
     """The frame shrunk by ``factor`` and the score of its beauty (None without depth), made on
-    first use and kept in the frame's folder."""
+    first use and kept in the frame's folder, with the file's channels shrunk beside them
+    (:func:`_file_layers`)."""
     cache = folder / f"small_{factor}.pkl"
     if cache.is_file():
         with open(cache, "rb") as f:
             loaded: tuple[Frame, dict[str, Any] | None] = pickle.load(f)  # our own file
         return loaded
-    small = downscale(read.read(folder / "in.exr"), factor)
+    frame = read.read(folder / "in.exr")
+    small = downscale(frame, factor)
     score = _score(small)
-    with atomic_path(cache) as tmp, open(tmp, "wb") as f:
-        pickle.dump((small, score), f, protocol=pickle.HIGHEST_PROTOCOL)
+    for path, data in (
+        (cache.with_suffix(".layers.pkl"), shrink_passthrough(frame, factor)),
+        (cache, (small, score)),
+    ):
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
     return small, score
+
+
+def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
+    """``small`` with the file's channels (shrunk by ``factor``), for the steps that read a
+    layer of the file (:data:`FILE_PARAMETERS`)."""
+    with open(folder / f"small_{factor}.layers.pkl", "rb") as f:
+        passthrough: Passthrough = pickle.load(f)  # our own file
+    return replace(small, passthrough=passthrough)
+
+
+def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
+    """The channels of the frame's file on its pixel grid, shrunk by ``factor`` as the geometry
+    is (one source pixel a block: Cryptomatte ids and index passes stay exact), with the headers
+    as read (manifests, names); other channels are left out."""
+    rows, cols = (max(1, n // factor) for n in frame.shape)
+    centre = factor // 2
+    parts = []
+    for header, channels in frame.passthrough.parts:
+        small = {}
+        for name, value in channels.items():
+            pixels = np.asarray(getattr(value, "pixels", value))
+            if pixels.shape[:2] == frame.shape:
+                block = pixels[centre : rows * factor : factor, centre : cols * factor : factor]
+                small[name] = np.ascontiguousarray(block)
+        parts.append((dict(header), small))
+    return Passthrough(parts, frame.passthrough.primary)
 
 
 def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | None:
@@ -182,6 +224,8 @@ def preview_job(
     score of the input and of the result (on the input's scale) and, with ``score_map``, the
     result's per-pixel score as a base64 PNG."""
     small, before = _small(Path(folder), factor, read)
+    if reads_file_layers(steps):
+        small = _file_layers(Path(folder), factor, small)
     out, op_s = pipeline.run_timed(small, steps, Context(files=False))
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure), Path(work) / "after.png"),
