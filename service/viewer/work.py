@@ -60,19 +60,24 @@ def shrink_factor(frame_height: int, height: int) -> int:
     return max(1, round(frame_height / max(1, height)))
 
 
+def _centres(pixels: np.ndarray, factor: int) -> np.ndarray:
+    """The pixel at the centre of each whole factor × factor block (a view)."""
+    rows, cols = (max(1, n // factor) for n in pixels.shape[:2])
+    c = factor // 2
+    return pixels[c : rows * factor : factor, c : cols * factor : factor]
+
+
 def downscale(frame: Frame, factor: int) -> Frame:
     """``frame`` shrunk by ``factor`` (blocks of factor × factor pixels: the centre pixel of
     :data:`_GEOMETRY`, the mean of the rest), its display window and origin with it, without
     the file's passthrough; the same buffers when ``factor`` is 1."""
     if factor <= 1:
         return replace(frame, passthrough=Passthrough(), holes=None, hole_beauty=None)
-    h, w = frame.shape
-    rows, cols = max(1, h // factor), max(1, w // factor)
-    centre = factor // 2
+    rows, cols = (max(1, n // factor) for n in frame.shape)
     buffers = {}
     for name, data in frame.buffers.items():
         if name in _GEOMETRY:
-            small = data[centre : rows * factor : factor, centre : cols * factor : factor]
+            small = _centres(data, factor)
         else:
             block = data[: rows * factor, : cols * factor]
             small = cv2.resize(block, (cols, rows), interpolation=cv2.INTER_AREA)
@@ -164,16 +169,13 @@ def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
     """The channels of the frame's file on its pixel grid, shrunk by ``factor`` as the geometry
     is (one source pixel a block: Cryptomatte ids and index passes stay exact), with the headers
     as read (manifests, names); other channels are left out."""
-    rows, cols = (max(1, n // factor) for n in frame.shape)
-    centre = factor // 2
     parts = []
     for header, channels in frame.passthrough.parts:
         small = {}
         for name, value in channels.items():
             pixels = np.asarray(getattr(value, "pixels", value))
             if pixels.shape[:2] == frame.shape:
-                block = pixels[centre : rows * factor : factor, centre : cols * factor : factor]
-                small[name] = np.ascontiguousarray(block)
+                small[name] = np.ascontiguousarray(_centres(pixels, factor))
         parts.append((dict(header), small))
     return Passthrough(parts, frame.passthrough.primary)
 
