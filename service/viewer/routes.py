@@ -6,8 +6,9 @@ their layers, previews and the full-resolution result; and the page itself at ``
   bundled example (a render of ``examples/spot.obj``);
 * ``GET /v1/frames/{id}``: what ``inspect`` found; ``DELETE /v1/frames/{id}``: forget it now;
 * ``GET /v1/frames/{id}/layers/{layer}.png?height=``: a layer as a picture;
-* ``POST /v1/frames/{id}/preview``: JSON ``{"pipeline", "height", "exposure"}`` -> the result
-  and its score map (base64 PNGs), the congruence scores before and after;
+* ``POST /v1/frames/{id}/preview``: JSON ``{"pipeline", "height", "exposure", "score_map"}``
+  -> the result (and its score map when asked for) as base64 PNGs, the congruence scores before
+  and after;
 * ``GET /v1/frames/{id}/enhanced.exr?pipeline=``: the full-resolution EXR, the bytes
   ``depict enhance`` writes.
 
