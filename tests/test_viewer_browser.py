@@ -189,3 +189,23 @@ def test_example_light_sphere_score_map_and_busy(page: Any, busy_server: Server)
     heavy.join()
     wait_preview(page, count)  # retried after Retry-After, and shown
     assert all("429" in e for e in errors), errors  # the refusal, nothing else
+
+
+def test_a_cryptomatte_object_as_a_steps_mask(page: Any, server: Server) -> None:
+    page.add_init_script(f"sessionStorage.setItem('depict.key', '{KEY}')")
+    page.goto(f"{server.url}/ui/")
+    page.wait_for_selector("#add-op option[value=radiance_scaling]", state="attached")
+    page.set_input_files("#file", str(BLENDER.with_name("cryptomatte.exr")))
+    wait_preview(page, 0)
+    assert "Suzanne" in page.text_content("#info")
+    offered = page.eval_on_selector_all("#suggest-mask option", "os => os.map(o => o.value)")
+    assert {"cryptomatte:Suzanne", "cryptomatte/CryptoMaterial:SuzanneMat", "ao"} <= set(offered)
+    whole = page.evaluate(AFTER_HASH)
+    count = previews(page)
+    field = page.locator('li[data-op="radiance_scaling"] [data-param="mask"] input')
+    assert field.get_attribute("list") == "suggest-mask"
+    field.fill("cryptomatte/CryptoMaterial:SuzanneMat")
+    field.dispatch_event("change")
+    wait_preview(page, count)
+    assert page.evaluate(AFTER_HASH) != whole
+    assert "error" not in page.get_attribute("#status", "class")

@@ -54,6 +54,7 @@ async function loadFrame(request, label) {
     const answer = await (await api(request.path, request.options)).json();
     state.frame = answer;
     showInfo(answer.info);
+    fillMasks(answer.info);
     fillLayers(answer.info.layers);
     setStatus(`${answer.name} loaded`);
     await showLayer();
@@ -88,6 +89,7 @@ function showInfo(info) {
     ["camera from", info.camera_source || "—"],
     ["colour space", info.colour_space || "unknown"],
   ];
+  for (const layer of info.cryptomatte || []) rows.push([layer.name, Object.keys(layer.names).join(", ")]);
   const blocked = Object.entries(info.operators.not_runnable).map(([k, v]) => `${k} (needs ${v.join(", ")})`);
   if (blocked.length) rows.push(["cannot run", blocked.join("; ")]);
   for (const line of [...info.problems, ...info.warnings]) rows.push(["note", line]);
@@ -95,6 +97,16 @@ function showInfo(info) {
     ? el("details", {}, el("summary", {}, `${Object.keys(info.buffers).length} buffers: ${Object.keys(info.buffers).join(", ")}`), v)
     : v);
   $("info").replaceChildren(...rows.flatMap(([k, v]) => [el("dt", {}, k), el("dd", {}, cell(k, v))]));
+}
+
+// What a step's `mask` may name in this frame: its one-channel buffers and its Cryptomatte names.
+function fillMasks(info) {
+  const one = Object.entries(info.buffers).filter(([, b]) => b.shape.length === 2).map(([k]) => k);
+  const crypto = (info.cryptomatte || []).flatMap((layer, i) => {
+    const prefix = i === 0 ? "cryptomatte" : `cryptomatte/${layer.name.split(".").pop()}`;
+    return Object.keys(layer.names).map((n) => `${prefix}:${n}`);
+  });
+  $("suggest-mask").replaceChildren(...[...crypto, ...one].map((v) => el("option", { value: v })));
 }
 
 function fillLayers(layers) {
@@ -196,7 +208,7 @@ function renderSteps() {
       el("button", { type: "button", title: "down", onclick: move(1) }, "↓"),
       el("button", { type: "button", title: "defaults", onclick: () => { step.params = {}; renderSteps(); schedulePreview(); } }, "reset"),
       el("button", { type: "button", title: "remove", onclick: () => { state.steps.splice(i, 1); renderSteps(); schedulePreview(); } }, "✕"));
-    const form = step.folded ? null : stepForm(op, step.params, () => schedulePreview());
+    const form = step.folded ? null : stepForm(op, step.params, () => schedulePreview(), { mask: true });
     return el("li", { "data-op": step.op }, head, form);
   }));
 }

@@ -219,7 +219,7 @@ function jsonControl(name, value, set) {
   return input;
 }
 
-function control(name, schema, value, set) {
+function control(name, schema, value, set, suggestions) {
   const k = kinds(schema);
   const listSchema = schema.type === "array" ? schema : k.other && k.other.type === "array" ? k.other : null;
   if (name === "light" || name === "lights") return lightControl(name, listSchema || schema, value, set);
@@ -236,7 +236,8 @@ function control(name, schema, value, set) {
   if (listSchema) return listControl(name, listSchema, value, set);
   if (k.number && k.auto !== null) return autoControl(name, schema, value, set);
   if (schema.type === "string" || (k.other && k.other.type === "string")) {
-    const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: schema.default ?? "" });
+    const list = suggestions[name] ? "suggest-" + name : undefined;
+    const input = el("input", { type: "text", class: "text", "aria-label": name, placeholder: schema.default ?? "", list });
     input.value = value ?? "";
     input.addEventListener("change", () => set(input.value || undefined));
     return input;
@@ -245,7 +246,8 @@ function control(name, schema, value, set) {
 }
 
 // The form of one step: a row per parameter; `changed(params)` after every edit.
-export function stepForm(op, params, changed) {
+// `suggestions`: parameter name -> values offered in a list (a datalist of that id must exist).
+export function stepForm(op, params, changed, suggestions = {}) {
   const props = op.params.properties || {};
   const rows = Object.entries(props).map(([name, schema]) => {
     const set = (v) => {
@@ -254,7 +256,7 @@ export function stepForm(op, params, changed) {
       changed(params);
     };
     const label = el("label", { class: "pname", title: schema.description || "" }, name);
-    return el("div", { class: "param", "data-param": name }, label, control(name, schema, params[name], set));
+    return el("div", { class: "param", "data-param": name }, label, control(name, schema, params[name], set, suggestions));
   });
   return el("div", { class: "params" }, rows);
 }
