@@ -22,7 +22,7 @@ import httpx
 import numpy as np
 
 from bench.common import HD
-from bench.viewer_browser import previews, viewer, wait_preview
+from bench.viewer_browser import CHROMIUM, previews, viewer, wait_preview
 from gbuffer.frame import Frame
 from gbuffer.io import write
 from gbuffer.render import load_mesh, render
@@ -80,6 +80,9 @@ def carried(frame: Frame, op: str) -> float:
 
 
 def main() -> None:
+    if not Path(CHROMIUM).is_file():
+        print(f"Chromium is absent ({CHROMIUM}; apt-get install chromium): no viewer benchmark")
+        return
     work = Path(tempfile.mkdtemp(prefix="bench-viewer-"))
     frame = work / "spot_1080p.exr"
     h, w = HD

@@ -14,7 +14,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from bench.viewer_browser import previews, viewer, wait_preview
+from bench.viewer_browser import CHROMIUM, previews, viewer, wait_preview
 from gbuffer.io import write
 from gbuffer.render import load_mesh, render
 
@@ -56,6 +56,9 @@ def shoot(frame: Path, target: Path, preset: str, edits: dict[str, str]) -> None
 
 
 def main() -> None:
+    if not Path(CHROMIUM).is_file():
+        print(f"Chromium is absent ({CHROMIUM}; apt-get install chromium): no screenshots")
+        return
     work = Path(tempfile.mkdtemp(prefix="viewer-shots-"))
     try:
         blender = blender_frame(work)
