@@ -39,6 +39,7 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from ops.checks import PERCENTILE, WHITE
 from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -146,13 +147,6 @@ def _check_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def _check_white(white: float) -> float:
-    w = float(white)
-    if not np.isfinite(w) or w <= 0.0:
-        raise ValueError(f"white must be a finite number > 0 (or 'auto'), got {white!r}")
-    return w
-
-
 def _flat(a: np.ndarray) -> np.ndarray:
     """A single-channel (H, W*C) view, so that cv2 scalar ops apply to every channel."""
     return a.reshape(a.shape[0], -1)
@@ -182,8 +176,7 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     A sequence should pin the white level (pass a number to the operators) so that it does not
     flicker from frame to frame (DESIGN.md).
     """
-    if not 0.0 < percentile <= 100.0:
-        raise ValueError(f"percentile must be in (0, 100], got {percentile}")
+    percentile = PERCENTILE.check(percentile, "percentile")
     arr = _check_rgb(rgb, "rgb")
     h, w = arr.shape[:2]
     step = 4 if h * w >= 16 * 65536 else 1
@@ -208,7 +201,7 @@ def resolve_white(white: White, rgb: np.ndarray, mask: np.ndarray | None = None)
         if white != "auto":
             raise ValueError(f"white must be 'auto' or a number > 0, got {white!r}")
         return auto_white(rgb, mask)
-    return _check_white(white)
+    return WHITE.check(white, "white")
 
 
 def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
@@ -223,7 +216,7 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     Computed as φ = cbrt(max(t, δ³)) + min(t, δ³)/(3δ²) − δ (the CIE linear segment below δ³).
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(_check_white(white))
+    m = _to_t(WHITE.check(white, "white"))
     h, w = arr.shape[:2]
     out = np.empty_like(arr)
 
@@ -246,7 +239,7 @@ def lab_phi_to_rgb(
     float32 array (or view) to write the result into; the result is returned either way.
     """
     arr = _check_rgb(phi, "phi")
-    m_inv = _from_t(_check_white(white))
+    m_inv = _from_t(WHITE.check(white, "white"))
     h, w = arr.shape[:2]
     res = np.empty_like(arr) if out is None else out
 
@@ -292,7 +285,7 @@ def lightness_rows(white: float = 1.0) -> Callable[[np.ndarray, np.ndarray], Non
     ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
     C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
     which the dozen calls of :func:`lightness`'s checks per strip would add up."""
-    m = _to_t(_check_white(white))[1:2]
+    m = _to_t(WHITE.check(white, "white"))[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
         _write(_cv.transform(rgb, m, dst=out), out)
@@ -334,7 +327,7 @@ def scale_lab(
         Where to write the result; it is returned either way.
     """
     arr = _check_rgb(rgb, "rgb")
-    w = _check_white(white)
+    w = WHITE.check(white, "white")
     hh, ww = arr.shape[:2]
     if callable(k):
         k_of = k

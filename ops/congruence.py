@@ -71,6 +71,13 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.checks import (
+    DEPTH_JUMP,
+    GRADIENT_SCALE,
+    INTEGRATION_SCALE,
+    PERCENTILE,
+    SHADING_NORM,
+)
 from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
@@ -425,13 +432,6 @@ def _brightness(lum: F32, cov: F32) -> float:
     return float(np.percentile(np.abs(lum[full] / cov[full]), 99.9))
 
 
-def _check_scale(name: str, value: float, hi: float) -> float:
-    v = float(value)
-    if not np.isfinite(v) or not (0.0 < v <= hi):
-        raise ValueError(f"{name} must be in (0, {hi:g}] (relative to image height), got {value!r}")
-    return v
-
-
 def congruence(
     image: NDArray[np.floating],
     depth: NDArray[np.floating],
@@ -508,14 +508,12 @@ def congruence(
     href = h if image_height is None else int(image_height)
     if href <= 0:
         raise ValueError(f"image_height must be a positive number of pixels, got {image_height!r}")
-    sg = _check_scale("gradient_scale", gradient_scale, 0.1) * href
-    si = _check_scale("integration_scale", integration_scale, 0.25) * href
-    if not (0.0 < float(percentile) <= 100.0):
-        raise ValueError(f"percentile must be in (0, 100], got {percentile!r}")
-    if not (np.isfinite(depth_jump) and depth_jump > 0):
-        raise ValueError(f"depth_jump must be > 0, got {depth_jump!r}")
-    if shading_norm is not None and not (np.isfinite(shading_norm) and shading_norm > 0):
-        raise ValueError(f"shading_norm must be > 0 (or None), got {shading_norm!r}")
+    sg = GRADIENT_SCALE.check(gradient_scale, "gradient_scale") * href
+    si = INTEGRATION_SCALE.check(integration_scale, "integration_scale") * href
+    PERCENTILE.check(percentile, "percentile")
+    DEPTH_JUMP.check(depth_jump, "depth_jump")
+    if shading_norm is not None:
+        SHADING_NORM.check(shading_norm, "shading_norm")
 
     img = img.astype(np.float32, copy=False)
     dep = dep.astype(np.float32, copy=False)

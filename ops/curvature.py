@@ -53,6 +53,7 @@ import cv2
 import numpy as np
 
 from ops.bilinear import Upsampled
+from ops.checks import ANISOTROPY, CURVATURE_DEPTH_JUMP, CURVATURE_GAIN, CURVATURE_SCALE, FRACTION
 from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
@@ -230,15 +231,6 @@ def _half_angle_rows(d, b, dx, dy):  # type: ignore[no-untyped-def]
 
 
 # -- validation ----------------------------------------------------------------------------------
-
-
-def _check_range(name: str, value: float, lo: float, hi: float, lo_open: bool = False) -> float:
-    v = float(value)
-    ok = (v > lo if lo_open else v >= lo) and v <= hi and math.isfinite(v)
-    if not ok:
-        bracket = "(" if lo_open else "["
-        raise ValueError(f"{name}={value!r} is outside the allowed range {bracket}{lo}, {hi}]")
-    return v
 
 
 def _check_buffers(
@@ -472,9 +464,9 @@ def principal_curvatures(
     Curvature
         k1 >= k2 per unit image height, the direction of k1, and the reliability weight.
     """
-    scale = _check_range("scale", scale, 0.0, 0.1)
-    f = _check_range("foreshortening", foreshortening, 0.0, 1.0)
-    depth_jump = _check_range("depth_jump", depth_jump, 0.0, 10.0, lo_open=True)
+    scale = CURVATURE_SCALE.check(scale, "scale")
+    f = FRACTION.check(foreshortening, "foreshortening")
+    depth_jump = CURVATURE_DEPTH_JUMP.check(depth_jump, "depth_jump")
     normal, depth, mask = _check_buffers(normal, depth, mask)
     hgt, wid = depth.shape
     img_h = float(hgt if image_height is None else image_height)
@@ -964,15 +956,11 @@ def _tanh_weighted_rows(x, s2, weight, out):  # type: ignore[no-untyped-def]
             o[j] = (one - two / (expf(a) + one)) * wr[j]
 
 
-def _check_gain(gain: float) -> float:
-    return _check_range("gain", gain, 0.0, 1e6)
-
-
 def isotropic(curv: Curvature, gain: float = DEFAULT_GAIN) -> np.ndarray:
     """Isotropic curvature mapping κ = tanh(s·(κ1 + κ2)) · weight (Radiance Scaling §4).
 
     The paper writes κ(p) = tanh(κu + κv), "mean curvature mapped to [-1, 1]"; κ1 + κ2 is twice
-    the mean curvature. ``gain`` s in [0, 1e6] rescales it since κ is per unit image height (a
+    the mean curvature. ``gain`` s in (0, 100] rescales it since κ is per unit image height (a
     sphere spanning half the image height has κ1 + κ2 = 8; the default 0.03 maps it to 0.24).
 
     Returns
@@ -987,7 +975,7 @@ def isotropic_field(curv: Curvature, gain: float = DEFAULT_GAIN) -> Upsampled:
     read through bilinear upsampling (:class:`ops.bilinear.Upsampled`), so a kernel that
     consumes κ (:func:`ops.scaling.scale_lobes`) interpolates each row as it needs it instead of
     reading a full-resolution plane; ``np.asarray`` of it is :func:`isotropic`."""
-    s = _check_gain(gain)
+    s = CURVATURE_GAIN.check(gain, "gain")
     coarse = curv._coarse_for("k1", "k2", "weight")
     if coarse is not None:
         return Upsampled(_tanh_weighted(coarse.trace, s, coarse.weight), coarse.size)
@@ -1018,12 +1006,12 @@ def anisotropic(
     light_dir : (3,) or (H, W, 3)
         Camera-space direction towards the light (normalised here).
     gain : float
-        s in [0, 1e6], as in :func:`isotropic`.
+        s in (0, 100], as in :func:`isotropic`.
     lam : float
         λ in [-1, 1].
     """
-    s = _check_gain(gain)
-    lam = _check_range("lam", lam, -1.0, 1.0)
+    s = CURVATURE_GAIN.check(gain, "gain")
+    lam = ANISOTROPY.check(lam, "lam")
     ell = np.asarray(light_dir, dtype=np.float32)
     if ell.shape == (3,):
         norm = float(np.linalg.norm(ell))

@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.checks import FACTOR, LLA_BASE, LLA_DEPTH_SIGMA, SCALES
 from ops.jit import kernel
 from ops.parallel import STRIP_PIXELS, run_strips, strip_rows
 
@@ -63,12 +64,6 @@ _DOWN_EXCLUDE = 2.0
 _STEP = 3.0
 # Rows per strip for the strip-parallel helpers.
 STRIP_ROWS = 32
-
-
-def _check_unit_range(value: float, name: str, lo: float, hi: float) -> float:
-    if not (isinstance(value, int | float) and math.isfinite(value) and lo < value <= hi):
-        raise ValueError(f"{name} must be in ({lo:g}, {hi:g}], got {value!r}")
-    return float(value)
 
 
 def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
@@ -934,16 +929,11 @@ def _validate(
         raise ValueError(f"normal must be (H, W, 3), got shape {normal.shape}")
     if depth.shape != normal.shape[:2]:
         raise ValueError(f"depth must be (H, W) = {normal.shape[:2]}, got shape {depth.shape}")
-    if (
-        isinstance(scales, bool)
-        or not isinstance(scales, int | np.integer)
-        or not 2 <= scales <= 12
-    ):
-        raise ValueError(f"scales must be an integer in [2, 12], got {scales!r}")
-    _check_unit_range(base, "base", 0.0, 1.0)
-    if not (isinstance(factor, int | float) and math.isfinite(factor) and 1.0 <= factor <= 4.0):
-        raise ValueError(f"factor must be in [1, 4], got {factor!r}")
-    _check_unit_range(depth_sigma, "depth_sigma", 0.0, 10.0)
+    if isinstance(scales, bool) or not isinstance(scales, int | np.integer) or scales not in SCALES:
+        raise ValueError(f"scales must be an integer in {SCALES}, got {scales!r}")
+    LLA_BASE.check(base, "base")
+    FACTOR.check(factor, "factor")
+    LLA_DEPTH_SIGMA.check(depth_sigma, "depth_sigma")
     return normal, depth
 
 

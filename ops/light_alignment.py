@@ -71,6 +71,7 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
 from ops.filtering import F32, NormalPyramid, normalize_field
 from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
@@ -92,18 +93,12 @@ def w_gamma(lam: np.ndarray | float, gamma: float = DEFAULT_GAMMA) -> np.ndarray
     Parameters
     ----------
     lam : confidence λ = λ1 λ2 in [0, 1] (array or scalar; clipped to [0, 1]).
-    gamma : γ ≥ 0 (the paper uses 3).
+    gamma : γ in :data:`ops.checks.LLA_GAMMA` (the paper uses 3).
     """
-    gamma = _check_gamma(gamma)
+    gamma = LLA_GAMMA.check(gamma, "gamma")
     lam_a = np.clip(np.asarray(lam, np.float32), 0.0, 1.0)
     e = np.float32(math.exp(-gamma))
     return np.asarray(lam_a / (e + lam_a * (np.float32(1.0) - e)), np.float32)
-
-
-def _check_gamma(gamma: float) -> float:
-    if not (isinstance(gamma, int | float) and math.isfinite(gamma) and 0.0 <= gamma <= 50.0):
-        raise ValueError(f"gamma must be in [0, 50], got {gamma!r}")
-    return float(gamma)
 
 
 def _check_sigmas(sigmas: Sequence[float], scales: int, name: str = "sigmas") -> list[float]:
@@ -113,22 +108,13 @@ def _check_sigmas(sigmas: Sequence[float], scales: int, name: str = "sigmas") ->
             f"{name} must have one value per scale transition: {scales - 1} for {scales} "
             f"normal fields, got {len(vals)}"
         )
-    for s in vals:
-        if not (math.isfinite(s) and 0.0 <= s <= 1.0):
-            raise ValueError(f"{name} values must be in [0, 1], got {s!r}")
-    return vals
+    return check_sequence(vals, LLA_SIGMA, name)
 
 
 def _check_guide(guide: str) -> str:
     if guide not in GUIDES:
         raise ValueError(f"guide must be one of {', '.join(GUIDES)}; got {guide!r}")
     return guide
-
-
-def _check_ior(ior: float) -> float:
-    if not (isinstance(ior, int | float) and math.isfinite(ior) and 0.0 < ior <= 10.0):
-        raise ValueError(f"ior must be in (0, 10], got {ior!r}")
-    return float(ior)
 
 
 def _soa(arr: np.ndarray) -> SoA:
@@ -527,7 +513,7 @@ def align_components(
         or the list [n_1, …, n_S] of (H, W, 3) fields (every scale at full resolution).
     components : guide name ("diffuse", "specular", "transmission") -> σ_1 … σ_{S−1}
         (finest first), each in [0, 1].
-    gamma : γ of W_γ, ≥ 0.
+    gamma : γ of W_γ, in [0, 20].
     view : (H, W, 3) or (3,) unit directions towards the eye (needed by "specular" and
         "transmission").
     ior : index of refraction of the transmission guide, in (0, 10].
@@ -537,8 +523,8 @@ def align_components(
     -------
     dict guide -> (H, W, 3) float32 unit directions ℓ_1; background keeps ``light_dir``.
     """
-    gamma = _check_gamma(gamma)
-    ior = _check_ior(ior)
+    gamma = LLA_GAMMA.check(gamma, "gamma")
+    ior = IOR.check(ior, "ior")
     pyr = normals if isinstance(normals, NormalPyramid) else None
     fields = None
     if pyr is None:

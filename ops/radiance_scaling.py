@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ops.checks import FRACTION, TOON_LEVELS
 from ops.color import luminance
 from ops.curvature import Curvature, anisotropic, isotropic
 from ops.scaling import sigma
@@ -65,11 +66,6 @@ def _kappa(curv: Curvature, light_dir: np.ndarray, gain: float, lam: float) -> n
     if lam == 0.0:
         return isotropic(curv, gain)
     return anisotropic(curv, light_dir, gain, lam)
-
-
-def _check_levels(levels: int) -> None:
-    if levels < 0 or levels == 1:
-        raise ValueError(f"toon_levels={levels} must be 0 (off) or >= 2")
 
 
 def quantise(intensity: np.ndarray, levels: int) -> np.ndarray:
@@ -115,9 +111,9 @@ def phong(
     alpha, gamma_* : σ's invariant point and the magnitude per lobe (Eq. 2).
     gain, lam : curvature gain of the tanh mapping and anisotropy λ ∈ [−1, 1] (§4).
     """
-    if not 0.0 <= zeta <= 1.0:
-        raise ValueError(f"zeta={zeta} is outside [0, 1] (1 = Lambert, < 1 sub-Lambertian)")
-    _check_levels(toon_levels)
+    FRACTION.check(zeta, "zeta")
+    if toon_levels != 0:  # 0: no toon shading
+        TOON_LEVELS.check(toon_levels, "toon_levels")
     covered = np.linalg.norm(normal, axis=2) > 0.5
     alb = np.broadcast_to(np.asarray(albedo, np.float32), normal.shape)
     r = normalize(reflect(view, normal))

@@ -65,6 +65,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.checks import CURVEDNESS_NORM, FRACTION, PERCENTILE
 from ops.curvature import Curvature
 from ops.jit import kernel
 from ops.parallel import run_strips, strip_rows
@@ -211,13 +212,6 @@ def _check_unit_image(img: NDArray[np.generic], name: str) -> F32:
     return arr
 
 
-def _check_fraction(name: str, value: float) -> float:
-    v = float(value)
-    if not (0.0 <= v <= 1.0):
-        raise ValueError(f"{name}={value!r} is outside the allowed range [0, 1]")
-    return v
-
-
 # -- the descriptor --------------------------------------------------------------------------------
 
 
@@ -300,18 +294,15 @@ def _grid_descriptor(
     that grid to full resolution (None when the curvature is at full resolution) and, for a
     ``texture`` of (h, w) texels, the texel coordinates (x, y) of S there (else None, None); one
     pass of :func:`_descriptor_rows` in row strips on both cores."""
-    p = float(percentile)
-    if not 0.0 < p <= 100.0:
-        raise ValueError(f"percentile={percentile!r} is outside the allowed range (0, 100]")
+    p = PERCENTILE.check(percentile, "percentile")
     if isinstance(curvedness_norm, str):
         if curvedness_norm != "auto":
             raise ValueError(
-                f"curvedness_norm={curvedness_norm!r} must be 'auto' or a number in (0, 1e6]"
+                f"curvedness_norm={curvedness_norm!r} must be 'auto' or a number in "
+                f"{CURVEDNESS_NORM}"
             )
     else:
-        norm = float(curvedness_norm)
-        if not 0.0 < norm <= 1e6:
-            raise ValueError(f"curvedness_norm={curvedness_norm!r} is outside the range (0, 1e6]")
+        norm = CURVEDNESS_NORM.check(curvedness_norm, "curvedness_norm")
     coarse = curv._coarse_for("k1", "k2", "weight")
     if coarse is not None:
         k1, k2, wgt = coarse.k1, coarse.k2, coarse.weight
@@ -678,7 +669,7 @@ def paint_arm(
     rad = float(radius)
     if not 0.0 < rad <= 2.0:
         raise ValueError(f"radius={radius!r} is outside the allowed range (0, 2]")
-    soft = _check_fraction("softness", softness)
+    soft = FRACTION.check(softness, "softness")
     vals = np.atleast_1d(np.asarray(value, np.float32))
     chans = 1 if tex.ndim == 2 else tex.shape[2]
     if vals.size not in (1, chans) or not (np.all(vals >= 0.0) and np.all(vals <= 1.0)):
@@ -1010,7 +1001,7 @@ def counter_shading(
     """
     rr = _f32_rows(r, "r", (2,))
     lit = _lit(ndotl, normal, light, rr.shape)
-    thr = _check_fraction("threshold", threshold)
+    thr = FRACTION.check(threshold, "threshold")
     out = np.empty(rr.shape, np.float32)
     t = np.float32(thr)
 

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from ops.bilinear import Upsampled, upsample_row
+from ops.checks import ALPHA, GAMMA, PERCENTILE, WHITE
 from ops.jit import expf, inline_kernel, kernel
 from ops.parallel import run_strips
 
@@ -34,20 +35,6 @@ _LUMA_W = (np.float32(REC709[0]), np.float32(REC709[1]), np.float32(REC709[2])) 
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
 _ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
-
-
-def _check_alpha(alpha: float, name: str = "alpha") -> float:
-    a = float(alpha)
-    if not (0.0 < a < 1.0):
-        raise ValueError(f"{name}={alpha!r} is outside the allowed range (0, 1)")
-    return a
-
-
-def _check_gamma(gamma: float, name: str = "gamma") -> float:
-    g = float(gamma)
-    if not (g >= 0.0 and math.isfinite(g)):
-        raise ValueError(f"{name}={gamma!r} is outside the allowed range [0, inf)")
-    return g
 
 
 def _clip01(x: np.ndarray) -> np.ndarray:
@@ -120,14 +107,14 @@ def sigma(kappa: ArrayLike, delta: ArrayLike, alpha: float, gamma: float) -> np.
     alpha : float
         Scaling-invariant point α in (0, 1).
     gamma : float
-        Scaling magnitude γ in [0, inf) (γκ is clipped to ±80).
+        Scaling magnitude γ in [0, 1e4] (γκ is clipped to ±80).
 
     Returns
     -------
     float32 array of the broadcast shape of ``kappa`` and ``delta``.
     """
-    a = _check_alpha(alpha)
-    g = _check_gamma(gamma)
+    a = ALPHA.check(alpha, "alpha")
+    g = GAMMA.check(gamma, "gamma")
     k, d = np.broadcast_arrays(np.asarray(kappa, np.float32), np.asarray(delta, np.float32))
     shape = k.shape
     k2 = _as_2d(k)
@@ -175,9 +162,7 @@ def white_level(
     percentile : float
         In (0, 100].
     """
-    p = float(percentile)
-    if not 0.0 < p <= 100.0:
-        raise ValueError(f"percentile={percentile!r} is outside the allowed range (0, 100]")
+    p = PERCENTILE.check(percentile, "percentile")
     vals, m8, wid = _counting(values, mask)
     level = _banded_percentile(vals, m8, wid, p)
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
@@ -306,9 +291,7 @@ def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
     ``light`` is a lobe's incoming light without its colour (H, W, 3); ``white`` (> 0) the level
     mapped to δ̄ = 1 (see :func:`white_level`). NaN gives 0, +inf 1.
     """
-    w = float(white)
-    if not (w > 0.0 and math.isfinite(w)):
-        raise ValueError(f"white={white!r} is outside the allowed range (0, inf)")
+    w = WHITE.check(white, "white")
     return _clip01(luminance(light, 1.0 / w))
 
 
@@ -382,20 +365,18 @@ def scale_lobes(
         hgt, wid = grid.shape
     names = list(lobes)
     alphas = {
-        n: _check_alpha(float(v), f"alpha[{n!r}]")  # type: ignore[arg-type]
-        for n, v in _per_lobe(alpha, names, "alpha").items()
+        n: ALPHA.check(v, f"alpha[{n!r}]") for n, v in _per_lobe(alpha, names, "alpha").items()
     }
     gammas = {
-        n: _check_gamma(float(v), f"gamma[{n!r}]")  # type: ignore[arg-type]
-        for n, v in _per_lobe(gamma, names, "gamma").items()
+        n: GAMMA.check(v, f"gamma[{n!r}]") for n, v in _per_lobe(gamma, names, "gamma").items()
     }
     whites = _per_lobe(white, names, "white")
     for n, w in whites.items():
         if isinstance(w, str):
             if w != "auto":
                 raise ValueError(f"white[{n!r}]={w!r} must be a number > 0 or 'auto'")
-        elif not (float(w) > 0.0 and math.isfinite(float(w))):  # type: ignore[arg-type]
-            raise ValueError(f"white[{n!r}]={w!r} is outside the allowed range (0, inf)")
+        else:
+            WHITE.check(w, f"white[{n!r}]")
 
     def rgb(x: np.ndarray, what: str) -> np.ndarray:
         x = np.ascontiguousarray(x, dtype=np.float32)

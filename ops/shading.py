@@ -31,6 +31,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
+from ops.checks import AMBIENT, EXPONENT, FRACTION, IOR, ROUGHNESS, SHININESS, WEIGHT
 from ops.jit import kernel
 from ops.parallel import run_strips
 
@@ -190,7 +191,7 @@ def refract(v: np.ndarray, n: np.ndarray, ior: float) -> np.ndarray:
     into the surface along t = η(−v) + (η cosθ_i − √k) n with η = 1/ior, cosθ_i = n·v,
     k = 1 − η²(1 − cos²θ_i). Total internal reflection (k < 0, possible when ior < 1) gives 0.
     """
-    _check_ior(ior)
+    IOR.check(ior, "ior")
     n = np.asarray(n, np.float32)
     v = _field(v, n)
     eta = np.float32(1.0 / ior)
@@ -206,16 +207,6 @@ def _pos_pow(x: np.ndarray, p: float) -> np.ndarray:
     """max(x, 0) ** p with cv2.pow (≈10x faster than np.power on float32)."""
     x = np.maximum(x, np.float32(0.0))
     return np.asarray(cv2.pow(x, float(p)), np.float32).reshape(x.shape)
-
-
-def _check_exponent(value: float, name: str) -> None:
-    if not (math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be > 0, got {value}")
-
-
-def _check_ior(ior: float) -> None:
-    if not (math.isfinite(ior) and ior > 0.0):
-        raise ValueError(f"ior must be > 0, got {ior}")
 
 
 def _dots(
@@ -291,7 +282,7 @@ def blinn_phong(
     Blinn, "Models of light reflection for computer synthesized pictures", SIGGRAPH 1977.
     Unnormalised, in [0, 1], as Radiance Scaling §5.1 needs (δ_s = ρ_s).
     """
-    _check_exponent(shininess, "shininess")
+    SHININESS.check(shininess, "shininess")
     return _blinn_phong(*_dots(n, l, v), shininess)
 
 
@@ -312,7 +303,7 @@ def phong(
     Phong, "Illumination for computer generated pictures", CACM 1975; in [0, 1] (Radiance
     Scaling §5.1, δ_s = ρ_s).
     """
-    _check_exponent(shininess, "shininess")
+    SHININESS.check(shininess, "shininess")
     return _phong(*_dots(n, l, v), shininess)
 
 
@@ -321,12 +312,6 @@ def _fresnel_schlick(f0: float, cos_theta: np.ndarray) -> np.ndarray:
     m = np.clip(1.0 - cos_theta, 0.0, 1.0)
     m2 = m * m
     return np.asarray(f0 + (1.0 - f0) * (m2 * m2 * m), np.float32)
-
-
-def _check_unit(value: float, name: str, low_open: bool = False) -> None:
-    ok = math.isfinite(value) and (0.0 < value if low_open else 0.0 <= value) and value <= 1.0
-    if not ok:
-        raise ValueError(f"{name} must be in {'(0' if low_open else '[0'}, 1], got {value}")
 
 
 def _ggx(
@@ -361,8 +346,8 @@ def ggx(
     G = G₁(l) G₁(v), G₁(x) = 2 (n·x) / (n·x + √(α² + (1 − α²)(n·x)²)) (Walter et al. Eq. 34),
     F = Schlick(f0, v·h). 0 where n·l ≤ 0 or n·v ≤ 0. Finite and ≥ 0 for roughness in (0, 1].
     """
-    _check_unit(roughness, "roughness", low_open=True)
-    _check_unit(f0, "f0")
+    ROUGHNESS.check(roughness, "roughness")
+    FRACTION.check(f0, "f0")
     return _ggx(*_dots(n, l, v), roughness, f0)
 
 
@@ -404,8 +389,8 @@ def ashikhmin_shirley(
     Both are 0 where n·l ≤ 0 or n·v ≤ 0. Neither is bounded by 1 (which is why RS maps them with
     δ_d = ℓ·n and δ_s = h·n instead).
     """
-    _check_exponent(exponent, "exponent")
-    _check_unit(rs, "rs")
+    EXPONENT.check(exponent, "exponent")
+    FRACTION.check(rs, "rs")
     return _ashikhmin_shirley(*_dots(n, l, v), exponent, rs)
 
 
@@ -436,8 +421,8 @@ def transmission(
     max(t·l, 0)^exponent, in [0, 1], nonzero only for lights behind the surface. Local Light
     Alignment §6 uses the same refracted vector t as the guide of transmission.
     """
-    _check_exponent(exponent, "exponent")
-    _check_ior(ior)
+    EXPONENT.check(exponent, "exponent")
+    IOR.check(ior, "ior")
     return _transmission(*_dots(n, l, v), ior, exponent)
 
 
@@ -536,12 +521,10 @@ def shade_lobes(
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}; got {model!r}")
-    if not (math.isfinite(ambient) and ambient >= 0.0):
-        raise ValueError(f"ambient must be >= 0, got {ambient}")
-    _check_exponent(shininess, "shininess")
-    if not (math.isfinite(transmission_weight) and transmission_weight >= 0.0):
-        raise ValueError(f"transmission_weight must be >= 0, got {transmission_weight}")
-    _check_ior(ior)
+    AMBIENT.check(ambient, "ambient")
+    SHININESS.check(shininess, "shininess")
+    WEIGHT.check(transmission_weight, "transmission_weight")
+    IOR.check(ior, "ior")
     normal = np.ascontiguousarray(normal, np.float32)
     if normal.ndim != 3 or normal.shape[2] != 3:
         raise ValueError(f"normal must be (H, W, 3), got shape {normal.shape}")
@@ -684,13 +667,13 @@ def shade_directions(
         raise ValueError(f"diffuse must be one of {', '.join(DIFFUSE_MODELS)}; got {diffuse!r}")
     if specular not in SPECULAR_MODELS:
         raise ValueError(f"specular must be one of {', '.join(SPECULAR_MODELS)}; got {specular!r}")
-    _check_exponent(shininess, "shininess")
-    _check_exponent(transmission_exponent, "transmission_exponent")
-    _check_unit(f0, "f0")
-    _check_ior(ior)
+    SHININESS.check(shininess, "shininess")
+    EXPONENT.check(transmission_exponent, "transmission_exponent")
+    FRACTION.check(f0, "f0")
+    IOR.check(ior, "ior")
     rough = np.asarray(roughness, np.float32)
     if rough.ndim == 0:
-        _check_unit(float(rough), "roughness", low_open=True)
+        ROUGHNESS.check(rough, "roughness")
     else:
         rough = np.clip(rough, np.float32(1e-3), np.float32(1.0))
     normal = np.ascontiguousarray(normal, np.float32)

@@ -53,6 +53,7 @@ import cv2
 import numpy as np
 
 from ops import color
+from ops.checks import POSITIVE, RELATIVE_SIGMA, UNSHARP_AMOUNT, UNSHARP_SIGMA
 from ops.masked import masked_gaussian
 from ops.parallel import STRIP_PIXELS
 
@@ -99,24 +100,6 @@ Array = np.ndarray
 
 # ---------------------------------------------------------------------------------------------
 # validation helpers
-
-
-def _finite(name: str, value: float, lo: float | None = None, hi: float | None = None) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    rng = f"[{'-inf' if lo is None else lo}, {'inf' if hi is None else hi}]"
-    if not math.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
-        raise ValueError(f"{name}={value!r} is outside the allowed range {rng}")
-    return v
-
-
-def _positive(name: str, value: float) -> float:
-    v = _finite(name, value)
-    if v <= 0.0:
-        raise ValueError(f"{name}={value!r} must be > 0")
-    return v
 
 
 def _rgb(name: str, a: Array) -> Array:
@@ -1438,9 +1421,9 @@ def surface_blur(
         raise ValueError(f"signal must have shape (H, W), got {sig.shape}")
     shape = (int(sig.shape[0]), int(sig.shape[1]))
     sig = np.ascontiguousarray(sig)
-    sigma = _positive("sigma_scene", sigma_scene)
-    ds = _positive("depth_sigma", depth_sigma)
-    ns = None if normal_sigma is None else _positive("normal_sigma", normal_sigma)
+    sigma = POSITIVE.check(sigma_scene, "sigma_scene")
+    ds = UNSHARP_SIGMA.check(depth_sigma, "depth_sigma")
+    ns = None if normal_sigma is None else UNSHARP_SIGMA.check(normal_sigma, "normal_sigma")
     depth_a = _plane("depth", depth, shape)
     ps = _plane("pixel_size", pixel_size, shape)
     nrm = None if normal is None else _normals(normal, shape)
@@ -1555,11 +1538,13 @@ def unsharp_masking(
     """
     img = _rgb("beauty", beauty)
     shape = (int(img.shape[0]), int(img.shape[1]))
-    lam = _finite("amount", amount, -10.0, 10.0)
-    sigma = _positive("sigma_scene", sigma_scene)
-    vsig = sigma / 4.0 if variance_sigma is None else _positive("variance_sigma", variance_sigma)
-    ds = _positive("depth_sigma", depth_sigma)
-    ns = None if normal_sigma is None else _positive("normal_sigma", normal_sigma)
+    lam = UNSHARP_AMOUNT.check(amount, "amount")
+    sigma = POSITIVE.check(sigma_scene, "sigma_scene")
+    vsig = (
+        sigma / 4.0 if variance_sigma is None else POSITIVE.check(variance_sigma, "variance_sigma")
+    )
+    ds = UNSHARP_SIGMA.check(depth_sigma, "depth_sigma")
+    ns = None if normal_sigma is None else UNSHARP_SIGMA.check(normal_sigma, "normal_sigma")
     depth_a = _plane("depth", depth, shape)
     ps = _plane("pixel_size", pixel_size, shape)
     mask_a = _mask(mask, shape)
@@ -1611,7 +1596,11 @@ def unsharp_masking(
         adapt = (a, 2**kv)
     up = None if res is None else res[0]  # None: too small for any level, nothing to smooth
     lam32 = np.float32(lam)
-    fine = lum if fine_px <= 0.0 else masked_gaussian(lum, surf.valid, _finite("fine_px", fine_px))
+    fine = (
+        lum
+        if fine_px <= 0.0
+        else masked_gaussian(lum, surf.valid, POSITIVE.check(fine_px, "fine_px"))
+    )
 
     def k_rows(r: slice) -> color.KRows:
         """k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4, Eq. 1), and
@@ -1692,11 +1681,9 @@ def plain_unsharp_mask(
         height when processing a crop).
     """
     img = _rgb("beauty", beauty)
-    s = _finite("sigma", sigma, 0.0, 1.0)
-    if s <= 0.0:
-        raise ValueError(f"sigma={sigma!r} must be in (0, 1]")
-    lam = _finite("amount", amount, -10.0, 10.0)
-    hh = img.shape[0] if image_height is None else int(_positive("image_height", image_height))
+    s = RELATIVE_SIGMA.check(sigma, "sigma")
+    lam = UNSHARP_AMOUNT.check(amount, "amount")
+    hh = img.shape[0] if image_height is None else int(POSITIVE.check(image_height, "image_height"))
     wl = color.resolve_white(white, img, None)
     lum = _lightness(img, wl)
     smooth = _blur(lum, s * hh)
@@ -1751,13 +1738,11 @@ def depth_unsharp_masking(
     """
     img = _rgb("beauty", beauty)
     shape = (int(img.shape[0]), int(img.shape[1]))
-    lam = _finite("amount", amount, -10.0, 10.0)
-    s = _finite("sigma", sigma, 0.0, 1.0)
-    if s <= 0.0:
-        raise ValueError(f"sigma={sigma!r} must be in (0, 1]")
+    lam = UNSHARP_AMOUNT.check(amount, "amount")
+    s = RELATIVE_SIGMA.check(sigma, "sigma")
     if mode not in ("darken", "both"):
         raise ValueError(f"mode={mode!r} must be 'darken' or 'both'")
-    hh = img.shape[0] if image_height is None else int(_positive("image_height", image_height))
+    hh = img.shape[0] if image_height is None else int(POSITIVE.check(image_height, "image_height"))
     depth_a = _plane("depth", depth, shape)
     mask_a = _mask(mask, shape)
     valid = _cv.inRange(depth_a, 1e-30, 3.0e38)
