@@ -78,12 +78,13 @@ from ops.checks import (
     PERCENTILE,
     SHADING_NORM,
 )
+from ops.color import REC709_Y
 from ops.parallel import run_strips
 
 F32 = NDArray[np.float32]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.
-REC709 = np.array([[0.2126, 0.7152, 0.0722]], dtype=np.float32)
+_LUMA = np.array([REC709_Y], dtype=np.float32)  # (1, 3) for cv2.transform
 
 # Relative floor under which a tensor is treated as zero (float32 rounding noise).
 _REL_FLOOR = 1e-10
@@ -231,7 +232,7 @@ def _covered_level(
             cv2.multiply(covf, (msk[r0:r1] > 0.5).astype(np.float32), dst=covf)
         cv2.multiply(depc, covf, dst=depc)
         if img.ndim == 3:
-            cv2.transform(img[r0:r1], REC709, dst=lum)
+            cv2.transform(img[r0:r1], _LUMA, dst=lum)
             cv2.multiply(lum, covf, dst=lum)
         else:
             cv2.multiply(img[r0:r1], covf, dst=lum)

@@ -54,7 +54,8 @@ import numpy as np
 
 from ops.bilinear import Upsampled
 from ops.checks import ANISOTROPY, CURVATURE_DEPTH_JUMP, CURVATURE_GAIN, CURVATURE_SCALE, FRACTION
-from ops.jit import expf, inline_kernel, kernel
+from ops.jit import inline_kernel, kernel
+from ops.numerics import expf
 from ops.parallel import run_strips
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 
 from ops.checks import FACTOR, LLA_BASE, LLA_DEPTH_SIGMA, SCALES
 from ops.jit import kernel
+from ops.numerics import exp_neg
 from ops.parallel import STRIP_PIXELS, run_strips, strip_rows
 
 F32 = NDArray[np.float32]
@@ -246,27 +247,6 @@ _JBF_TAPS = (
     (1, -1), (1, 0), (1, 1),
     (2, 0),
 )  # fmt: skip
-# e^{-u} of the range kernel: u clamped here (e^-64 ≈ 1.6e-28 counts as 0), halved this many
-# times before the polynomial (see _range_weight).
-_EXP_U_MAX = np.float32(64.0)
-_EXP_SQUARINGS = 5
-_EXP_SCALE = np.float32(1.0 / (1 << _EXP_SQUARINGS))
-_E2, _E3, _E4, _E5 = (np.float32((-1.0) ** n / math.factorial(n)) for n in (2, 3, 4, 5))
-
-
-@kernel
-def _range_weight(u):  # type: ignore[no-untyped-def]
-    """e^{−u} for u ≥ 0, vectorisable (no exp call), within 2e-7 absolute (0 for u ≥ 64):
-    e^{−u} = (e^{−t})^32 with t = min(u, 64)/32 ∈ [0, 2] and e^{−t} ≈ 1 + q, q the degree-5
-    Taylor polynomial less 1; the 5 squarings are done on q, (1 + q)² = 1 + q (q + 2), so that
-    weights near 1 keep their relative precision."""
-    t = min(u, _EXP_U_MAX) * _EXP_SCALE
-    q = ((((_E5 * t + _E4) * t + _E3) * t + _E2) * t - _F1) * t
-    for _ in range(_EXP_SQUARINGS):
-        q = q * (q + np.float32(2.0))
-    return q + _F1
-
-
 #: Columns per chunk of :func:`_jbf_rows` (its local buffers have this compile-time row length).
 _JBF_CHUNK = 128
 _JBF_RS = _JBF_CHUNK + 4
@@ -277,7 +257,7 @@ def _jb_tap(gc, g, x, y, z, j, sw, c, ax, ay, az):  # type: ignore[no-untyped-de
     """(ax, ay, az) plus tap j of guide row ``g`` and planes ``x``, ``y``, ``z``: spatial
     weight ``sw`` times the range weight e^{−c (g[j] − gc)²}."""
     d = g[j] - gc
-    wt = sw * _range_weight(d * d * c)
+    wt = sw * exp_neg(d * d * c)
     return ax + wt * x[j], ay + wt * y[j], az + wt * z[j]
 
 
@@ -993,7 +973,7 @@ def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
     max(1, round(1.5 σ)) (that of ``cv2.ximgproc.jointBilateralFilter``, borders reflected),
     G_r of standard deviation ``depth_sigma`` on the guide g: log depth, background far behind
     every surface. Radii ≤ 2 (every level the pyramid picks, σ ≤ 1.5) run the compiled
-    :func:`_jbf_rows` on row strips, with G_r evaluated to 2e-7 (:func:`_range_weight`);
+    :func:`_jbf_rows` on row strips, with G_r evaluated to 2e-7 (:func:`ops.numerics.exp_neg`);
     larger ones (levels capped by a small image) ``cv2.ximgproc.jointBilateralFilter``.
     """
     m = geo.mask[k]

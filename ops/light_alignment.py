@@ -74,6 +74,7 @@ import numpy as np
 from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
 from ops.filtering import F32, NormalPyramid, normalize_field
 from ops.jit import inline_kernel, kernel
+from ops.numerics import atan2_upper, sincos_upper
 from ops.parallel import run_strips
 from ops.shading import Light, light_vectors
 
@@ -187,73 +188,7 @@ _GUIDE_CODE = {"diffuse": _DIFFUSE, "specular": _SPECULAR, "transmission": _TRAN
 _F0, _F1, _F2 = np.float32(0.0), np.float32(1.0), np.float32(2.0)
 _TINY = np.float32(1e-12)
 _SMALL = np.float32(1e-6)
-_PI_F = np.float32(math.pi)
-_HALF_PI_F = np.float32(math.pi / 2.0)
 _TWO_OVER_PI_F = np.float32(2.0 / math.pi)
-# atan(t) ≈ t P(t²) on [0, 1]: minimax, error 4e-8 rad (1.3e-7 evaluated in float32)
-_AT0 = np.float32(0.9999993356019542)
-_AT1 = np.float32(-0.33329860818634105)
-_AT2 = np.float32(0.19946565712599593)
-_AT3 = np.float32(-0.13908628858035077)
-_AT4 = np.float32(0.09642193828012686)
-_AT5 = np.float32(-0.05591226181184129)
-_AT6 = np.float32(0.021862903744628806)
-_AT7 = np.float32(-0.004054550244039307)
-# sin(u) ≈ u S(u²), cos(u) ≈ C(u²) on [−π/2, π/2]: minimax, errors 3e-9 and 2e-10
-_S0 = np.float32(0.9999999765894195)
-_S1 = np.float32(-0.16666647634345014)
-_S2 = np.float32(0.008332899818385985)
-_S3 = np.float32(-0.00019800897458455147)
-_S4 = np.float32(2.5904878875604442e-06)
-_C0 = np.float32(0.9999999997806464)
-_C1 = np.float32(-0.4999999935846119)
-_C2 = np.float32(0.04166663625765576)
-_C3 = np.float32(-0.001388836139486635)
-_C4 = np.float32(2.4760161070974673e-05)
-_C5 = np.float32(-2.6051490159550994e-07)
-
-
-@kernel
-def _atan2_upper(y, x):  # type: ignore[no-untyped-def]
-    """atan2(y, x) ∈ [0, π] for y ≥ 0 (0 at the origin), vectorisable: octant reduction by
-    selects and the minimax polynomial of atan on [0, 1]."""
-    ax = abs(x)
-    big = y > ax
-    hi = y if big else ax
-    lo = ax if big else y
-    hi = hi if hi > _TINY else _TINY
-    t = lo / hi
-    z = t * t
-    p = _AT6 + z * _AT7
-    p = _AT5 + z * p
-    p = _AT4 + z * p
-    p = _AT3 + z * p
-    p = _AT2 + z * p
-    p = _AT1 + z * p
-    p = _AT0 + z * p
-    r = t * p
-    r = _HALF_PI_F - r if big else r
-    return _PI_F - r if x < _F0 else r
-
-
-@kernel
-def _sincos(theta):  # type: ignore[no-untyped-def]
-    """(sin θ, cos θ) for θ ∈ [0, π] (minimax polynomials on [0, π/2], by sin(π − θ) = sin θ,
-    cos(π − θ) = −cos θ)."""
-    big = theta > _HALF_PI_F
-    u = _PI_F - theta if big else theta
-    z = u * u
-    s = _S3 + z * _S4
-    s = _S2 + z * s
-    s = _S1 + z * s
-    s = _S0 + z * s
-    s = u * s
-    c = _C4 + z * _C5
-    c = _C3 + z * c
-    c = _C2 + z * c
-    c = _C1 + z * c
-    c = _C0 + z * c
-    return s, (-c if big else c)
 
 
 @kernel
@@ -382,7 +317,7 @@ def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):
             q = s * (_F1 - bl * bl) - p * p  # (|ā| |ℓ·y|)²
             q = np.sqrt(q if q > _F0 else _F0)
             lam2 = np.sqrt(s)  # λ2 = |ā|
-            lam = _atan2_upper(abs(p), q) * _TWO_OVER_PI_F * lam2  # λ = λ1 λ2
+            lam = atan2_upper(abs(p), q) * _TWO_OVER_PI_F * lam2  # λ = λ1 λ2
             k = sigma * lam / (egam + lam * (_F1 - egam))  # σ W_γ(λ)
             lit = p > _F0  # ℓ̄·x > 0: g = a; else the tangent t = (z − c a)/|ā|
             isd = _F0 if lit else _F1 / (lam2 if lam2 > _TINY else _TINY)
@@ -391,8 +326,8 @@ def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):
             gl = gl if gl > -_F1 else -_F1
             sin_o = _F1 - gl * gl
             sin_o = np.sqrt(sin_o if sin_o > _F0 else _F0)
-            theta = _atan2_upper(sin_o, gl) * k  # θ = σ W_γ Ω
-            sin_t, cos_t = _sincos(theta)
+            theta = atan2_upper(sin_o, gl) * k  # θ = σ W_γ Ω
+            sin_t, cos_t = sincos_upper(theta)
             sin_o = sin_o if sin_o > _SMALL else _SMALL
             # ℓ_i ∝ sin(Ω − θ) ℓ + sin θ g,  g = h a + isd z,  h = 1 (lit) or −c/|ā|
             coef_l = cos_t * sin_o - gl * sin_t

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.scaling import luminance
+from ops.color import luminance
 from ops.unsharp import surface_blur
 
 F32 = NDArray[np.float32]

@@ -66,6 +66,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.checks import CURVEDNESS_NORM, FRACTION, PERCENTILE
+from ops.color import REC709_Y
 from ops.curvature import Curvature
 from ops.jit import kernel
 from ops.parallel import run_strips, strip_rows
@@ -609,7 +610,7 @@ def arm_from_image(img: NDArray[np.generic]) -> F32:
             scale = 1.0 / 255.0
         elif arr.dtype == np.uint16:
             scale = 1.0 / 65535.0
-        w709 = np.array([[0.2126, 0.7152, 0.0722]], np.float32) * scale
+        w709 = np.array([REC709_Y], np.float32) * scale
         out = cv2.transform(rgb.astype(np.float32), w709).reshape(rgb.shape[:2])
     elif arr.ndim == 2:
         if arr.dtype == np.uint8:

@@ -25,13 +25,12 @@ from numpy.typing import ArrayLike
 
 from ops.bilinear import Upsampled, upsample_row
 from ops.checks import ALPHA, GAMMA, PERCENTILE, WHITE
-from ops.jit import expf, inline_kernel, kernel
+from ops.color import REC709_Y, luminance
+from ops.jit import inline_kernel, kernel
+from ops.numerics import dot3_row, expf
 from ops.parallel import run_strips
 
-#: Rec. 709 / sRGB luminance weights (linear RGB).
-REC709 = (0.2126, 0.7152, 0.0722)
-_LUMA = np.array([REC709], dtype=np.float32)  # (1, 3)
-_LUMA_W = (np.float32(REC709[0]), np.float32(REC709[1]), np.float32(REC709[2]))  # for kernels
+_LUMA = np.array(REC709_Y, dtype=np.float32)  # for kernels
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
 _ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
@@ -124,26 +123,6 @@ def sigma(kappa: ArrayLike, delta: ArrayLike, alpha: float, gamma: float) -> np.
 
 
 # -- reflectance mapping for renderer lobes (Eq. 4) ----------------------------------------------
-
-
-def luminance(rgb: np.ndarray, scale: float = 1.0) -> np.ndarray:
-    """Rec. 709 luminance ``scale·(0.2126 R + 0.7152 G + 0.0722 B)`` of (H, W, 3) -> (H, W)."""
-    rgb = np.ascontiguousarray(rgb, dtype=np.float32)
-    if rgb.ndim != 3 or rgb.shape[2] != 3:
-        raise ValueError(f"expected an (H, W, 3) RGB array, got shape {rgb.shape}")
-    s32 = np.float32(scale)
-    w0, w1, w2 = _LUMA_W[0] * s32, _LUMA_W[1] * s32, _LUMA_W[2] * s32
-    hgt, wid = rgb.shape[:2]
-    out = np.empty((hgt, wid), np.float32)
-    run_strips(hgt, lambda r0, r1: _luma_rows(rgb[r0:r1], w0, w1, w2, out[r0:r1]), _STRIP_ROWS)
-    return out
-
-
-@kernel
-def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
-    wid = out.shape[1]
-    for i in range(out.shape[0]):
-        _luma_row(rgb[i].reshape(3 * wid), w0, w1, w2, out[i])
 
 
 def white_level(
@@ -257,14 +236,14 @@ def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-de
     nw = (wid + 7) // 8
     flags = np.zeros(8 * nw, np.uint8)
     words = flags.view(np.uint64)
-    w0, w1, w2 = _LUMA_W
+    w0, w1, w2 = _LUMA
     big = np.float32(np.inf)
     counted = below = k = 0
     for i in range(0, rows.shape[0], step):
         if rows.shape[1] == wid:
             y[:] = rows[i]
         else:
-            _luma_row(rows[i], w0, w1, w2, y)
+            dot3_row(rows[i], w0, w1, w2, y)
         mr = m8[i] if m8.shape[0] else ones
         n_in = 0
         for j in range(wid):
@@ -291,8 +270,8 @@ def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
     ``light`` is a lobe's incoming light without its colour (H, W, 3); ``white`` (> 0) the level
     mapped to δ̄ = 1 (see :func:`white_level`). NaN gives 0, +inf 1.
     """
-    w = WHITE.check(white, "white")
-    return _clip01(luminance(light, 1.0 / w))
+    s = np.float32(1.0 / WHITE.check(white, "white"))
+    return _clip01(luminance(light, (_LUMA[0] * s, _LUMA[1] * s, _LUMA[2] * s)))
 
 
 # -- scaling renderer lobes -----------------------------------------------------------------------
@@ -408,7 +387,7 @@ def scale_lobes(
     # _sigma_from over max(α, 1 - α), so σ is exactly 1 where E = e^{-γκ} is 1; δ̄ = the light's
     # luminance over its white level (as reflectance_delta).
     coef = np.array(
-        [[*(_LUMA[0] / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
+        [[*(_LUMA / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
         np.float32,
     ).reshape(nl, 5)
     lobe_t = tuple(lobe_arr[n] for n in names)
@@ -448,13 +427,6 @@ def _pq_factors(alpha: float) -> tuple[float, float]:
     if alpha < 0.5:
         return alpha / (1.0 - alpha), 1.0
     return 1.0, 1.0
-
-
-@inline_kernel
-def _luma_row(light, w0, w1, w2, d):  # type: ignore[no-untyped-def]
-    """d[j] = (w0, w1, w2) · pixel j of the flat RGB row ``light``."""
-    for j in range(d.shape[0]):
-        d[j] = w0 * light[3 * j] + w1 * light[3 * j + 1] + w2 * light[3 * j + 2]
 
 
 @inline_kernel
@@ -553,7 +525,7 @@ def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, si
             sk[:j0] = one
             sk[j1:] = one
             light = lights[k][i].reshape(3 * wid)[3 * j0 : 3 * j1]
-            _luma_row(light, coef[k, 0], coef[k, 1], coef[k, 2], d[j0:j1])
+            dot3_row(light, coef[k, 0], coef[k, 1], coef[k, 2], d[j0:j1])
             _sigma_row(d[j0:j1], e[which[k], j0:j1], coef[k, 3], coef[k, 4], sk[j0:j1])
             if keep:
                 sig[k, r0 + i] = sk

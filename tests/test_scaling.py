@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from ops.bilinear import Upsampled
+from ops.color import luminance
 from ops.curvature import isotropic, principal_curvatures
-from ops.scaling import luminance, reflectance_delta, scale_lobes, sigma, white_level
+from ops.scaling import reflectance_delta, scale_lobes, sigma, white_level
 from tests import analytic
 
 ALPHAS = (0.1, 0.25, 0.5, 0.8)

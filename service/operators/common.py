@@ -12,8 +12,8 @@ from pydantic import Field, field_validator
 
 from gbuffer.frame import Frame
 from ops import checks
+from ops.color import luminance
 from ops.lighting import lighting_gain
-from ops.scaling import luminance
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
 from service.images import load_image

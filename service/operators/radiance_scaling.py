@@ -13,8 +13,9 @@ from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.bilinear import Upsampled
+from ops.color import luminance
 from ops.masked import masked_gaussian
-from ops.scaling import luminance, scale_lobes, white_level
+from ops.scaling import scale_lobes, white_level
 from service.operators.base import Context, register
 from service.operators.common import (
     Alpha,

@@ -33,7 +33,7 @@ from pydantic import Field, model_validator
 from gbuffer.frame import Frame
 from ops import checks, color
 from ops import curvature as curv_ops
-from ops.scaling import luminance
+from ops.color import luminance
 from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
 from service.errors import PipelineError
 from service.operators.base import Context, Params, register
