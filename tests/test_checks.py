@@ -3,7 +3,6 @@ models refuse and accept what they accept, because both read the same :class:`Ra
 
 from __future__ import annotations
 
-import doctest
 import functools
 import math
 from collections.abc import Callable
@@ -27,11 +26,6 @@ from service.operators.light_alignment import LightAlignmentParams
 from service.operators.radiance_scaling import RadianceScalingParams
 from service.operators.unsharp import UnsharpParams
 from tests import analytic
-
-
-def test_doctests() -> None:
-    result = doctest.testmod(checks)
-    assert result.attempted >= 3 and result.failed == 0
 
 
 @pytest.mark.parametrize(
