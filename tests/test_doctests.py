@@ -20,6 +20,8 @@ def test_docstring_examples(name: str) -> None:
     assert result.failed == 0
 
 
-@pytest.mark.parametrize("name", ["ops.checks", "ops.color", "ops.unsharp.surface"])
+@pytest.mark.parametrize(
+    "name", ["ops.checks", "ops.color", "ops.unsharp.surface", "ops.relief.shape"]
+)
 def test_the_equations_have_examples(name: str) -> None:
     assert doctest.testmod(importlib.import_module(name)).attempted > 0
