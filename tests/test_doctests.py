@@ -21,7 +21,14 @@ def test_docstring_examples(name: str) -> None:
 
 
 @pytest.mark.parametrize(
-    "name", ["ops.checks", "ops.color", "ops.unsharp.surface", "ops.relief.shape"]
+    "name",
+    [
+        "ops.checks",
+        "ops.color",
+        "ops.unsharp.surface",
+        "ops.relief.shape",
+        "ops.light_alignment.eq1",
+    ],
 )
 def test_the_equations_have_examples(name: str) -> None:
     assert doctest.testmod(importlib.import_module(name)).attempted > 0
