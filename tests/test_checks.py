@@ -17,7 +17,7 @@ from ops.checks import Range
 from ops.congruence import congruence
 from ops.curvature import isotropic, principal_curvatures
 from ops.light_alignment import w_gamma
-from ops.scaling import sigma
+from ops.radiance_scaling import sigma
 from ops.shading import blinn_phong, refract
 from service.operators.baselines import ExaggeratedParams
 from service.operators.congruence import CongruenceParams

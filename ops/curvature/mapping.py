@@ -71,8 +71,8 @@ def isotropic(curv: Curvature, gain: float = DEFAULT_GAIN) -> np.ndarray:
 def isotropic_field(curv: Curvature, gain: float = DEFAULT_GAIN) -> Upsampled:
     """:func:`isotropic` left on the working grid: the tanh is mapped there and the result is
     read through bilinear upsampling (:class:`ops.bilinear.Upsampled`), so a kernel that
-    consumes κ (:func:`ops.scaling.scale_lobes`) interpolates each row as it needs it instead of
-    reading a full-resolution plane; ``np.asarray`` of it is :func:`isotropic`."""
+    consumes κ (:func:`ops.radiance_scaling.scale_lobes`) interpolates each row as it needs it
+    instead of reading a full-resolution plane; ``np.asarray`` of it is :func:`isotropic`."""
     s = CURVATURE_GAIN.check(gain, "gain")
     coarse = curv._coarse_for("k1", "k2", "weight")
     if coarse is not None:

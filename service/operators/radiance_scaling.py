@@ -15,7 +15,7 @@ from ops import radiance_scaling as rs
 from ops.bilinear import Upsampled
 from ops.color import luminance
 from ops.masked import masked_gaussian
-from ops.scaling import scale_lobes, white_level
+from ops.radiance_scaling import scale_lobes, white_level
 from service.operators.base import Context, register
 from service.operators.common import (
     Alpha,

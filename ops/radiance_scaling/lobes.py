@@ -1,126 +1,29 @@
-"""Radiance Scaling: the scaling function σ (Eq. 2) and its post-process form on lobes (Eq. 4).
-
-Reference: R. Vergne, R. Pacanowski, P. Barla, X. Granier, C. Schlick, "Improving Shape Depiction
-under Arbitrary Rendering", IEEE TVCG 17(8), 2011 (``papers/radiance-scaling.txt``), §4 (Eq. 2)
-and §5.3 (Eq. 4, precomputed radiance: σ̄ taken out of the integral, δ̄ = lobe light / white).
-
-Sign of κ. Eq. 2 is printed with ``e^{γκ}``. Evaluated with κ > 0 on convexities (the convention
-the paper states for κ, and Depict's), that would *darken* intensities above α on convex features,
-the opposite of the paper's own text ("For convex features, reflected lighting intensities above
-α are brightened and those below α are darkened") and of the authors' shaders (MeshLab's Radiance
-Scaling plugin evaluates it with ``exp(-β)`` / ``exp(gamma*(-k))`` of a convex-positive κ). The
-printed sign goes with the paper's ``H = ∇(-(n_x, n_y)/n_z)``, negative on bumps in a camera
-space whose +z points at the viewer. Depict keeps κ > 0 on convexities (``ops.curvature``) and
-evaluates Eq. 2 with ``e^{-γκ}``, so convexities brighten what is above α, as the text says.
-"""
+"""Radiance Scaling as a post-process of a renderer's lobes (§5.3, Eq. 4): δ̄ = lobe light / white
+level, each lobe scaled by σ, the beauty rebuilt."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping
 
-import cv2
 import numpy as np
-from numpy.typing import ArrayLike
 
-from ops.bilinear import Upsampled, upsample_row
+from ops.bilinear import Upsampled
 from ops.checks import ALPHA, GAMMA, PERCENTILE, WHITE
-from ops.color import REC709_Y, luminance
-from ops.jit import inline_kernel, kernel
-from ops.numerics import dot3_row, expf
+from ops.color import luminance
 from ops.parallel import run_strips
+from ops.radiance_scaling._common import (
+    _ACC_BEAUTY,
+    _ACC_LOBES,
+    _ACC_REMAINDER,
+    _LUMA,
+    _MAX_EXP,
+    _STRIP_ROWS,
+)
+from ops.radiance_scaling._kernels import _count_rows, _scale_rows
+from ops.radiance_scaling.sigma import _clip01
 
-_LUMA = np.array(REC709_Y, dtype=np.float32)  # for kernels
-_MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
-_STRIP_ROWS = 64  # rows per strip in scale_lobes
-_ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to
-
-
-def _clip01(x: np.ndarray) -> np.ndarray:
-    """Clip to [0, 1] in place (+inf -> 1, NaN -> 0)."""
-    cv2.patchNaNs(x, 0.0)
-    np.clip(x, np.float32(0.0), np.float32(1.0), out=x)
-    return x
-
-
-def _exp_term(kappa: np.ndarray, gamma: float) -> np.ndarray:
-    """e^{-γκ} for κ clipped to [-1, 1] (float32, 2-D; NaN κ counts as 0)."""
-    arg = np.multiply(kappa, np.float32(-gamma), dtype=np.float32)
-    cv2.patchNaNs(arg, 0.0)
-    lim = np.float32(min(gamma, _MAX_EXP))
-    np.clip(arg, -lim, lim, out=arg)
-    return np.asarray(cv2.exp(arg, dst=arg), np.float32)
-
-
-def _sigma_from(
-    expk: np.ndarray,
-    delta: np.ndarray,
-    alpha: float,
-    *,
-    scratch: np.ndarray | None = None,
-    consume: bool = False,
-    out: np.ndarray | None = None,
-) -> np.ndarray:
-    """Eq. 2 from E = e^{-γκ} and δ in [0, 1] (both (H, W) float32), in the cancellation-free
-    form σ = (P·E + Q) / (P + Q·E), P = α(1 - δ), Q = (1 - α)δ.
-
-    ``scratch`` is an optional buffer like ``delta``; with ``consume`` ``delta`` is overwritten;
-    ``out`` receives σ.
-    (NumPy for the scalar operations: cv2 is slower with Python scalars.)
-    """
-    # Coefficients rounded to float32 each way, so that swapping α and 1 - α swaps them exactly
-    # and, at δ = α, α(1 - δ) and (1 - α)δ round alike (σ = 1).
-    p = np.subtract(np.float32(1.0), delta, out=scratch, dtype=np.float32)
-    np.multiply(p, np.float32(alpha), out=p)
-    q = np.multiply(delta, np.float32(1.0 - alpha), out=delta if consume else None)
-    num = cv2.multiply(p, expk, dst=out)
-    cv2.add(num, q, dst=num)
-    cv2.accumulateProduct(q, expk, p)  # p <- P + Q·E (the denominator)
-    return np.asarray(cv2.divide(num, p, dst=num), np.float32)
-
-
-def _as_2d(x: np.ndarray) -> np.ndarray:
-    if x.ndim == 2:
-        return np.ascontiguousarray(x)
-    return np.ascontiguousarray(x).reshape(1, -1) if x.size else x.reshape(1, 0)
-
-
-def sigma(kappa: ArrayLike, delta: ArrayLike, alpha: float, gamma: float) -> np.ndarray:
-    """Scaling function σ_{α,γ}(κ, δ) of Radiance Scaling (TVCG 2011, §4, Eq. 2)::
-
-        σ_{α,γ}(κ, δ) = (α e^{γκ'} + δ(1 − α(1 + e^{γκ'}))) / (α + δ(e^{γκ'} − α(1 + e^{γκ'})))
-
-    with κ' = −κ (κ > 0 on convexities, see the module docstring), evaluated as
-    ``(P·E + Q) / (P + Q·E)`` with E = e^{−γκ}, P = α(1 − δ), Q = (1 − α)δ (the same function,
-    without cancellation). Properties: σ = 1 where κ = 0 or δ = α; σ(κ, δ)·σ(−κ, δ) = 1;
-    σ_α(κ, 1 − δ) = 1 / σ_{1−α}(κ, δ); monotonic in δ (increasing for κ > 0: on convexities δ > α
-    is brightened, δ < α darkened; decreasing for κ < 0); σ(κ, 0) = e^{−γκ}, σ(κ, 1) = e^{γκ};
-    γ = 0 gives σ ≡ 1.
-
-    Parameters
-    ----------
-    kappa : array or float
-        Mapped curvature, clipped to [-1, 1].
-    delta : array or float
-        Reflectance mapping δ, clipped to [0, 1] (NaN counts as 0).
-    alpha : float
-        Scaling-invariant point α in (0, 1).
-    gamma : float
-        Scaling magnitude γ in [0, 1e4] (γκ is clipped to ±80).
-
-    Returns
-    -------
-    float32 array of the broadcast shape of ``kappa`` and ``delta``.
-    """
-    a = ALPHA.check(alpha, "alpha")
-    g = GAMMA.check(gamma, "gamma")
-    k, d = np.broadcast_arrays(np.asarray(kappa, np.float32), np.asarray(delta, np.float32))
-    shape = k.shape
-    k2 = _as_2d(k)
-    d2 = _clip01(_as_2d(d).copy())
-    out = _sigma_from(_exp_term(k2, g), d2, a)
-    return out.reshape(shape)
-
+__all__ = ["reflectance_delta", "scale_lobes", "white_level"]
 
 # -- reflectance mapping for renderer lobes (Eq. 4) ----------------------------------------------
 
@@ -223,45 +126,6 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
     pair = np.array([band[k - n_below], band[k + 1 - n_below]], np.float32)
     # quantile of the pair at the fractional part: numpy's lerp, with the same (weak) weight.
     return float(np.quantile(pair, float(g - k)))
-
-
-@kernel
-def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-def]
-    """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
-    uint8 coverage, or no rows): (counted, below ``lo``, packed into ``out``). The counts are
-    vectorised reductions that also flag the values in the band; only the 8-byte words of flags
-    that hold one are looked at to pack them."""
-    y = np.empty(wid, np.float32)
-    ones = np.ones(wid, np.uint8)
-    nw = (wid + 7) // 8
-    flags = np.zeros(8 * nw, np.uint8)
-    words = flags.view(np.uint64)
-    w0, w1, w2 = _LUMA
-    big = np.float32(np.inf)
-    counted = below = k = 0
-    for i in range(0, rows.shape[0], step):
-        if rows.shape[1] == wid:
-            y[:] = rows[i]
-        else:
-            dot3_row(rows[i], w0, w1, w2, y)
-        mr = m8[i] if m8.shape[0] else ones
-        n_in = 0
-        for j in range(wid):
-            v = y[j]
-            ok = (abs(v) < big) & (mr[j] != 0)
-            band = ok & (v >= lo) & (v <= hi)
-            counted += ok
-            below += ok & (v < lo)
-            n_in += band
-            flags[j] = band
-        if n_in:
-            for q in range(nw):
-                if words[q]:
-                    for j in range(8 * q, min(8 * q + 8, wid)):
-                        if flags[j]:
-                            out[k] = y[j]
-                            k += 1
-    return counted, below, k
 
 
 def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
@@ -427,132 +291,3 @@ def _pq_factors(alpha: float) -> tuple[float, float]:
     if alpha < 0.5:
         return alpha / (1.0 - alpha), 1.0
     return 1.0, 1.0
-
-
-@inline_kernel
-def _exp_row(kappa, gamma, lim, e):  # type: ignore[no-untyped-def]
-    """e[j] = e^{−γκ_j}, γκ clipped to ±``lim`` and NaN κ counted as 0 (as :func:`_exp_term`)."""
-    zero = np.float32(0.0)
-    for j in range(e.shape[0]):
-        x = -gamma * kappa[j]
-        x = x if x == x else zero
-        e[j] = expf(min(max(x, -lim), lim))
-
-
-@inline_kernel
-def _sigma_row(d, e, pf, qf, s):  # type: ignore[no-untyped-def]
-    """Eq. 2 per pixel: σ = (P'E + Q') / (P' + Q'E), δ̄ = clip(d, 0, 1) (NaN → 0),
-    P' = ``pf``(1 − δ̄), Q' = ``qf`` δ̄ (see :func:`scale_lobes`)."""
-    zero, one = np.float32(0.0), np.float32(1.0)
-    for j in range(s.shape[0]):
-        x = d[j]
-        x = x if x > zero else zero
-        x = x if x < one else one
-        p = pf * (one - x)
-        q = qf * x
-        s[j] = (p * e[j] + q) / (p + q * e[j])
-
-
-@inline_kernel
-def _put_scaled(acc, src, lobe, s, less):  # type: ignore[no-untyped-def]
-    """acc = src + (s − ``less``) · lobe on flat RGB rows (s per pixel; ``src`` may be ``acc``)."""
-    for j in range(s.shape[0]):
-        f = s[j] - less
-        for c in range(3):
-            m = 3 * j + c
-            acc[m] = src[m] + f * lobe[m]
-
-
-@inline_kernel
-def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):  # type: ignore[no-untyped-def]
-    """:func:`_put_scaled` of three lobes at once (one pass over ``acc``)."""
-    for j in range(s0.shape[0]):
-        f0, f1, f2 = s0[j] - less, s1[j] - less, s2[j] - less
-        for c in range(3):
-            m = 3 * j + c
-            acc[m] = src[m] + f0 * l0[m] + f1 * l1[m] + f2 * l2[m]
-
-
-@inline_kernel
-def _nonzero_span(x):  # type: ignore[no-untyped-def]
-    """(j0, j1): the first and one past the last index where ``x`` is not 0 ((0, 0) if none)."""
-    n = x.shape[0]
-    lo, hi = n, 0
-    for j in range(n):
-        nz = x[j] != np.float32(0.0)
-        lo = min(lo, j if nz else n)
-        hi = max(hi, j + 1 if nz else 0)
-    return (lo, hi) if lo < hi else (0, 0)
-
-
-@kernel
-def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
-    """Rows ``r0 ..`` of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with
-    ``mode`` _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY.
-    κ is the ``grid`` upsampled ``f`` times (:func:`ops.bilinear.upsample_row`; f = 1: κ
-    itself); σ_k of lobe k from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to
-    ± ``gammas[which[k], 1]``, and δ̄ = clip(coef[k, :3] · light_k, 0, 1),
-    P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when
-    it has rows.
-
-    σ = 1 exactly where κ = 0 (E = 1), so on each row only the span between the first and the
-    last pixel of non-zero κ is computed: outside it no light is read, and with _ACC_BEAUTY no
-    lobe either (the beauty is copied). Background, where κ is 0, costs a copy. Each step is its
-    own loop over the span (E per γ, δ̄, σ, the sum), each vectorised by LLVM; RGB rows are
-    indexed flat (3j + c)."""
-    zero, one = np.float32(0.0), np.float32(1.0)
-    keep = sig.shape[1] > 0
-    less = one if mode == _ACC_BEAUTY else zero
-    wid = out.shape[1]
-    nl = len(lobes)
-    e = np.empty((gammas.shape[0], wid), np.float32)
-    d = np.empty(wid, np.float32)
-    zeros = np.zeros(3 * wid, np.float32)
-    s = np.empty((nl, wid), np.float32)  # σ of the row's lobes (contiguous rows)
-    v = np.empty(grid.shape[1], np.float32)
-    kr = np.empty(wid if f > 1 else 0, np.float32)
-    for i in range(out.shape[0]):
-        if f > 1:
-            upsample_row(grid, f, r0 + i, v, kr)
-            kappa = kr
-        else:
-            kappa = grid[r0 + i]
-        j0, j1 = _nonzero_span(kappa)
-        for g in range(gammas.shape[0]):
-            _exp_row(kappa[j0:j1], gammas[g, 0], gammas[g, 1], e[g, j0:j1])
-        for k in range(nl):
-            sk = s[k]
-            sk[:j0] = one
-            sk[j1:] = one
-            light = lights[k][i].reshape(3 * wid)[3 * j0 : 3 * j1]
-            dot3_row(light, coef[k, 0], coef[k, 1], coef[k, 2], d[j0:j1])
-            _sigma_row(d[j0:j1], e[which[k], j0:j1], coef[k, 3], coef[k, 4], sk[j0:j1])
-            if keep:
-                sig[k, r0 + i] = sk
-        acc = out[i].reshape(3 * wid)
-        src = zeros if mode == _ACC_LOBES else base[i].reshape(3 * wid)
-        a, b = 0, wid
-        if mode == _ACC_BEAUTY:  # σ - 1 = 0 outside the span: the beauty as it is
-            a, b = j0, j1
-            acc[: 3 * a] = src[: 3 * a]
-            acc[3 * b :] = src[3 * b :]
-        acc, src = acc[3 * a : 3 * b], src[3 * a : 3 * b]
-        k = 0
-        while k + 3 <= nl:  # three lobes per pass over the row, then the rest one by one
-            _put_scaled3(
-                acc,
-                src,
-                lobes[k][i].reshape(3 * wid)[3 * a : 3 * b],
-                lobes[k + 1][i].reshape(3 * wid)[3 * a : 3 * b],
-                lobes[k + 2][i].reshape(3 * wid)[3 * a : 3 * b],
-                s[k, a:b],
-                s[k + 1, a:b],
-                s[k + 2, a:b],
-                less,
-            )
-            src = acc
-            k += 3
-        while k < nl:
-            _put_scaled(acc, src, lobes[k][i].reshape(3 * wid)[3 * a : 3 * b], s[k, a:b], less)
-            src = acc
-            k += 1
