@@ -25,6 +25,15 @@ from ops.curvature import DEFAULT_GAIN, DEFAULT_SCALE, isotropic, principal_curv
 from ops.parallel import run_strips
 from ops.shading import dot, lambert, normalize
 
+__all__ = [
+    "ES_SCALES",
+    "exaggerated_shading",
+    "lambert_image",
+    "light_warping",
+    "smoothed_normals",
+    "warp_light",
+]
+
 F32 = NDArray[np.float32]
 
 #: Default smoothing scales of Exaggerated Shading (Gaussian σ relative to the image height).

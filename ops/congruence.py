@@ -81,6 +81,8 @@ from ops.checks import (
 from ops.color import REC709_Y
 from ops.parallel import run_strips
 
+__all__ = ["CongruenceResult", "congruence"]
+
 F32 = NDArray[np.float32]
 
 #: Rec. 709 / sRGB luminance weights of linear RGB.

@@ -28,6 +28,8 @@ from typing import Any, TypeVar, cast
 
 import numba
 
+__all__ = ["FASTMATH", "inline_kernel", "kernel"]
+
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: LLVM fast-math flags of every kernel (see the module docstring).

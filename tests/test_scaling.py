@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ops.bilinear import Upsampled
 from ops.color import luminance
 from ops.curvature import isotropic, principal_curvatures
+from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import (
     reflectance_delta,
     scale_lobes,

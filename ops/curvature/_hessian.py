@@ -13,8 +13,9 @@ import cv2
 import numpy as np
 
 from ops.curvature._common import _FLT_MAX, _NZ_MIN
-from ops.curvature._jumps import _downsample, _jump_band, _mask_u8
+from ops.curvature._jumps import _jump_band, _mask_u8
 from ops.jit import inline_kernel, kernel
+from ops.pyramid.reduce import box_downsample
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -33,7 +34,7 @@ def _working_coverage(
     depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
     cov = cv2.inRange(dbox, 1e-30, _FLT_MAX)
     if mask is not None:
-        m = _downsample(_mask_u8(mask), level, size)
+        m = box_downsample(_mask_u8(mask), level, size)
         cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
     return cov, depth_l
 

@@ -44,22 +44,6 @@ def _mask_u8(mask: np.ndarray) -> np.ndarray:
     return _cv.compare(np.ascontiguousarray(mask, dtype=np.float32), 0.5, cv2.CMP_GT)
 
 
-def _downsample(img: np.ndarray, level: int, size: tuple[int, int]) -> np.ndarray:
-    """Box average over 2^level x 2^level blocks (``size`` = (w, h) of the result).
-
-    For exact halvings, bilinear resizing by 1/2 samples the middle of each 2x2 block, which is
-    their average (and faster than INTER_AREA); other sizes use INTER_AREA.
-    """
-    h, w = img.shape[:2]
-    k = 2**level
-    if h % k or w % k:
-        return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
-    for _ in range(level):
-        h, w = h // 2, w // 2
-        img = cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR)
-    return img
-
-
 # -- principal curvatures --------------------------------------------------------------------------
 
 

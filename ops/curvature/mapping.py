@@ -9,7 +9,6 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.bilinear import Upsampled
 from ops.checks import ANISOTROPY, CURVATURE_GAIN
 from ops.curvature import _common
 from ops.curvature._common import DEFAULT_GAIN
@@ -17,6 +16,7 @@ from ops.curvature.result import _FIELDS, Curvature
 from ops.jit import kernel
 from ops.numerics import expf
 from ops.parallel import run_strips
+from ops.pyramid.upsample import Upsampled
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -70,7 +70,7 @@ def isotropic(curv: Curvature, gain: float = DEFAULT_GAIN) -> np.ndarray:
 
 def isotropic_field(curv: Curvature, gain: float = DEFAULT_GAIN) -> Upsampled:
     """:func:`isotropic` left on the working grid: the tanh is mapped there and the result is
-    read through bilinear upsampling (:class:`ops.bilinear.Upsampled`), so a kernel that
+    read through bilinear upsampling (:class:`ops.pyramid.Upsampled`), so a kernel that
     consumes κ (:func:`ops.radiance_scaling.scale_lobes`) interpolates each row as it needs it
     instead of reading a full-resolution plane; ``np.asarray`` of it is :func:`isotropic`."""
     s = CURVATURE_GAIN.check(gain, "gain")

@@ -24,9 +24,10 @@ from ops.curvature._hessian import (
     _weigh_blocks,
     _working_coverage,
 )
-from ops.curvature._jumps import _check_buffers, _downsample, _mask_u8, _working_level
+from ops.curvature._jumps import _check_buffers, _mask_u8, _working_level
 from ops.curvature.result import Curvature, _Coarse
 from ops.parallel import run_strips
+from ops.pyramid.reduce import box_downsample
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -102,7 +103,7 @@ def principal_curvatures(
     var = sigma_px * sigma_px - box_var - k * k / 3.0
     sigma_l = math.sqrt(var) / k if var > 0.0 else 0.0
     if not exact:  # working-grid inputs for the whole frame at once
-        whole_n = _downsample(normal, level, (w_l, h_l))
+        whole_n = box_downsample(normal, level, (w_l, h_l))
         whole_c = _working_coverage(depth, mask, level, (w_l, h_l))
 
     def weighted(a0: int, a1: int, c0: int, c1: int, covp: np.ndarray, nch: int) -> np.ndarray:

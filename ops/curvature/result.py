@@ -10,11 +10,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.bilinear import Upsampled
 from ops.curvature import _common
 from ops.curvature._hessian import _deriv_x, _deriv_y
 from ops.jit import kernel
 from ops.parallel import run_strips
+from ops.pyramid.upsample import Upsampled
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.

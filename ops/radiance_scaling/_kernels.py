@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ops.bilinear import upsample_row
 from ops.jit import inline_kernel, kernel
 from ops.numerics import dot3_row, expf
+from ops.pyramid.upsample import upsample_row
 from ops.radiance_scaling._common import _ACC_BEAUTY, _ACC_LOBES, _LUMA
 
 
@@ -110,7 +110,7 @@ def _nonzero_span(x):  # type: ignore[no-untyped-def]
 def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
     """Rows ``r0 ..`` of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with
     ``mode`` _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY.
-    κ is the ``grid`` upsampled ``f`` times (:func:`ops.bilinear.upsample_row`; f = 1: κ
+    κ is the ``grid`` upsampled ``f`` times (:func:`ops.pyramid.upsample_row`; f = 1: κ
     itself); σ_k of lobe k from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to
     ± ``gammas[which[k], 1]``, and δ̄ = clip(coef[k, :3] · light_k, 0, 1),
     P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when

@@ -8,10 +8,10 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ops.bilinear import Upsampled
 from ops.checks import ALPHA, GAMMA, PERCENTILE, WHITE
 from ops.color import luminance
 from ops.parallel import run_strips
+from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling._common import (
     _ACC_BEAUTY,
     _ACC_LOBES,

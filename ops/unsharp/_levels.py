@@ -14,8 +14,9 @@ import numpy as np
 
 from ops import color
 from ops.parallel import STRIP_PIXELS
+from ops.pyramid.reduce import halve
 from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _ONE, _SIGMA_C, _WALL, Array
-from ops.unsharp._surface import _area_half, _guide_gradient, _Level, _plane_slope, _Surface, _write
+from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface, _write
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -194,11 +195,11 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     np.divide(keep, half, out=keep)
     np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
     sel = _cv.multiply(lv.cov, keep)
-    cov = _area_half(sel)
+    cov = halve(sel)
     inv = np.divide(_ONE, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
 
     def red(field: Array) -> Array:
-        return _cv.multiply(_area_half(_cv.multiply(field, sel)), inv)
+        return _cv.multiply(halve(_cv.multiply(field, sel)), inv)
 
     iz = red(lv.iz)
     if surf.lps is None:

@@ -3,7 +3,6 @@ Deussen (SIGGRAPH 2006) and a plain 2-D unsharp mask of L*, for comparisons."""
 
 from __future__ import annotations
 
-import math
 from typing import Any, Literal
 
 import cv2
@@ -11,6 +10,7 @@ import numpy as np
 
 from ops import color
 from ops.checks import POSITIVE, RELATIVE_SIGMA, UNSHARP_AMOUNT
+from ops.pyramid.reduce import gaussian_blur
 from ops.unsharp._common import Array, _lightness, _mask, _plane, _rgb, _with_lightness
 from ops.unsharp._surface import _crop, _outside
 
@@ -18,40 +18,8 @@ _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
 __all__ = ["depth_unsharp_masking", "plain_unsharp_mask"]
 
+
 # ---------------------------------------------------------------------------------------------
-# Gaussian blur of any width at bounded cost
-
-
-def _blur(img: Array, sigma_px: float) -> Array:
-    """Gaussian blur of ``img`` with σ = ``sigma_px`` (replicated border), float32.
-
-    Wide blurs go through a pyramid: the image is area-downsampled by 2^m so that σ is at least
-    2 pixels there, blurred with the remaining σ' = √(σ² − σ_box²) / 2^m, and upsampled
-    bilinearly (the result is band-limited, so the interpolation error is far below the
-    enhancement). Cost stays ≈ a few copies at any σ.
-    """
-    if sigma_px <= 0.0:
-        return img.copy()
-    h, w = img.shape[:2]
-    m = 0
-    while sigma_px / 2 ** (m + 1) >= 2.0 and min(h, w) // 2 ** (m + 1) >= 8:
-        m += 1
-    if m == 0:
-        return _cv.GaussianBlur(img, (0, 0), sigma_px, borderType=_cv.BORDER_REPLICATE)
-    f = 2**m
-    hs, ws = -(-h // f), -(-w // f)
-    pad = img
-    if hs * f != h or ws * f != w:
-        pad = _cv.copyMakeBorder(img, 0, hs * f - h, 0, ws * f - w, _cv.BORDER_REPLICATE)
-    small = _cv.resize(pad, (ws, hs), interpolation=_cv.INTER_AREA)
-    # the box of the area average has variance (f² − 1)/12 image pixels², the bilinear
-    # upsampling about f²/6 more; take both out of the Gaussian applied at the small scale
-    rest = max(sigma_px**2 - (f * f - 1) / 12.0 - f * f / 6.0, (0.5 * f) ** 2)
-    small = _cv.GaussianBlur(small, (0, 0), math.sqrt(rest) / f, borderType=_cv.BORDER_REPLICATE)
-    big = _cv.resize(small, (ws * f, hs * f), interpolation=_cv.INTER_LINEAR)
-    return big if big.shape[:2] == (h, w) else np.ascontiguousarray(big[:h, :w])
-
-
 def plain_unsharp_mask(
     beauty: Array,
     sigma: float,
@@ -85,7 +53,7 @@ def plain_unsharp_mask(
     hh = img.shape[0] if image_height is None else int(POSITIVE.check(image_height, "image_height"))
     wl = color.resolve_white(white, img, None)
     lum = _lightness(img, wl)
-    smooth = _blur(lum, s * hh)
+    smooth = gaussian_blur(lum, s * hh)
     new_lum = _cv.scaleAdd(_cv.subtract(lum, smooth), lam, lum)
     return _with_lightness(img, lum, new_lum, wl, None)
 
@@ -160,7 +128,7 @@ def depth_unsharp_masking(
         _cv.addWeighted(dn, 1.0 / span, dn, 0.0, -z_near / span, dst=dn)
     else:
         dn = np.where(valid > 0, np.float32(0.0), np.float32(BACKGROUND_DEPTH))
-    delta = _cv.subtract(_blur(dn, s * hh), dn)
+    delta = _cv.subtract(gaussian_blur(dn, s * hh), dn)
     if mode == "darken":
         _cv.min(delta, 0.0, dst=delta)
     wl = color.resolve_white(white, img, valid.view(bool))

@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike
 
 from ops import color
 from ops.checks import POSITIVE, UNSHARP_AMOUNT, UNSHARP_SIGMA
-from ops.masked import masked_gaussian
+from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import _L_EPS, _LEVEL_SIGMA, _ONE, Array, _mask, _normals, _plane, _rgb
 from ops.unsharp._levels import _sub_resize
 from ops.unsharp._pyramid import _fade, _surface_pyramid
@@ -193,7 +193,7 @@ def unsharp_masking(
     (L*, a*, b*) → (U, k a*, k b*),  k = U / L*        (§4: hue angle and saturation kept)
 
     * L*_f is L* itself (``fine_px`` = 0, the paper) or L* averaged over the surface's pixels
-      with a Gaussian of ``fine_px`` pixels (:func:`ops.masked.masked_gaussian`): the contrast
+      with a Gaussian of ``fine_px`` pixels (:func:`ops.pyramid.masked_gaussian`): the contrast
       added is then that of the structure between the two scales, and the pixel-scale
       Monte-Carlo noise of a path-traced frame passes through as it is instead of being
       multiplied by 1 + λ.

@@ -12,9 +12,9 @@ from gbuffer.frame import LOBES, Frame
 from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
-from ops.bilinear import Upsampled
 from ops.color import luminance
-from ops.masked import masked_gaussian
+from ops.pyramid.masked import masked_gaussian
+from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import scale_lobes, white_level
 from service.operators.base import Context, register
 from service.operators.common import (
