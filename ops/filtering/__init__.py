@@ -29,35 +29,28 @@ back to full resolution by edge-aware upsampling:
 
 Background pixels (mask false, depth not finite or ≤ 0) never contribute and stay 0.
 
-Modules: :mod:`.normals` (:func:`normal_pyramid`, :func:`multiscale_normals`), :mod:`.depth_pyramid`
-(:class:`DepthPyramid`); compiled kernels in :mod:`._kernels`.
+Modules: :mod:`.normals` (:func:`normal_pyramid`, :func:`multiscale_normals`), with the joint
+bilateral filter in :mod:`._kernels`; the depth-aware pyramid they run on is
+:class:`ops.pyramid.DepthPyramid`.
 """
 
 from ops.filtering._common import (
-    BACKGROUND,
     DEFAULT_BASE,
     DEFAULT_DEPTH_SIGMA,
     DEFAULT_FACTOR,
     DEFAULT_SCALES,
     F32,
-    STRIP_ROWS,
-    normalize_field,
 )
-from ops.filtering.depth_pyramid import DepthPyramid
 from ops.filtering.normals import NormalPyramid, multiscale_normals, normal_pyramid, scale_sigmas_px
 
 __all__ = [
-    "BACKGROUND",
     "DEFAULT_BASE",
     "DEFAULT_DEPTH_SIGMA",
     "DEFAULT_FACTOR",
     "DEFAULT_SCALES",
     "F32",
-    "STRIP_ROWS",
-    "DepthPyramid",
     "NormalPyramid",
     "multiscale_normals",
     "normal_pyramid",
-    "normalize_field",
     "scale_sigmas_px",
 ]

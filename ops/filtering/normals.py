@@ -17,11 +17,10 @@ from ops.filtering._common import (
     DEFAULT_FACTOR,
     DEFAULT_SCALES,
     F32,
-    normalize_field,
 )
 from ops.filtering._kernels import _JBF_TAPS, _jbf_rows
-from ops.filtering.depth_pyramid import DepthPyramid
 from ops.parallel import STRIP_PIXELS, run_strips, strip_rows
+from ops.pyramid.depth import DepthPyramid, normalize_field
 
 __all__ = ["NormalPyramid", "multiscale_normals", "normal_pyramid", "scale_sigmas_px"]
 

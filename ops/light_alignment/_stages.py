@@ -11,7 +11,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.filtering import F32, NormalPyramid, normalize_field
+from ops.filtering import F32, NormalPyramid
 from ops.light_alignment._common import SoA
 from ops.light_alignment._kernels import (
     _GUIDE_CODE,
@@ -21,6 +21,7 @@ from ops.light_alignment._kernels import (
     _write_rows,
 )
 from ops.parallel import run_strips
+from ops.pyramid import normalize_field
 
 
 def _soa(arr: np.ndarray) -> SoA:

@@ -8,9 +8,10 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
-from ops.filtering import F32, NormalPyramid, normalize_field
+from ops.filtering import F32, NormalPyramid
 from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
+from ops.pyramid import normalize_field
 from ops.shading import Light, light_vectors
 
 __all__ = ["align_components", "align_light", "align_lights"]

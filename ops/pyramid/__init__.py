@@ -13,19 +13,24 @@ Users: the curvature (:mod:`ops.curvature`: working grid by :func:`box_downsampl
 through :class:`Upsampled`), Radiance Scaling on lobes (:class:`Upsampled` κ, masked δ̄),
 unsharp masking (its surface pyramid reduces with :func:`halve`; the baselines blur with
 :func:`gaussian_blur`; the fine signal is a :func:`masked_gaussian`) and the lighting
-correction. The depth-aware pyramid of the multi-scale normals is
-:class:`ops.filtering.DepthPyramid`.
+correction;
+* :mod:`.depth` — :class:`DepthPyramid`: 2×2 reductions that keep the front-most surface of each
+  block and edge-aware upsampling across depth jumps (Local Light Alignment's multi-scale normals,
+  :mod:`ops.filtering`, and the light carried between its levels), and :func:`normalize_field`.
 """
 
+from ops.pyramid.depth import DepthPyramid, normalize_field
 from ops.pyramid.masked import masked_gaussian
 from ops.pyramid.reduce import box_downsample, gaussian_blur, halve
 from ops.pyramid.upsample import Upsampled, upsample_row
 
 __all__ = [
+    "DepthPyramid",
     "Upsampled",
     "box_downsample",
     "gaussian_blur",
     "halve",
     "masked_gaussian",
+    "normalize_field",
     "upsample_row",
 ]

@@ -11,11 +11,52 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.filtering._common import _DOWN_EXCLUDE, _STEP, BACKGROUND, F32, STRIP_ROWS, normalize_field
-from ops.filtering._kernels import _build01_rows, _down_geometry_rows, _down_unit_rows, _gather_unit
 from ops.parallel import run_strips, strip_rows
+from ops.pyramid._depth_kernels import (
+    BACKGROUND,
+    _build01_rows,
+    _down_geometry_rows,
+    _down_unit_rows,
+    _gather_unit,
+)
 
-__all__ = ["DepthPyramid"]
+__all__ = ["DepthPyramid", "normalize_field"]
+
+F32 = NDArray[np.float32]
+
+# Block members further than this many depth_sigma behind the block's front are left out.
+_DOWN_EXCLUDE = 2.0
+# A log-depth step between covered neighbouring samples larger than this many depth_sigma is
+# treated as a discontinuity by the upsampling even without a second difference.
+_STEP = 3.0
+# Rows per strip for the strip-parallel helpers.
+STRIP_ROWS = 32
+
+
+def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
+    """Unit vectors along the last axis of ``v`` (..., 3); zero vectors stay 0. ``mask``: an
+    (H, W) float 0/1 coverage the result is multiplied by."""
+    v = np.asarray(v, np.float32)
+    if v.ndim == 3 and v.shape[2] == 3 and v.shape[0] * v.shape[1] >= 4096:
+        # planes (cv2.split / merge): the same arithmetic without strided or broadcast passes
+        x, y, z = cv2.split(v)
+        n2 = x * x
+        n2 += y * y
+        n2 += z * z
+        inv = np.zeros_like(n2)
+        np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
+        if mask is not None:
+            inv *= mask  # 0/1: (v inv) m = v (inv m)
+        for plane in (x, y, z):
+            plane *= inv
+        return np.asarray(cv2.merge([x, y, z]), np.float32)
+    n2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2]
+    inv = np.zeros_like(n2)
+    np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
+    out = np.asarray(v * inv[..., None], np.float32)
+    if mask is not None:
+        out *= mask[..., None]
+    return out
 
 
 def _log_depth(depth: F32, mask: np.ndarray | None, out: F32 | None = None) -> F32:
