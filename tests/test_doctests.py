@@ -6,6 +6,8 @@ from __future__ import annotations
 import doctest
 import importlib
 import pkgutil
+import re
+from pathlib import Path
 
 import pytest
 
@@ -32,3 +34,16 @@ def test_docstring_examples(name: str) -> None:
 )
 def test_the_equations_have_examples(name: str) -> None:
     assert doctest.testmod(importlib.import_module(name)).attempted > 0
+
+
+def test_the_readmes_equation_list_names_real_functions() -> None:
+    """Every ``ops.…`` name in the README's "Where the equations are" table exists and is
+    documented."""
+    text = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    table = text.split("**Where the equations are.**", 1)[1].split("\n\n", 2)[1]
+    names = re.findall(r"`(ops(?:\.\w+)+)`", table)
+    assert len(names) >= 20
+    for name in names:
+        module, _, attr = name.rpartition(".")
+        obj = getattr(importlib.import_module(module), attr)
+        assert obj.__doc__, name
