@@ -11,7 +11,6 @@ import numpy as np
 #: default kernels); same module, untyped.
 _cv: Any = cv2
 
-__all__ = ["DEFAULT_DEPTH_JUMP", "DEFAULT_FORESHORTENING", "DEFAULT_GAIN", "DEFAULT_SCALE"]
 
 #: Default derivative scale, relative to the image height (σ = 3.2 px at 1080p).
 DEFAULT_SCALE = 0.003

@@ -5,14 +5,6 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = [
-    "DEFAULT_BASE",
-    "DEFAULT_DEPTH_SIGMA",
-    "DEFAULT_FACTOR",
-    "DEFAULT_SCALES",
-    "F32",
-]
-
 F32 = NDArray[np.float32]
 
 #: Spatial σ of the first filter (n_1 → n_2), relative to the image height.

@@ -12,6 +12,7 @@ pyramid (:mod:`ops.unsharp._pyramid`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Literal
 
 import cv2
@@ -24,7 +25,8 @@ from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import _L_EPS, _LEVEL_SIGMA, _ONE, Array, _mask, _normals, _plane, _rgb
 from ops.unsharp._levels import _sub_resize
 from ops.unsharp._pyramid import _fade, _surface_pyramid
-from ops.unsharp._surface import _outside, _surface, _valid, _write
+from ops.unsharp._surface import _outside, _Surface, _surface, _valid, _write
+from ops.unsharp._upsample import _Upsampler
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -134,6 +136,87 @@ def surface_blur(
 
 # ---------------------------------------------------------------------------------------------
 # operators
+
+
+def _finite_plane(name: str, a: Array | float, shape: tuple[int, int]) -> Array:
+    arr = _plane(name, a, shape)
+    if not _cv.checkRange(arr)[0]:
+        raise ValueError(f"{name} must be finite everywhere")
+    return arr
+
+
+def _shifted(box: tuple[slice, slice], y0: int, x0: int) -> tuple[slice, slice]:
+    """``box`` in a grid whose origin is at (y0, x0)."""
+    ys, xs = box
+    return slice(ys.start - y0, ys.stop - y0), slice(xs.start - x0, xs.stop - x0)
+
+
+def _adapt(res: tuple[_Upsampler, tuple[int, Array] | None] | None) -> tuple[Array, int] | None:
+    """√(1 + Var(L*/100)) on its level, and that level's factor (None: not adaptive)."""
+    if res is None or res[1] is None:
+        return None
+    kv, v = res[1]
+    return _cv.sqrt(_cv.addWeighted(v, 1e-4, v, 0.0, 1.0)), 2**kv
+
+
+@dataclass
+class _LightnessRows:
+    """The k of :func:`unsharp_masking` for ``color.scale_lab``, strip by strip.
+
+    Per strip of rows r: k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4,
+    Eq. 1, as :func:`unsharp_lightness`), and where λ_adapt = 0 (kept bit for bit), in the
+    columns that hold some surface (the others are kept whole). L*_σ and √(1 + Var) are
+    upsampled here, strip by strip.
+    """
+
+    surf: _Surface
+    lum: Array  # L*
+    fine: Array  # L*_f
+    up: _Upsampler | None  # L*_σ (None: too small for any level, nothing to smooth)
+    lam: float  # λ
+    cov: Array | None  # α (None: a bool mask)
+    gain: Array | None  # g
+    fade: tuple[slice, slice] | None  # where σ_px < s_1: U fades to L* (see _fade)
+    ps: Array  # pixel sizes
+    c_fade: float
+    adapt: tuple[Array, int] | None  # √(1 + Var) on its level, and its factor
+
+    def __call__(self, r: slice) -> color.KRows:
+        x, _, n, _ = _cv.boundingRect(self.surf.valid[r])
+        c = slice(x, x + n)
+        if n == 0:
+            return np.empty((r.stop - r.start, 0), np.float32), None, c
+        rc = (r, c)
+        valid_r = self.surf.valid[rc]
+        # λ g α: 0 off the surface
+        if self.cov is None:
+            lam_r = np.multiply(valid_r, np.float32(self.lam), dtype=np.float32)
+        else:
+            lam_r = _cv.min(_cv.max(self.cov[rc], 0.0), 1.0)
+            _cv.multiply(lam_r, valid_r, dst=lam_r, scale=self.lam, dtype=_cv.CV_32F)
+        if self.gain is not None:
+            _cv.multiply(lam_r, self.gain[rc], dst=lam_r)
+        if self.fade is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S), a0 = min(σ_px²/s_1², 1)
+            fy, fx = self.fade
+            y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
+            x0, x1 = max(c.start, fx.start), min(c.stop, fx.stop)
+            if y0 < y1 and x0 < x1:  # (elsewhere on the surface a0 = 1)
+                fb = (slice(y0 - r.start, y1 - r.start), slice(x0 - c.start, x1 - c.start))
+                a0 = _cv.divide(self.c_fade, _cv.max(self.ps[y0:y1, x0:x1], 1e-30))
+                _cv.multiply(a0, a0, dst=a0)
+                part = lam_r[fb]
+                _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
+        keep_r = _cv.compare(lam_r, 0.0, _cv.CMP_EQ)
+        if self.adapt is not None:  # √(1 + Var)
+            lam_r = _cv.multiply(lam_r, _sub_resize(self.adapt[0], self.adapt[1], r, c), dst=lam_r)
+        lum_r = self.lum[rc]
+        # L*_σ (a view: written in)
+        new = lum_r.copy() if self.up is None else self.up.rows(r, c)[0]
+        new = _cv.subtract(self.fine[rc], new, dst=new)
+        new = _cv.multiply(lam_r, new, dst=new)
+        new = _cv.add(lum_r, new, dst=new)
+        new = _cv.max(new, 0.0, dst=new)
+        return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
 
 
 def unsharp_lightness(
@@ -256,9 +339,7 @@ def unsharp_masking(
     ps = _plane("pixel_size", pixel_size, shape)
     mask_a = _mask(mask, shape)
     nrm = None if normal is None else _normals(normal, shape)
-    gain = None if gain_map is None else _plane("gain_map", gain_map, shape)
-    if gain is not None and not _cv.checkRange(gain)[0]:
-        raise ValueError("gain_map must be finite everywhere")
+    gain = None if gain_map is None else _finite_plane("gain_map", gain_map, shape)
 
     # σ_px < s_1 (pixel size above c_fade): U fades to L* itself (see _fade); the box of those
     # pixels is found with the others
@@ -288,67 +369,18 @@ def unsharp_masking(
     res = _surface_pyramid(surf, lum, first, sigma, vsig if adaptive else None, ns)
     cov_a = None if mask_a.dtype == np.bool_ else mask_a[box]
     gain_a = None if gain is None else gain[box]
-    if res is None or fade_box is None:
-        fade_box = None
-    else:  # in the bounding box of the surface
-        fy, fx = fade_box
-        fade_box = (
-            slice(fy.start - ys.start, fy.stop - ys.start),
-            slice(fx.start - xs.start, fx.stop - xs.start),
-        )
-    adapt = None
-    if res is not None and res[1] is not None:
-        kv, v = res[1]
-        a = _cv.sqrt(_cv.addWeighted(v, 1e-4, v, 0.0, 1.0))  # √(1 + Var(L*/100))
-        adapt = (a, 2**kv)
+    # the box where U fades to L*, in the bounding box of the surface
+    fade_box = None if res is None or fade_box is None else _shifted(fade_box, ys.start, xs.start)
     up = None if res is None else res[0]  # None: too small for any level, nothing to smooth
-    lam32 = np.float32(lam)
     fine = (
         lum
         if fine_px <= 0.0
         else masked_gaussian(lum, surf.valid, POSITIVE.check(fine_px, "fine_px"))
     )
 
-    def k_rows(r: slice) -> color.KRows:
-        """k = max(U, 0) / max(L*, 1e-3) with U = L* + λ_adapt (L* − L*_σ) (§4, Eq. 1), and
-        where λ_adapt = 0 (kept bit for bit), for the rows r, in the columns that hold some
-        surface (the others are kept whole). L*_σ and √(1 + Var) are upsampled here, strip by
-        strip."""
-        x, _, n, _ = _cv.boundingRect(surf.valid[r])
-        c = slice(x, x + n)
-        if n == 0:
-            return np.empty((r.stop - r.start, 0), np.float32), None, c
-        rc = (r, c)
-        valid_r = surf.valid[rc]
-        # λ g α: 0 off the surface
-        if cov_a is None:
-            lam_r = np.multiply(valid_r, lam32, dtype=np.float32)
-        else:
-            lam_r = _cv.min(_cv.max(cov_a[rc], 0.0), 1.0)
-            _cv.multiply(lam_r, valid_r, dst=lam_r, scale=lam, dtype=_cv.CV_32F)
-        if gain_a is not None:
-            _cv.multiply(lam_r, gain_a[rc], dst=lam_r)
-        if fade_box is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S), a0 = min(σ_px²/s_1², 1)
-            fy, fx = fade_box
-            y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
-            x0, x1 = max(c.start, fx.start), min(c.stop, fx.stop)
-            if y0 < y1 and x0 < x1:  # (elsewhere on the surface a0 = 1)
-                fb = (slice(y0 - r.start, y1 - r.start), slice(x0 - c.start, x1 - c.start))
-                a0 = _cv.divide(c_fade, _cv.max(ps[y0:y1, x0:x1], 1e-30))
-                _cv.multiply(a0, a0, dst=a0)
-                part = lam_r[fb]
-                _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
-        keep_r = _cv.compare(lam_r, 0.0, _cv.CMP_EQ)
-        if adapt is not None:  # √(1 + Var)
-            lam_r = _cv.multiply(lam_r, _sub_resize(adapt[0], adapt[1], r, c), dst=lam_r)
-        lum_r = lum[rc]
-        new = lum_r.copy() if up is None else up.rows(r, c)[0]  # L*_σ (a view: written in)
-        new = _cv.subtract(fine[rc], new, dst=new)
-        new = _cv.multiply(lam_r, new, dst=new)
-        new = _cv.add(lum_r, new, dst=new)
-        new = _cv.max(new, 0.0, dst=new)
-        return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
-
+    k_rows = _LightnessRows(
+        surf, lum, fine, up, lam, cov_a, gain_a, fade_box, ps, c_fade, _adapt(res)
+    )
     if sub_shape == shape:
         out = color.scale_lab(img_box, k_rows, wl)
     else:
