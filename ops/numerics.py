@@ -32,11 +32,11 @@ _TINY = np.float32(1e-12)
 
 
 @intrinsic
-def _float32_from_bits(typingctx, bits):  # type: ignore[no-untyped-def]
+def _float32_from_bits(typingctx, bits):
     """The float32 whose IEEE-754 bit pattern is the int32 ``bits`` (a bit cast, no conversion)."""
     sig = types.float32(types.int32)
 
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+    def codegen(context, builder, signature, args):
         return builder.bitcast(args[0], ir.FloatType())
 
     return sig, codegen
@@ -56,7 +56,7 @@ EXPF_MAX = np.float32(87.0)
 
 
 @inline_kernel
-def expf(x):  # type: ignore[no-untyped-def]
+def expf(x):
     """e^x in float32 for |x| <= :data:`EXPF_MAX` (clamped there), within 2 ulp of the exact
     value, vectorisable (no library call): x = n ln 2 + r, e^r from Cephes' polynomial and 2^n
     from its bits. NaN must be handled by the caller (it gives an undefined value)."""
@@ -80,7 +80,7 @@ _E2, _E3, _E4, _E5 = (np.float32((-1.0) ** n / math.factorial(n)) for n in (2, 3
 
 
 @kernel
-def exp_neg(u):  # type: ignore[no-untyped-def]
+def exp_neg(u):
     """e^{−u} for u ≥ 0, vectorisable (no exp call), within 2e-7 absolute (0 for u ≥ 64):
     e^{−u} = (e^{−t})^32 with t = min(u, 64)/32 ∈ [0, 2] and e^{−t} ≈ 1 + q, q the degree-5
     Taylor polynomial less 1; the 5 squarings are done on q, (1 + q)² = 1 + q (q + 2), so that
@@ -118,7 +118,7 @@ _C5 = np.float32(-2.6051490159550994e-07)
 
 
 @kernel
-def atan2_upper(y, x):  # type: ignore[no-untyped-def]
+def atan2_upper(y, x):
     """atan2(y, x) ∈ [0, π] for y ≥ 0 (0 at the origin), vectorisable: octant reduction by
     selects and the minimax polynomial of atan on [0, 1]."""
     ax = abs(x)
@@ -141,7 +141,7 @@ def atan2_upper(y, x):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def sincos_upper(theta):  # type: ignore[no-untyped-def]
+def sincos_upper(theta):
     """(sin θ, cos θ) for θ ∈ [0, π] (minimax polynomials on [0, π/2], by sin(π − θ) = sin θ,
     cos(π − θ) = −cos θ)."""
     big = theta > _HALF_PI_F
@@ -161,7 +161,7 @@ def sincos_upper(theta):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def dot3_row(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
+def dot3_row(rgb, w0, w1, w2, out):
     """out[j] = (w0, w1, w2) · triple j of the flat interleaved row ``rgb`` (3 · len(out))."""
     for j in range(out.shape[0]):
         out[j] = w0 * rgb[3 * j] + w1 * rgb[3 * j + 1] + w2 * rgb[3 * j + 2]

@@ -26,7 +26,7 @@ _JBF_RS = _JBF_CHUNK + 4
 
 
 @kernel
-def _jb_tap(gc, g, x, y, z, j, sw, c, ax, ay, az):  # type: ignore[no-untyped-def]
+def _jb_tap(gc, g, x, y, z, j, sw, c, ax, ay, az):
     """(ax, ay, az) plus tap j of guide row ``g`` and planes ``x``, ``y``, ``z``: spatial
     weight ``sw`` times the range weight e^{−c (g[j] − gc)²}."""
     d = g[j] - gc
@@ -35,7 +35,7 @@ def _jb_tap(gc, g, x, y, z, j, sw, c, ax, ay, az):  # type: ignore[no-untyped-de
 
 
 @kernel
-def _jb_planes(b, r, dx):  # type: ignore[no-untyped-def]
+def _jb_planes(b, r, dx):
     """Guide and x, y, z rows of window row ``r`` in the chunk buffer ``b`` of
     :func:`_jbf_rows`, from column 2 + ``dx`` on."""
     o = 4 * r * _JBF_RS + 2 + dx
@@ -43,7 +43,7 @@ def _jb_planes(b, r, dx):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _jbf_rows(guide, src, mask, sw, c, out):  # type: ignore[no-untyped-def]
+def _jbf_rows(guide, src, mask, sw, c, out):
     """Joint bilateral filter of a unit-vector field on rows, window of radius ≤ 2
     (:func:`_bilateral`), renormalised and times the coverage as by :func:`normalize_field`.
 

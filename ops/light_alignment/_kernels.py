@@ -22,14 +22,14 @@ _TWO_OVER_PI_F = np.float32(2.0 / math.pi)
 
 
 @kernel
-def _reflect_px(nx, ny, nz, vx, vy, vz):  # type: ignore[no-untyped-def]
+def _reflect_px(nx, ny, nz, vx, vy, vz):
     """r = 2 (n·v) n − v (:func:`ops.shading.reflect`)."""
     two = _F2 * (nx * vx + ny * vy + nz * vz)
     return two * nx - vx, two * ny - vy, two * nz - vz
 
 
 @kernel
-def _refract_px(nx, ny, nz, vx, vy, vz, eta):  # type: ignore[no-untyped-def]
+def _refract_px(nx, ny, nz, vx, vy, vz, eta):
     """t = −η v + (η cos_i − √k) n, cos_i = n·v, k = 1 − η² (1 − cos_i²), 0 where k < 0
     (:func:`ops.shading.refract`)."""
     cos_i = nx * vx + ny * vy + nz * vz
@@ -43,7 +43,7 @@ def _refract_px(nx, ny, nz, vx, vy, vz, eta):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _inv_norm(x, y, z, tiny2):  # type: ignore[no-untyped-def]
+def _inv_norm(x, y, z, tiny2):
     """1/√max(|v|², ``tiny2``): 0 vectors (background) stay 0."""
     n2 = x * x + y * y + z * z
     return _F1 / np.sqrt(n2 if n2 > tiny2 else tiny2)
@@ -54,14 +54,14 @@ _LIGHT_TINY2 = np.float32(1e-24)  # |ℓ| ≥ 1e-12 for upsampled lights
 
 
 @inline_kernel
-def _deinterleave(src, dst):  # type: ignore[no-untyped-def]
+def _deinterleave(src, dst):
     """The first ``dst.shape[1]`` XYZ triples of the flat row ``src`` into planes ``dst`` (3, w)."""
     for j in range(dst.shape[1]):
         dst[0, j], dst[1, j], dst[2, j] = src[3 * j], src[3 * j + 1], src[3 * j + 2]
 
 
 @kernel
-def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):  # type: ignore[no-untyped-def]
+def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):
     """One scale of Eq. 1 (§4-6) on rows of structure-of-arrays planes.
 
     ``na``, ``nb``, ``view``, ``light``: tuples of three C-contiguous (rows, ·) planes, read
@@ -172,7 +172,7 @@ def _eq1_rows(na, nb, view, light, out, flat_a, flat_v, offs, guide, par, norm):
 
 
 @kernel
-def _guide_rows(n, view, guide, eta, out):  # type: ignore[no-untyped-def]
+def _guide_rows(n, view, guide, eta, out):
     """The guide a_i (§6) of a unit field ``n`` on planes (the formulas of :func:`_eq1_rows`)."""
     wd = out[0].shape[1]
     for i in range(out[0].shape[0]):
@@ -191,7 +191,7 @@ def _guide_rows(n, view, guide, eta, out):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _write_rows(light, ol, norm_l, mask, orig, out, x0, wd):  # type: ignore[no-untyped-def]
+def _write_rows(light, ol, norm_l, mask, orig, out, x0, wd):
     """Level-0 output rows (interleaved, flat (rows, 3 W)): the aligned ``light`` planes (read
     from column ``ol`` on, renormalised if ``norm_l``) on the covered pixels (``mask`` 1, not 0)
     of columns x0 … x0 + wd, the original light ``orig`` (flat rows) everywhere else."""
@@ -218,7 +218,7 @@ def _write_rows(light, ol, norm_l, mask, orig, out, x0, wd):  # type: ignore[no-
 
 
 @kernel
-def _store_rows(light, ol, norm_l, mask, out, x0, wd):  # type: ignore[no-untyped-def]
+def _store_rows(light, ol, norm_l, mask, out, x0, wd):
     """Coarse-level state rows: ``out`` planes (columns x0 … x0 + wd) = the aligned ``light``
     (from column ``ol`` on, renormalised if ``norm_l``) × the coverage ``mask`` (full rows)."""
     for i in range(out[0].shape[0]):

@@ -19,7 +19,7 @@ _INF = np.float32(np.inf)
 
 
 @kernel
-def _gather_unit(idx, w, planes, out):  # type: ignore[no-untyped-def]
+def _gather_unit(idx, w, planes, out):
     """out[n, c] = Σ_t w[t, n] planes[c][idx[t, n]] (the weighted samples of
     :meth:`DepthPyramid.up_sparse`), then each group of 3 channels renormalised as by
     :func:`normalize_field` (0 where |v|² ≤ 1e-20)."""
@@ -39,7 +39,7 @@ def _gather_unit(idx, w, planes, out):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):  # type: ignore[no-untyped-def]
+def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):
     """One row of 2×2 blocks of :meth:`DepthPyramid._down_geometry` from two rows ``la``,
     ``lb`` of log depth with :data:`BACKGROUND` on background (covered iff below it): the keep
     flags ``ka``, ``kb`` (covered and within ``thr`` of the block's front, i.e. minimum, log
@@ -72,7 +72,7 @@ def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):  # type: ig
 
 
 @kernel
-def _build01_rows(depth, mask8, thr, logd0, mask0, keep0, cover, logd1, mask1, excl1):  # type: ignore[no-untyped-def]
+def _build01_rows(depth, mask8, thr, logd0, mask0, keep0, cover, logd1, mask1, excl1):
     """Levels 0 and 1 of :class:`DepthPyramid` on rows of an even-sized level 0.
 
     ``depth``: (2 n, W) planar depth; ``mask8``: (2 n, W) uint8 coverage, or (0, W) for none;
@@ -103,7 +103,7 @@ def _build01_rows(depth, mask8, thr, logd0, mask0, keep0, cover, logd1, mask1, e
 
 
 @kernel
-def _down_geometry_rows(logd, m, excl, thr, keep, cover, logd_low, m_low, excl_low):  # type: ignore[no-untyped-def]
+def _down_geometry_rows(logd, m, excl, thr, keep, cover, logd_low, m_low, excl_low):
     """Level k → k+1 of :class:`DepthPyramid` (k ≥ 1) on rows of an even-sized (padded)
     level: ``logd``, ``m`` (covered where > 0), ``excl`` (samples excluded below, bool)
     (2 n, w); outputs ``keep`` (2 n, w) and ``cover``, ``logd_low``, ``m_low``, ``excl_low``
@@ -128,7 +128,7 @@ def _down_geometry_rows(logd, m, excl, thr, keep, cover, logd_low, m_low, excl_l
 
 
 @kernel
-def _down_unit_rows(v, keep, out):  # type: ignore[no-untyped-def]
+def _down_unit_rows(v, keep, out):
     """``out`` (n, w / 2, 3) = the 2×2 block sums / 4 of ``v`` (2 n, w, 3) weighted by ``keep``
     (2 n, w) (:meth:`DepthPyramid._down_unit`): the keep-weighted sum of each row pair in a
     row buffer, then the sums of column pairs (two short loops that LLVM vectorises)."""

@@ -12,7 +12,7 @@ from ops.radiance_scaling._common import _ACC_BEAUTY, _ACC_LOBES, _LUMA
 
 
 @kernel
-def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-def]
+def _count_rows(rows, m8, wid, step, lo, hi, out):
     """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
     uint8 coverage, or no rows): (counted, below ``lo``, packed into ``out``). The counts are
     vectorised reductions that also flag the values in the band; only the 8-byte words of flags
@@ -51,7 +51,7 @@ def _count_rows(rows, m8, wid, step, lo, hi, out):  # type: ignore[no-untyped-de
 
 
 @inline_kernel
-def _exp_row(kappa, gamma, lim, e):  # type: ignore[no-untyped-def]
+def _exp_row(kappa, gamma, lim, e):
     """e[j] = e^{−γκ_j}, γκ clipped to ±``lim`` and NaN κ counted as 0 (as :func:`_exp_term`)."""
     zero = np.float32(0.0)
     for j in range(e.shape[0]):
@@ -61,7 +61,7 @@ def _exp_row(kappa, gamma, lim, e):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _sigma_row(d, e, pf, qf, s):  # type: ignore[no-untyped-def]
+def _sigma_row(d, e, pf, qf, s):
     """Eq. 2 per pixel: σ = (P'E + Q') / (P' + Q'E), δ̄ = clip(d, 0, 1) (NaN → 0),
     P' = ``pf``(1 − δ̄), Q' = ``qf`` δ̄ (see :func:`scale_lobes`)."""
     zero, one = np.float32(0.0), np.float32(1.0)
@@ -75,7 +75,7 @@ def _sigma_row(d, e, pf, qf, s):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _put_scaled(acc, src, lobe, s, less):  # type: ignore[no-untyped-def]
+def _put_scaled(acc, src, lobe, s, less):
     """acc = src + (s − ``less``) · lobe on flat RGB rows (s per pixel; ``src`` may be ``acc``)."""
     for j in range(s.shape[0]):
         f = s[j] - less
@@ -85,7 +85,7 @@ def _put_scaled(acc, src, lobe, s, less):  # type: ignore[no-untyped-def]
 
 
 @inline_kernel
-def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):  # type: ignore[no-untyped-def]
+def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):
     """:func:`_put_scaled` of three lobes at once (one pass over ``acc``)."""
     for j in range(s0.shape[0]):
         f0, f1, f2 = s0[j] - less, s1[j] - less, s2[j] - less
@@ -95,7 +95,7 @@ def _put_scaled3(acc, src, l0, l1, l2, s0, s1, s2, less):  # type: ignore[no-unt
 
 
 @inline_kernel
-def _nonzero_span(x):  # type: ignore[no-untyped-def]
+def _nonzero_span(x):
     """(j0, j1): the first and one past the last index where ``x`` is not 0 ((0, 0) if none)."""
     n = x.shape[0]
     lo, hi = n, 0
@@ -107,7 +107,7 @@ def _nonzero_span(x):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, sig, r0):  # type: ignore[no-untyped-def]
+def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, sig, r0):
     """Rows ``r0 ..`` of :func:`scale_lobes`: ``out`` = (0 | base) + Σ_k σ_k · lobe_k with
     ``mode`` _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY.
     κ is the ``grid`` upsampled ``f`` times (:func:`ops.pyramid.upsample_row`; f = 1: κ

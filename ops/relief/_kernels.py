@@ -9,7 +9,7 @@ from ops.jit import kernel
 
 
 @kernel
-def _descriptor_rows(k1, k2, wgt, c, ax, ay, s1, s2, mx, my):  # type: ignore[no-untyped-def]
+def _descriptor_rows(k1, k2, wgt, c, ax, ay, s1, s2, mx, my):
     """Rows of :func:`_grid_descriptor`: ``S = K · g``, ``g = w·c / max(|K|·w·c, 1)`` =
     min(weight / (√2 L_norm), 1 / |K|) with ``c = 1 / (√2 L_norm)`` (S = 0 where K = 0: g is
     finite there), into ``s1``, ``s2``; when ``mx`` has rows, also the ARM texel coordinates
@@ -39,7 +39,7 @@ def _descriptor_rows(k1, k2, wgt, c, ax, ay, s1, s2, mx, my):  # type: ignore[no
 
 
 @kernel
-def _ndotl_row(nrm, nl, light, from_normal, i, out):  # type: ignore[no-untyped-def]
+def _ndotl_row(nrm, nl, light, from_normal, i, out):
     """Row ``i`` of n·ℓ clamped to [0, 1] into ``out`` (W,): ``light · n`` from the (rows, 3W)
     normals ``nrm`` (RGB rows indexed flat, so that LLVM vectorises the loop) with
     ``from_normal``, else the (rows, W) ``nl``. NaN counts as 0."""
@@ -60,7 +60,7 @@ def _ndotl_row(nrm, nl, light, from_normal, i, out):  # type: ignore[no-untyped-
 
 
 @kernel
-def _counter_rows(r, nrm, nl, light, from_normal, thr, out):  # type: ignore[no-untyped-def]
+def _counter_rows(r, nrm, nl, light, from_normal, thr, out):
     """Rows of :func:`counter_shading`: ``I = n·ℓ + r (1 − 2 n·ℓ)``, 1 where I > ``thr`` else 0,
     n·ℓ from :func:`_ndotl_row` (a row in L1)."""
     zero, one, two = np.float32(0.0), np.float32(1.0), np.float32(2.0)
@@ -75,7 +75,7 @@ def _counter_rows(r, nrm, nl, light, from_normal, thr, out):  # type: ignore[no-
 
 
 @kernel
-def _toon_coords(r, nrm, nl, light, from_normal, sx, sy, mx, my):  # type: ignore[no-untyped-def]
+def _toon_coords(r, nrm, nl, light, from_normal, sx, sy, mx, my):
     """Rows of :func:`xtoon`'s texel coordinates: ``mx = n·ℓ · sx`` (n·ℓ from
     :func:`_ndotl_row`), ``my = sy − sy · r`` with r clamped to [0, 1] (NaN counts as 0): the
     texels the edge-replicating lookup reads outside anyway, on cv2.remap's fast in-range path."""

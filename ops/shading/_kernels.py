@@ -9,7 +9,7 @@ from ops.jit import kernel
 
 
 @kernel
-def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):  # type: ignore[no-untyped-def]
+def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):
     """Per pixel of the rows of (rows, 3W) ``nrm``: the diffuse term max(n·ℓ_d, 0) (Lambert) or
     ((n·ℓ_d + 1)/2)² (half-Lambert, ``half``) times the coverage (|n|² > 0.25) into ``d_term``;
     with ``spec``, n·h = max((n·ℓ_s + n·v)/|ℓ_s + v|, 0) (0 where |ℓ_s + v| <= 1e-6) into ``nh``
@@ -48,7 +48,7 @@ def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):  # 
 
 
 @kernel
-def _add_terms(d_term, nh, gate, e, first, spec, od, os_):  # type: ignore[no-untyped-def]
+def _add_terms(d_term, nh, gate, e, first, spec, od, os_):
     """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh × gate × E,
     E = ``e`` (3,) the light's irradiance; outputs (rows, 3W)."""
     e0, e1, e2 = e[0], e[1], e[2]
@@ -62,7 +62,7 @@ def _add_terms(d_term, nh, gate, e, first, spec, od, os_):  # type: ignore[no-un
 
 
 @kernel
-def _add_row(t, e0, e1, e2, first, o):  # type: ignore[no-untyped-def]
+def _add_row(t, e0, e1, e2, first, o):
     """A row of (3W) ``o`` = (or += unless ``first``) ``t`` × (e0, e1, e2)."""
     if first:
         for j in range(t.shape[0]):
@@ -77,7 +77,7 @@ def _add_row(t, e0, e1, e2, first, o):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _radiance_rows(lit, col, const, rad, beauty, first):  # type: ignore[no-untyped-def]
+def _radiance_rows(lit, col, const, rad, beauty, first):
     """Rows (3W) of :func:`lobe_radiance`: ``rad`` = lit × col (``col`` one row for all with
     ``const``), ``beauty`` = (or += unless ``first``) rad."""
     for i in range(lit.shape[0]):
@@ -95,7 +95,7 @@ def _radiance_rows(lit, col, const, rad, beauty, first):  # type: ignore[no-unty
 
 
 @kernel
-def _ratio_rows(lobe, light, a, o, eps, rmax, new, new_light, acc):  # type: ignore[no-untyped-def]
+def _ratio_rows(lobe, light, a, o, eps, rmax, new, new_light, acc):
     """Rows (3W) of :func:`ratio_relight` for one lobe: ``new`` = ρ·lobe, ``acc`` += new − lobe
     and, when ``light`` has rows, ``new_light`` = ρ·light."""
     zero = np.float32(0.0)
