@@ -13,7 +13,7 @@ from ops.checks import (
     PERCENTILE,
     SHADING_NORM,
 )
-from ops.congruence._common import _REL_CURVED, _SHAPE_COUNTED
+from ops.congruence._common import _REL_CURVED, _SHAPE_COUNTED, F32
 from ops.congruence._flow import (
     _LOW_MAPS,
     _brightness,
@@ -28,6 +28,65 @@ from ops.congruence.result import CongruenceResult
 from ops.parallel import run_strips
 
 __all__ = ["congruence"]
+
+
+def _checked(
+    image: NDArray[np.floating],
+    depth: NDArray[np.floating],
+    mask: NDArray[np.generic] | None,
+    image_height: int | None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The image (H, W) or (H, W, 3) and the depth (H, W) checked, and the image height."""
+    img = np.asarray(image)
+    dep = np.asarray(depth)
+    if dep.ndim != 2:
+        raise ValueError(f"depth must be (H, W), got shape {dep.shape}")
+    h, w = dep.shape
+    if h < 3 or w < 3:
+        raise ValueError(f"depth must be at least 3x3, got shape {dep.shape}")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.shape[:2] != (h, w) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+        raise ValueError(
+            f"image must be (H, W, 3) or (H, W) matching depth {dep.shape}, got {img.shape}"
+        )
+    if mask is not None and np.shape(mask) != (h, w):
+        raise ValueError(f"mask must be (H, W) = {dep.shape}, got shape {np.shape(mask)}")
+    href = h if image_height is None else int(image_height)
+    if href <= 0:
+        raise ValueError(f"image_height must be a positive number of pixels, got {image_height!r}")
+    return img, dep, href
+
+
+def _eq2(
+    e_shape: F32,
+    e_shading: F32,
+    shading_dir: tuple[F32, F32],
+    shape_dir: tuple[F32, F32],
+    defined: np.ndarray,
+    area: F32,
+    outside: np.ndarray,
+) -> tuple[F32, float]:
+    """Eq. 2 on the analysis level: the per-pixel score (1 − ⌊e_shape − e_shading⌋) |v·v'| and
+    the score Σ e_shape·area·map / Σ e_shape·area. The directions are (cos 2φ, sin 2φ), so
+    |v·v'| = √((1 + cos 2(φ − φ'))/2); it is 0 where either is undefined (not ``defined``)."""
+    (ca, sa), (cb, sb) = shading_dir, shape_dir
+    cosd = ca * cb
+    cosd += sa * sb  # cos of the doubled-angle difference
+    cosd += 1.0
+    cosd *= 0.5
+    dot = np.sqrt(np.clip(cosd, 0.0, 1.0, out=cosd), out=cosd)
+    dot[~defined] = 0.0
+    smap = np.subtract(e_shape, e_shading)
+    np.clip(smap, 0.0, 1.0, out=smap)
+    np.subtract(1.0, smap, out=smap)
+    smap *= dot
+    smap[outside] = 0.0
+    wgt = e_shape * area
+    den = float(wgt.sum(dtype=np.float64))
+    wgt *= smap
+    score = float(wgt.sum(dtype=np.float64) / den) if den > 0 else 0.0
+    return smap, score
 
 
 def congruence(
@@ -88,24 +147,8 @@ def congruence(
     CongruenceResult
         The score and its per-pixel maps.
     """
-    img = np.asarray(image)
-    dep = np.asarray(depth)
-    if dep.ndim != 2:
-        raise ValueError(f"depth must be (H, W), got shape {dep.shape}")
+    img, dep, href = _checked(image, depth, mask, image_height)
     h, w = dep.shape
-    if h < 3 or w < 3:
-        raise ValueError(f"depth must be at least 3x3, got shape {dep.shape}")
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.shape[:2] != (h, w) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
-        raise ValueError(
-            f"image must be (H, W, 3) or (H, W) matching depth {dep.shape}, got {img.shape}"
-        )
-    if mask is not None and np.shape(mask) != (h, w):
-        raise ValueError(f"mask must be (H, W) = {dep.shape}, got shape {np.shape(mask)}")
-    href = h if image_height is None else int(image_height)
-    if href <= 0:
-        raise ValueError(f"image_height must be a positive number of pixels, got {image_height!r}")
     sg = GRADIENT_SCALE.check(gradient_scale, "gradient_scale") * href
     si = INTEGRATION_SCALE.check(integration_scale, "integration_scale") * href
     PERCENTILE.check(percentile, "percentile")
@@ -183,22 +226,7 @@ def congruence(
     es, ca, sa, ds, norm_s = _flow(
         tens[0], tens[1], tens[2], invw, inside, outside, lref, percentile, shading_norm, counted
     )
-    cosd = ca * cb
-    cosd += sa * sb  # cos of the doubled-angle difference
-    cosd += 1.0
-    cosd *= 0.5
-    dot = np.sqrt(np.clip(cosd, 0.0, 1.0, out=cosd), out=cosd)
-    ds &= dc
-    dot[~ds] = 0.0
-    smap = np.subtract(ec, es)
-    np.clip(smap, 0.0, 1.0, out=smap)
-    np.subtract(1.0, smap, out=smap)
-    smap *= dot
-    smap[outside] = 0.0
-    wgt = ec * area
-    den = float(wgt.sum(dtype=np.float64))
-    wgt *= smap
-    score = float(wgt.sum(dtype=np.float64) / den) if den > 0 else 0.0
+    smap, score = _eq2(ec, es, (ca, sa), (cb, sb), ds & dc, area, outside)
 
     maps = (smap, es, ec, np.where(inside, area, np.float32(0)), ca, sa, cb, sb)
     for name, m in zip(_LOW_MAPS, maps, strict=True):
