@@ -23,6 +23,33 @@ DIFFUSE_MODELS: tuple[str, ...] = ("lambert", "half_lambert")
 SPECULAR_MODELS: tuple[str, ...] = ("none", "blinn_phong", "ggx")
 
 
+def _checked_models(
+    diffuse: str,
+    specular: str,
+    shininess: float,
+    transmission_exponent: float,
+    f0: float,
+    ior: float,
+    roughness: float | np.ndarray,
+) -> np.ndarray:
+    """The models and their parameters of :func:`shade_directions` checked; the roughness as an
+    array (a field is clipped to [1e-3, 1])."""
+    if diffuse not in DIFFUSE_MODELS:
+        raise ValueError(f"diffuse must be one of {', '.join(DIFFUSE_MODELS)}; got {diffuse!r}")
+    if specular not in SPECULAR_MODELS:
+        raise ValueError(f"specular must be one of {', '.join(SPECULAR_MODELS)}; got {specular!r}")
+    SHININESS.check(shininess, "shininess")
+    EXPONENT.check(transmission_exponent, "transmission_exponent")
+    FRACTION.check(f0, "f0")
+    IOR.check(ior, "ior")
+    rough = np.asarray(roughness, np.float32)
+    if rough.ndim == 0:
+        ROUGHNESS.check(rough, "roughness")
+    else:
+        rough = np.clip(rough, np.float32(1e-3), np.float32(1.0))
+    return rough
+
+
 def shade_directions(
     normal: np.ndarray,
     view: np.ndarray,
@@ -69,19 +96,7 @@ def shade_directions(
     dict lobe -> (H, W, 3) float32 light without colour: ``"diffuse"``, ``"specular"`` (unless
     ``specular="none"``) and ``"transmission"`` (when asked); 0 where the normal is 0.
     """
-    if diffuse not in DIFFUSE_MODELS:
-        raise ValueError(f"diffuse must be one of {', '.join(DIFFUSE_MODELS)}; got {diffuse!r}")
-    if specular not in SPECULAR_MODELS:
-        raise ValueError(f"specular must be one of {', '.join(SPECULAR_MODELS)}; got {specular!r}")
-    SHININESS.check(shininess, "shininess")
-    EXPONENT.check(transmission_exponent, "transmission_exponent")
-    FRACTION.check(f0, "f0")
-    IOR.check(ior, "ior")
-    rough = np.asarray(roughness, np.float32)
-    if rough.ndim == 0:
-        ROUGHNESS.check(rough, "roughness")
-    else:
-        rough = np.clip(rough, np.float32(1e-3), np.float32(1.0))
+    rough = _checked_models(diffuse, specular, shininess, transmission_exponent, f0, ior, roughness)
     normal = np.ascontiguousarray(normal, np.float32)
     if normal.ndim != 3 or normal.shape[2] != 3:
         raise ValueError(f"normal must be (H, W, 3), got shape {normal.shape}")
