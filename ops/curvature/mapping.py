@@ -160,8 +160,8 @@ def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[s
     # weight are left over from the working grid, and their sign must not reach the file
     return {
         "H": isotropic(curv, gain),
-        "k1": cv2.add(cv2.multiply(curv.k1, curv.weight), 0.0),
-        "k2": cv2.add(cv2.multiply(curv.k2, curv.weight), 0.0),
+        "k1": _cv.add(cv2.multiply(curv.k1, curv.weight), 0.0),
+        "k2": _cv.add(cv2.multiply(curv.k2, curv.weight), 0.0),
         "dir.X": curv.dir_x.copy(),
         "dir.Y": curv.dir_y.copy(),
     }
