@@ -1,4 +1,4 @@
-"""Bilinear upsampling by an integer factor (ops/bilinear.py) against cv2.resize."""
+"""Bilinear upsampling by an integer factor (ops/pyramid/upsample.py) against cv2.resize."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from ops.bilinear import Upsampled
+from ops.pyramid.upsample import Upsampled
 
 
 @pytest.mark.parametrize("factor", [1, 2, 3, 4, 8])

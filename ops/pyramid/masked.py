@@ -6,6 +6,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = ["masked_gaussian"]
+
 F32 = NDArray[np.float32]
 
 

@@ -22,6 +22,8 @@ import numpy as np
 from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
 
+__all__ = ["Upsampled", "upsample_row"]
+
 _STRIP_ROWS = 64  # output rows per strip of Upsampled.__array__
 
 
