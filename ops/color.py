@@ -1,10 +1,8 @@
 """Linear scene-referred RGB <-> CIELAB, float32, vectorised, HDR-safe.
 
-Depict's radiance is linear RGB in the frame's working space (:mod:`ops.colorspace`; by default
-Rec.709 / sRGB primaries and a D65 white, DESIGN.md); every function takes the space's RGB-to-XYZ
-matrix (``rgb_to_xyz``) and CIELAB is relative to that space's white. CIELAB is taken relative
-to a *white level*: a linear value equal to ``white`` in all three channels maps to L* = 100,
-a* = b* = 0. Values above the white level are not clipped: CIELAB's
+Depict's radiance is linear RGB with Rec.709 / sRGB primaries and a D65 white (DESIGN.md). CIELAB
+is taken relative to a *white level*: a linear value equal to ``white`` in all three channels maps
+to L* = 100, a* = b* = 0. Values above the white level are not clipped: CIELAB's
 f(t) = t^(1/3) extends above 1, so L* > 100 and the round trip stays exact for HDR radiance.
 
 Why not ``cv2.cvtColor``: OpenCV's float ``COLOR_RGB2Lab`` applies the sRGB transfer curve, and
@@ -41,7 +39,10 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
-from ops.colorspace import REC709_RGB_TO_XYZ
+from ops.checks import PERCENTILE, WHITE
+from ops.colorspace import REC709_RGB_TO_XYZ, REC709_Y
+from ops.jit import kernel
+from ops.numerics import dot3_row
 from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -65,8 +66,7 @@ __all__ = [
 #: Linear Rec.709/sRGB (D65) to CIE XYZ (IEC 61966-2-1), column vectors: the default space.
 #: Another working space passes its own matrix (``rgb_to_xyz``, :mod:`ops.colorspace`).
 RGB_TO_XYZ = REC709_RGB_TO_XYZ
-#: Rec.709 luminance weights (the Y row).
-REC709_Y = RGB_TO_XYZ[1]
+_LUMA_ROWS = 64  # rows per strip of luminance()
 
 _DELTA = 6.0 / 29.0
 _DELTA3 = _DELTA**3
@@ -145,45 +145,53 @@ def _check_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def _check_white(white: float) -> float:
-    w = float(white)
-    if not np.isfinite(w) or w <= 0.0:
-        raise ValueError(f"white must be a finite number > 0 (or 'auto'), got {white!r}")
-    return w
-
-
 def _flat(a: np.ndarray) -> np.ndarray:
     """A single-channel (H, W*C) view, so that cv2 scalar ops apply to every channel."""
     return a.reshape(a.shape[0], -1)
 
 
-def luminance(rgb: np.ndarray, weights: np.ndarray = REC709_Y) -> np.ndarray:
-    """Relative luminance Y = w_r R + w_g G + w_b B of linear RGB.
+def luminance(rgb: np.ndarray, weights: tuple[float, float, float] = REC709_Y) -> np.ndarray:
+    """Relative luminance Y = w_R R + w_G G + w_B B of linear RGB, by default Rec. 709's
+    Y = 0.2126 R + 0.7152 G + 0.0722 B (:data:`REC709_Y`).
 
-    ``weights``: the working space's Y row (:attr:`ops.colorspace.ColorSpace.weights`; default
-    Rec.709, 0.2126729, 0.7151522, 0.072175). ``rgb`` has shape (..., 3); the result has the leading
-    shape, float32.
+    ``rgb`` has shape (..., 3); the result has the leading shape, float32 (the weights are
+    rounded to float32, the sum is taken in float32).
+
+    >>> luminance(np.array([[1.0, 1.0, 1.0], [2.0, 0.0, 0.0]])).tolist() == [
+    ...     np.float32(0.2126) + np.float32(0.7152) + np.float32(0.0722), np.float32(0.4252)]
+    True
     """
-    arr = np.asarray(rgb, dtype=np.float32)
+    arr = np.ascontiguousarray(rgb, dtype=np.float32)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"rgb must have shape (..., 3), got {arr.shape}")
-    flat = np.ascontiguousarray(arr.reshape(-1, 1, 3))
-    y = _cv.transform(flat, _weights(weights))
-    return np.asarray(y, dtype=np.float32).reshape(arr.shape[:-1])
+    if arr.size == 0:
+        return np.zeros(arr.shape[:-1], np.float32)
+    grid = arr.reshape(-1, arr.shape[-2] if arr.ndim > 1 else 1, 3)  # (rows, width, 3)
+    w0, w1, w2 = (np.float32(w) for w in weights)
+    out = np.empty(grid.shape[:2], np.float32)
+    run_strips(
+        grid.shape[0],
+        lambda r0, r1: _luma_rows(grid[r0:r1], w0, w1, w2, out[r0:r1]),
+        _LUMA_ROWS,
+    )
+    return out.reshape(arr.shape[:-1])
 
 
-def _weights(weights: np.ndarray) -> np.ndarray:
-    return np.asarray(weights, np.float32).reshape(1, 3)
+@kernel
+def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
+    wid = out.shape[1]
+    for i in range(out.shape[0]):
+        dot3_row(rgb[i].reshape(3 * wid), w0, w1, w2, out[i])
 
 
 def auto_white(
     rgb: np.ndarray,
     mask: np.ndarray | None = None,
     percentile: float = 99.0,
-    weights: np.ndarray = REC709_Y,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> float:
-    """White level for CIELAB: the ``percentile`` of luminance (``weights``: the working space's
-    Y row) over covered pixels.
+    """White level for CIELAB: the ``percentile`` of luminance (``weights``: the working space's)
+    over covered pixels.
 
     Computed on a strided subsample (every 4th row and column, at least 64k pixels kept where the
     image has them) for speed; a 99th percentile moves by well under 1 % from that. Pixels with
@@ -193,13 +201,12 @@ def auto_white(
     A sequence should pin the white level (pass a number to the operators) so that it does not
     flicker from frame to frame (DESIGN.md).
     """
-    if not 0.0 < percentile <= 100.0:
-        raise ValueError(f"percentile must be in (0, 100], got {percentile}")
+    percentile = PERCENTILE.check(percentile, "percentile")
     arr = _check_rgb(rgb, "rgb")
     h, w = arr.shape[:2]
     step = 4 if h * w >= 16 * 65536 else 1
     sub = np.ascontiguousarray(arr[::step, ::step])
-    y = _cv.transform(sub, _weights(weights))
+    y = luminance(sub, weights)
     ok = np.isfinite(y) & (y > 0.0)
     if mask is not None:
         m = np.asarray(mask)
@@ -217,15 +224,15 @@ def resolve_white(
     white: White,
     rgb: np.ndarray,
     mask: np.ndarray | None = None,
-    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> float:
-    """``white`` as a number: ``"auto"`` -> :func:`auto_white` (luminance in the space of
-    ``rgb_to_xyz``), a number -> itself (checked)."""
+    """``white`` as a number: ``"auto"`` -> :func:`auto_white` (luminance with the working
+    space's ``weights``), a number -> itself (checked)."""
     if isinstance(white, str):
         if white != "auto":
             raise ValueError(f"white must be 'auto' or a number > 0, got {white!r}")
-        return auto_white(rgb, mask, weights=np.asarray(rgb_to_xyz)[1])
-    return _check_white(white)
+        return auto_white(rgb, mask, weights=weights)
+    return WHITE.check(white, "white")
 
 
 def rgb_to_lab_phi(
@@ -242,7 +249,7 @@ def rgb_to_lab_phi(
     Computed as φ = cbrt(max(t, δ³)) + min(t, δ³)/(3δ²) − δ (the CIE linear segment below δ³).
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(_check_white(white), rgb_to_xyz)
+    m = _to_t(WHITE.check(white, "white"), rgb_to_xyz)
     h, w = arr.shape[:2]
     out = np.empty_like(arr)
 
@@ -268,7 +275,7 @@ def lab_phi_to_rgb(
     float32 array (or view) to write the result into; the result is returned either way.
     """
     arr = _check_rgb(phi, "phi")
-    m_inv = _from_t(_check_white(white), rgb_to_xyz)
+    m_inv = _from_t(WHITE.check(white, "white"), rgb_to_xyz)
     h, w = arr.shape[:2]
     res = np.empty_like(arr) if out is None else out
 
@@ -321,7 +328,7 @@ def lightness_rows(
     ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
     C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
     which the dozen calls of :func:`lightness`'s checks per strip would add up."""
-    m = _to_t(_check_white(white), rgb_to_xyz)[1:2]
+    m = _to_t(WHITE.check(white, "white"), rgb_to_xyz)[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
         _write(_cv.transform(rgb, m, dst=out), out)
@@ -362,11 +369,9 @@ def scale_lab(
         Where non-zero, ``rgb`` is returned bit for bit.
     out : (H, W, 3) float32 array (or view) or None
         Where to write the result; it is returned either way.
-    rgb_to_xyz : 3×3
-        The working space (:mod:`ops.colorspace`); CIELAB is relative to its white.
     """
     arr = _check_rgb(rgb, "rgb")
-    w = _check_white(white)
+    w = WHITE.check(white, "white")
     hh, ww = arr.shape[:2]
     if callable(k):
         k_of = k
@@ -415,8 +420,7 @@ def _rows_of(a: np.ndarray, shape: tuple[int, int], dtype: type, name: str) -> n
 def rgb_to_lab(
     rgb: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
 ) -> np.ndarray:
-    """Linear RGB (default Rec.709 primaries, D65; else the space of ``rgb_to_xyz``) -> CIELAB
-    relative to the white level ``white`` and the space's white.
+    """Linear RGB (Rec.709 primaries, D65) -> CIELAB relative to the white level ``white``.
 
     X, Y, Z = M · rgb / white, each divided by the D65 white (Xn, Yn, Zn);
     L* = 116 f(Y/Yn) − 16, a* = 500 (f(X/Xn) − f(Y/Yn)), b* = 200 (f(Y/Yn) − f(Z/Zn)),

@@ -34,6 +34,7 @@ __all__ = [
     "P3_D65",
     "REC709",
     "REC709_RGB_TO_XYZ",
+    "REC709_Y",
     "REC2020",
     "ColorSpace",
     "bradford",
@@ -65,6 +66,11 @@ KNOWN: dict[str, Chromaticities] = {
     "Linear Rec.2020": REC2020,
     "Linear P3-D65": P3_D65,
 }
+
+#: Rec. 709 / sRGB luminance weights of linear RGB (ITU-R BT.709-6, item 3.3: Y = 0.2126 R +
+#: 0.7152 G + 0.0722 B): the weights of the Rec.709 space (its matrix's Y row is the same to
+#: four decimals).
+REC709_Y = (0.2126, 0.7152, 0.0722)
 
 #: IEC 61966-2-1's rounded Rec.709 matrix (the one Depict has always used).
 REC709_RGB_TO_XYZ = np.array(
@@ -127,9 +133,12 @@ class ColorSpace:
     source: str = "default"
 
     @property
-    def weights(self) -> np.ndarray:
-        """Luminance weights (the Y row of the matrix), float64."""
-        return np.asarray(self.matrix[1], np.float64)
+    def weights(self) -> tuple[float, float, float]:
+        """Luminance weights: the Y row of the matrix (Rec.709: :data:`REC709_Y`)."""
+        if self.is_rec709:
+            return REC709_Y
+        w = self.matrix[1]
+        return (float(w[0]), float(w[1]), float(w[2]))
 
     @property
     def white(self) -> np.ndarray:
