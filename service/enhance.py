@@ -61,13 +61,15 @@ class WriteRequest:
     """What to write: intermediate layers too (``debug_layers``), the result layer
     (``output_layer``, :mod:`service.output`), a tone-mapped PNG instead of the EXR (``preview``,
     at ``exposure`` stops), and the input's name recorded in the output (``input_name``; default:
-    the name of the file read)."""
+    the name of the file read), and where new layers go (``layout``: :data:`gbuffer.io.LAYOUTS`,
+    same part, an added part, or a sidecar file with only them)."""
 
     debug_layers: bool = False
     output_layer: str | None = None
     preview: bool = False
     exposure: float = 0.0
     input_name: str | None = None
+    layout: str = "same"
 
 
 class Enhanced(TypedDict):
@@ -102,12 +104,12 @@ def enhance(
     frame = read.read(in_path)
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
     out, op_s = pipeline.run_timed(frame, steps, context)
-    out = pipeline.finish(out, write.output_layer, write.input_name)
+    out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)
     warnings: list[str] = []
     if write.preview:
         write_png(picture(out, "beauty", exposure=write.exposure), out_path)
     else:
-        warnings = write_exr(out, out_path)
+        warnings = write_exr(out, out_path, write.layout)
     h, w = out.shape
     return {
         "op_s": op_s,

@@ -16,7 +16,9 @@ from service.registry import operators
 def cmd_enhance(args: argparse.Namespace) -> int:
     check_outputs([args.output], [args.input, args.camera, args.pipeline])
     compiled = steps(args) or pipeline.DEFAULT
-    write = WriteRequest(debug_layers=args.debug_layers, output_layer=args.output_layer)
+    write = WriteRequest(
+        debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
+    )
     result = enhance(args.input, args.output, compiled, read_request(args), write)
     warn(result["read_warnings"] + result["warnings"])
     print(f"wrote {args.output}")
