@@ -610,8 +610,23 @@ def _extract_chunks(data: bytes, layout: FileLayout, index: int) -> list[bytes]:
     return chunks
 
 
-def _source_chunks(pt: ExrPassthrough, index: int) -> list[bytes] | None:
-    """The original chunks of part ``index``, or None when the source file changed."""
+@dataclass
+class _FileChunks:
+    """Chunks of a part left in the source file: (start, size) byte ranges, in table order,
+    without the multi-part part-number prefix; copied to the output without being held."""
+
+    path: str
+    ranges: list[tuple[int, int]]
+
+    def __len__(self) -> int:
+        return len(self.ranges)
+
+    def size(self, k: int) -> int:
+        return self.ranges[k][1]
+
+
+def _source_chunks(pt: ExrPassthrough, index: int) -> _FileChunks | None:
+    """Where the original chunks of part ``index`` are, or None when the source file changed."""
     if pt.layout is None or not pt.path:
         return None
     try:
@@ -620,13 +635,12 @@ def _source_chunks(pt: ExrPassthrough, index: int) -> list[bytes] | None:
             return None
         part = pt.layout.parts[index]
         skip = 4 if pt.layout.multipart else 0
-        chunks = []
+        ranges = []
         with open(pt.path, "rb") as f:
             for off in part.offsets:
                 n = _chunk_size(f, off, part, pt.layout.multipart)
-                f.seek(off + skip)
-                chunks.append(f.read(n - skip))
-        return chunks
+                ranges.append((off + skip, n - skip))
+        return _FileChunks(pt.path, ranges)
     except OSError:
         return None
 
@@ -772,7 +786,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
     )
     warnings: list[str] = []
     headers: list[dict[str, RawAttribute]] = []
-    all_chunks: list[list[bytes]] = []
+    all_chunks: list[list[bytes] | _FileChunks] = []
     storages: list[str] = []
     orders: list[list[int]] = []
     for i, (header, channels) in enumerate(passthrough.parts):
@@ -794,7 +808,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         )
         if kind.startswith("deep"):
             raise FrameError(f"{where}: part {i} is deep; deep parts cannot be written")
-        chunks = None
+        chunks: list[bytes] | _FileChunks | None = None
         if _unchanged_pixels(passthrough, i, header):
             assert exr_pt is not None
             chunks = _source_chunks(exr_pt, i)
@@ -839,27 +853,28 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         all_chunks.append(chunks)
         orders.append(order)
         storages.append(kind)
-    data = _assemble(headers, all_chunks, orders, storages, multipart)
     try:
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
-                f.write(data)
+                _assemble(f, headers, all_chunks, orders, storages, multipart)
     except OSError as exc:
         raise FrameError(f"{where}: cannot write ({exc.strerror or exc})") from None
     return warnings
 
 
 def _assemble(
+    out: BinaryIO,
     headers: list[dict[str, RawAttribute]],
-    chunks: list[list[bytes]],
+    chunks: list[list[bytes] | _FileChunks],
     orders: list[list[int]],
     storages: list[str],
     multipart: bool,
-) -> bytes:
-    """Magic, version flags, headers, offset tables and chunks of an EXR file.
+) -> None:
+    """Write magic, version flags, headers, offset tables and chunks of an EXR file to ``out``.
 
     ``orders[p]`` lists part p's chunk indices in the order they are laid out in the file
-    (e.g. decreasing y for ``DECREASING_Y``); the offset table stays in index order.
+    (e.g. decreasing y for ``DECREASING_Y``); the offset table stays in index order. Chunks
+    left in a source file (:class:`_FileChunks`) are copied from it one at a time.
     """
     version = 2
     long_names = any(len(k) > 31 or len(r.type) > 31 for h in headers for k, r in h.items()) or any(
@@ -878,19 +893,30 @@ def _assemble(
         head += b"\0"
     if multipart:
         head += b"\0"
-    total = sum(len(c) for c in chunks)
-    pos = len(head) + 8 * total
-    tables = []
-    body = []
-    for index, (part_chunks, order) in enumerate(zip(chunks, orders, strict=True)):
-        prefix = struct.pack("<i", index) if multipart else b""
+    prefix_size = 4 if multipart else 0
+    pos = len(head) + 8 * sum(len(c) for c in chunks)
+    for part_chunks, order in zip(chunks, orders, strict=True):
         offsets = [0] * len(part_chunks)
         for k in order:
             offsets[k] = pos
-            body.append(prefix + part_chunks[k])
-            pos += len(prefix) + len(part_chunks[k])
-        tables.append(struct.pack(f"<{len(offsets)}Q", *offsets))
-    return bytes(head) + b"".join(tables) + b"".join(body)
+            pos += prefix_size + _size(part_chunks, k)
+        head += struct.pack(f"<{len(offsets)}Q", *offsets)
+    out.write(head)
+    for index, (part_chunks, order) in enumerate(zip(chunks, orders, strict=True)):
+        prefix = struct.pack("<i", index) if multipart else b""
+        if isinstance(part_chunks, _FileChunks):
+            with open(part_chunks.path, "rb") as src:
+                for k in order:
+                    start, size = part_chunks.ranges[k]
+                    src.seek(start)
+                    out.write(prefix + src.read(size))
+        else:
+            for k in order:
+                out.write(prefix + part_chunks[k])
+
+
+def _size(chunks: list[bytes] | _FileChunks, k: int) -> int:
+    return chunks.size(k) if isinstance(chunks, _FileChunks) else len(chunks[k])
 
 
 def storage_name(header: dict[str, Any]) -> str:

@@ -476,7 +476,8 @@ def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
     count = (size + 15) // 16
     chunks = [struct.pack("<i", 16 * k) + chunk[4:] for k in range(count)]
     order = list(range(count))
-    path.write_bytes(exr._assemble([attrs], [chunks], [order], ["scanlineimage"], False))
+    with open(path, "wb") as f:
+        exr._assemble(f, [attrs], [chunks], [order], ["scanlineimage"], False)
     return path
 
 
