@@ -41,6 +41,7 @@ import os
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from collections.abc import Sequence
 from typing import Any, BinaryIO
 
 import numpy as np
@@ -598,15 +599,16 @@ def _physical_order(offsets: list[int]) -> list[int]:
     return sorted(range(len(offsets)), key=offsets.__getitem__)
 
 
-def _extract_chunks(data: bytes, layout: FileLayout, index: int) -> list[bytes]:
-    """Chunks of part ``index`` in table order, without the multi-part part-number prefix."""
+def _extract_chunks(data: io.BytesIO, layout: FileLayout, index: int) -> list[memoryview]:
+    """Chunks of part ``index`` in table order, without the multi-part part-number prefix (views
+    of ``data``'s buffer, not copies)."""
     part = layout.parts[index]
-    f = io.BytesIO(data)
     skip = 4 if layout.multipart else 0
+    view = data.getbuffer()
     chunks = []
     for off in part.offsets:
-        n = _chunk_size(f, off, part, layout.multipart)
-        chunks.append(data[off + skip : off + n])
+        n = _chunk_size(data, off, part, layout.multipart)
+        chunks.append(view[off + skip : off + n])
     return chunks
 
 
@@ -670,7 +672,7 @@ def _binding_attributes(values: dict[str, Any], where: str) -> dict[str, RawAttr
 
 def _encode_part(
     header: dict[str, Any], channels: dict[str, Any], storage: str, where: str, part_no: int
-) -> tuple[dict[str, RawAttribute], list[bytes], list[int], list[str]]:
+) -> tuple[dict[str, RawAttribute], list[memoryview], list[int], list[str]]:
     """Encode one part with the binding as a standalone file; its attributes and chunks."""
     warnings = []
     hdr = {k: _plain(header[k]) for k in _ENCODE_KEYS if k in header}
@@ -723,8 +725,10 @@ def _encode_part(
             f"part {part_no}: the OpenEXR binding cannot write it with {codec} "
             f"({_one_line(exc)}); written with ZIP"
         )
-    layout = _read_layout(io.BytesIO(data), len(data), where)
-    _read_offsets(io.BytesIO(data), layout, where)
+    size = data.seek(0, io.SEEK_END)
+    data.seek(0)
+    layout = _read_layout(data, size, where)
+    _read_offsets(data, layout, where)
     part = layout.parts[0]
     return (
         part.attributes,
@@ -734,11 +738,11 @@ def _encode_part(
     )
 
 
-def _encode(header: dict[str, Any], channels: dict[str, Any]) -> bytes:
+def _encode(header: dict[str, Any], channels: dict[str, Any]) -> io.BytesIO:
     """One part encoded by the binding as a standalone file (the binding may raise)."""
     buf = io.BytesIO()
     OpenEXR.File(header, dict(channels)).write(buf)
-    return buf.getvalue()
+    return buf
 
 
 def _unchanged_pixels(pt: Passthrough, index: int, header: dict[str, Any]) -> bool:
@@ -786,7 +790,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
     )
     warnings: list[str] = []
     headers: list[dict[str, RawAttribute]] = []
-    all_chunks: list[list[bytes] | _FileChunks] = []
+    all_chunks: list[list[memoryview] | _FileChunks] = []
     storages: list[str] = []
     orders: list[list[int]] = []
     for i, (header, channels) in enumerate(passthrough.parts):
@@ -808,7 +812,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         )
         if kind.startswith("deep"):
             raise FrameError(f"{where}: part {i} is deep; deep parts cannot be written")
-        chunks: list[bytes] | _FileChunks | None = None
+        chunks: list[memoryview] | _FileChunks | None = None
         if _unchanged_pixels(passthrough, i, header):
             assert exr_pt is not None
             chunks = _source_chunks(exr_pt, i)
@@ -865,7 +869,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
 def _assemble(
     out: BinaryIO,
     headers: list[dict[str, RawAttribute]],
-    chunks: list[list[bytes] | _FileChunks],
+    chunks: Sequence[Sequence[bytes | memoryview] | _FileChunks],
     orders: list[list[int]],
     storages: list[str],
     multipart: bool,
@@ -912,10 +916,11 @@ def _assemble(
                     out.write(prefix + src.read(size))
         else:
             for k in order:
-                out.write(prefix + part_chunks[k])
+                out.write(prefix)
+                out.write(part_chunks[k])
 
 
-def _size(chunks: list[bytes] | _FileChunks, k: int) -> int:
+def _size(chunks: Sequence[bytes | memoryview] | _FileChunks, k: int) -> int:
     return chunks.size(k) if isinstance(chunks, _FileChunks) else len(chunks[k])
 
 
