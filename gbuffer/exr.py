@@ -39,9 +39,9 @@ import io
 import math
 import os
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from collections.abc import Sequence
 from typing import Any, BinaryIO
 
 import numpy as np

@@ -262,7 +262,9 @@ def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[s
     """One part, ZIP: the frame's buffers under canonical names (``buffers``) and its outputs."""
     warnings: list[str] = []
     channels = canonical_channels(frame) if buffers else {}
-    radiance_names = set(canonical_channels(_subframe(frame, _radiance_keys()))) if buffers else set()
+    radiance_names = (
+        set(canonical_channels(_subframe(frame, _radiance_keys()))) if buffers else set()
+    )
     shape = frame.shape
     pixels: dict[str, np.ndarray] = {}
     for name, arr in channels.items():
