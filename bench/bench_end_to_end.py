@@ -1,6 +1,7 @@
 """Benchmark: a frame where users meet it, against an ``oiiotool`` copy of the same file, same run.
 
-Run: ``.venv/bin/python -m bench.bench_end_to_end`` (part of ``make bench``). Two 1920x1080 frames,
+Run: ``.venv/bin/python -m bench.bench_end_to_end [enhance] [http] [batch] [pipeline]`` (all of
+them by default; part of ``make bench``). Two 1920x1080 frames,
 made once and kept in ``.bench-cache/`` (git-ignored):
 
 * a Blender Cycles multilayer EXR (``corpus/spot.py`` at 4 samples: every pass Depict reads,
@@ -36,6 +37,7 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -80,16 +82,34 @@ def depict_frame() -> Path:
 
 
 def timed(cmd: Sequence[str]) -> tuple[float, int]:
-    """Seconds and peak resident memory (bytes) of one run of ``cmd``."""
+    """Seconds and peak resident memory (bytes) of one run of ``cmd``.
+
+    The peak is the child's own ``VmHWM``, polled while it runs: ``ru_maxrss`` of a child
+    counts the resident memory of this (large) process at the fork."""
     t0 = time.perf_counter()
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    _, status, usage = os.wait4(proc.pid, 0)
+    peak = [0]
+    watcher = threading.Thread(target=_watch_peak, args=(proc, peak))
+    watcher.start()
+    _, err = proc.communicate()
     seconds = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    err = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    watcher.join()
     if proc.returncode != 0:
-        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {err.strip()[-400:]}")
-    return seconds, usage.ru_maxrss * 1024
+        text = err.decode(errors="replace").strip()[-400:]
+        raise RuntimeError(f"{' '.join(cmd)} failed ({proc.returncode}): {text}")
+    return seconds, peak[0]
+
+
+def _watch_peak(proc: subprocess.Popen[bytes], peak: list[int]) -> None:
+    status = Path(f"/proc/{proc.pid}/status")
+    while proc.poll() is None:
+        try:
+            for line in status.read_text().splitlines():
+                if line.startswith("VmHWM:"):
+                    peak[0] = max(peak[0], int(line.split()[1]) * 1024)
+        except (OSError, ValueError):
+            pass
+        time.sleep(0.02)
 
 
 def paired_runs(cmd: Sequence[str], ref: Sequence[str], repeat: int = REPEAT) -> tuple[float, ...]:
@@ -215,10 +235,18 @@ def pipeline_rows() -> None:
     frame = covered_frame()
     for op, target in (("curvature", 6.0), ("radiance_scaling", 10.0), ("light_alignment", 60.0)):
         compiled = pipeline.compile([{"op": op}])
-        report.time(f"pipeline.run {op}", lambda c=compiled: pipeline.run(frame, c), 5, target)
+        report.time(f"pipeline.run {op}", partial(pipeline.run, frame, compiled), 5, target)
 
 
-def main() -> None:
+SECTIONS = ("enhance", "http", "batch", "pipeline")
+
+
+def main(argv: Sequence[str] = ()) -> None:
+    """Every section, or those named: ``python -m bench.bench_end_to_end enhance http``."""
+    sections = list(argv) or list(SECTIONS)
+    unknown = sorted(set(sections) - set(SECTIONS))
+    if unknown:
+        raise SystemExit(f"unknown sections {unknown}; choose from {', '.join(SECTIONS)}")
     if OIIOTOOL is None:
         raise SystemExit("oiiotool not found: `uv sync` installs the openimageio wheel")
     work = Path(tempfile.mkdtemp(prefix="bench-e2e-"))
@@ -228,15 +256,18 @@ def main() -> None:
             print("Cycles frame skipped: no blender on PATH (apt-get install blender)")
         frames = [("Cycles multilayer", cycles)] if cycles else []
         frames.append(("Depict render", depict_frame()))
-        for name, path in frames:
-            enhance_rows(name, path, work)
         main_frame = cycles or depict_frame()
-        http_row(main_frame, work)
-        batch_row(main_frame, work)
-        pipeline_rows()
+        for name, path in frames if "enhance" in sections else ():
+            enhance_rows(name, path, work)
+        if "http" in sections:
+            http_row(main_frame, work)
+        if "batch" in sections:
+            batch_row(main_frame, work)
+        if "pipeline" in sections:
+            pipeline_rows()
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])
