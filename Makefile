@@ -69,6 +69,7 @@ bench: install
 gallery: install
 	$(BIN)/python -m bench.gallery_corpus
 	$(BIN)/python -m bench.gallery
+	$(BIN)/python -m bench.gallery_masks
 
 # Blender Cycles renders of the corpus/ scenes (every size and sample count; hours on 2 cores)
 # and Depict's renders of the optional meshes, into corpus/frames/

@@ -18,7 +18,8 @@ labelled PNG sheets into ``gallery/`` (git-ignored):
   ARM (``custom_arm.png``, passed by its path).
 
 ``make gallery`` runs :mod:`bench.gallery_corpus` first: every operator's defaults on the corpus
-frames, in ``gallery/corpus/``.
+frames, in ``gallery/corpus/``; then :mod:`bench.gallery_masks`: steps restricted to one object
+by Cryptomatte (``gallery/masks_blender.png``).
 
 ``--docs DIR`` also writes six pictures for the README (at least 800 px wide):
 ``rs_scenarios.png``, ``rs_blender.png``, ``lla_scales.png``, ``lla_materials.png``, ``usm.png``

@@ -369,7 +369,8 @@ def solve_camera(
     p, degeneracy = dlt(uv, xyz)
     affine, affine_rms = affine_fit(uv, xyz)
     planar = degeneracy > 0.1
-    dlt_rms = math.inf if planar else _dlt_rms(p, uv, xyz)
+    # points on one plane determine no DLT: only an exact affine fit says orthographic then
+    dlt_rms = 0.0 if planar else _dlt_rms(p, uv, xyz)
     if affine_rms <= dlt_rms + AFFINE_SLACK_PX or affine_rms < AFFINE_SLACK_PX:
         if planar:
             raise FrameError(

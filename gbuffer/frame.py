@@ -119,6 +119,10 @@ class Frame:
             return (int(b.shape[0]), int(b.shape[1]))
         for o in self.outputs.values():
             return (int(o.shape[0]), int(o.shape[1]))
+        if self.passthrough.parts:  # a file with no buffer Depict knows (only mattes, ...)
+            for c in self.passthrough.parts[self.passthrough.primary][1].values():
+                pixels = np.asarray(getattr(c, "pixels", c))
+                return (int(pixels.shape[0]), int(pixels.shape[1]))
         raise ValueError("frame has no buffers")
 
     @property

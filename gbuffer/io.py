@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import OpenEXR
 
-from gbuffer import exr
+from gbuffer import cryptomatte, exr
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
@@ -385,6 +385,7 @@ def describe(frame: Frame) -> dict[str, Any]:
     position pass: rms_px, max_px, pixels, outliers; null without one), ``missing`` (what
     operators need and the frame lacks), ``depict`` (what Depict wrote into a file it made:
     version, input, pipeline, result layer, original layer, history; null otherwise),
+    ``cryptomatte`` (each Cryptomatte layer: name, ranks, the pixels each manifest name covers),
     ``warnings``.
     """
     pt = frame.passthrough
@@ -435,6 +436,7 @@ def describe(frame: Frame) -> dict[str, Any]:
         "camera_fit": None if frame.camera is None else frame.camera.fit,
         "missing": _missing(frame),
         "depict": _provenance(pt.parts[pt.primary][0]) if pt.parts else None,
+        "cryptomatte": cryptomatte.describe(frame),
         "warnings": list(getattr(pt, "warnings", [])),
     }
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from gbuffer import cryptomatte
 from gbuffer.atomic import atomic_path
 from gbuffer.errors import FrameError
 from gbuffer.frame import BUFFERS, Frame
@@ -65,7 +66,11 @@ def _grey_or_signed(values: np.ndarray) -> np.ndarray:
 
 
 def picture(frame: Frame, layer: str = "beauty", exposure: float = 0.0) -> np.ndarray:
-    """An (H, W, 3) float32 RGB picture in [0, 1] of a canonical buffer or a file layer."""
+    """An (H, W, 3) float32 RGB picture in [0, 1] of a canonical buffer or a file layer;
+    ``cryptomatte`` (or ``cryptomatte/LAYER``): a false-colour view of the Cryptomatte ids."""
+    if layer == "cryptomatte" or layer.startswith("cryptomatte/"):
+        chosen = cryptomatte.named_layers(frame, layer.partition("/")[2] or None)[0]
+        return cryptomatte.id_picture(frame, chosen)
     if layer in frame.buffers:
         data = frame.buffers[layer]
         if layer == "normal":

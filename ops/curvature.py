@@ -1070,10 +1070,12 @@ def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[s
     "dir.Y": dir_y}`` (float32, (H, W)); H is the mapped curvature tanh(s·(κ1 + κ2)) in [-1, 1]
     (Radiance Scaling §4), k1/k2 are per unit image height and 0 where the weight is 0.
     """
+    # + 0.0 turns the -0.0 of a negative k times a zero weight into 0.0: the values under a zero
+    # weight are left over from the working grid, and their sign must not reach the file
     return {
         "H": isotropic(curv, gain),
-        "k1": cv2.multiply(curv.k1, curv.weight),
-        "k2": cv2.multiply(curv.k2, curv.weight),
+        "k1": cv2.add(cv2.multiply(curv.k1, curv.weight), 0.0),
+        "k2": cv2.add(cv2.multiply(curv.k2, curv.weight), 0.0),
         "dir.X": curv.dir_x.copy(),
         "dir.Y": curv.dir_y.copy(),
     }

@@ -17,7 +17,8 @@ from typing import Any
 
 from gbuffer.presets import PRESETS
 from service.cli import build_parser
-from service.registry import operators
+from service.masks import MASK_FIELDS
+from service.registry import Params, operators
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 
@@ -56,11 +57,25 @@ def operators_section() -> str:
             f"Needs {', '.join(f'`{n}`' for n in op.needs) or 'nothing'}; "
             f"writes {', '.join(f'`{w}`' for w in op.writes)}."
         )
-        lines += ["", "| parameter | default | meaning |", "|---|---|---|"]
-        for name, field in op.params.model_fields.items():
-            desc = _cell(field.description or "")
-            lines.append(f"| `{name}` | {_cell(_default(field))} | {desc} |")
+        lines += _table({k: v for k, v in op.params.model_fields.items() if k not in MASK_FIELDS})
+    lines += [
+        "",
+        "### Masks (every operator)",
+        "",
+        "Every step also takes these parameters, which restrict it to a matte m in [0, 1]: "
+        "out = in + m·(op(in) − in) for every layer the step writes (zero for a layer it "
+        "adds). `depict mask FILE SPEC -o m.png` writes the matte; `depict inspect` lists the "
+        "file's Cryptomatte names; `depict preview --layer cryptomatte` shows their ids.",
+    ]
+    lines += _table({k: v for k, v in Params.model_fields.items() if k in MASK_FIELDS})
     return "\n".join(lines)
+
+
+def _table(fields: dict[str, Any]) -> list[str]:
+    lines = ["", "| parameter | default | meaning |", "|---|---|---|"]
+    for name, field in fields.items():
+        lines.append(f"| `{name}` | {_cell(_default(field))} | {_cell(field.description or '')} |")
+    return lines
 
 
 def presets_section() -> str:

@@ -191,7 +191,7 @@ def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:
     if op.needs_camera:
         frame.need_camera(f"{op.name} needs the camera")
     try:
-        op.apply(frame, step.params, context)
+        op.run(frame, step.params, context)  # apply, restricted to the step's mask
     except FrameError:
         raise
     except ValueError as exc:  # ops/ names a bad value in a ValueError

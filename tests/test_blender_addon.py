@@ -22,6 +22,7 @@ import OpenEXR
 import pytest
 
 import gbuffer
+from service.masks import matte
 from tests.live_server import live_server
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +34,9 @@ PIPELINE = '{"steps": [{"op": "radiance_scaling", "params": {"preset": "paper", 
 pytestmark = pytest.mark.skipif(BLENDER is None, reason="Debian's blender is not installed")
 
 
-def drive(tmp: Path, path: str, server: str | None = None) -> dict[str, Any]:
+def drive(
+    tmp: Path, path: str, server: str | None = None, pipeline: str = PIPELINE
+) -> dict[str, Any]:
     """Run the driver with ``PATH`` = ``path``; its report (and the files it left in ``tmp``)."""
     assert BLENDER is not None
     env = {k: v for k, v in os.environ.items() if not k.startswith("DEPICT_")}
@@ -42,7 +45,7 @@ def drive(tmp: Path, path: str, server: str | None = None) -> dict[str, Any]:
         env["DEPICT_SERVER"] = server
     cmd = [BLENDER, "-b", "--factory-startup", "--python", str(DRIVER), "--"]
     run = subprocess.run(
-        [*cmd, str(ADDON), str(tmp), PIPELINE], env=env, capture_output=True, text=True, timeout=600
+        [*cmd, str(ADDON), str(tmp), pipeline], env=env, capture_output=True, text=True, timeout=600
     )
     report_file = tmp / "report.json"
     assert report_file.is_file(), run.stdout[-3000:] + run.stderr[-3000:]
@@ -81,7 +84,24 @@ def test_addon_with_the_local_depict(tmp_path: Path) -> None:
     report = drive(tmp_path, f"{venv_bin}:/usr/bin:/bin")
     check_result(tmp_path, report)
     names = [s["id"] for s in report["settings"]]
-    assert {"operator", "gamma", "scenario", "amount", "pipeline", "compositor"} <= set(names)
+    assert {"operator", "gamma", "scenario", "amount", "mask", "pipeline", "compositor"} <= set(
+        names
+    )
+
+
+def test_addon_mask_switches_cryptomatte_on_and_changes_only_suzanne(tmp_path: Path) -> None:
+    venv_bin = str(Path(sys.executable).parent)
+    masked = PIPELINE.replace('"gamma": 2}', '"gamma": 2, "mask": "cryptomatte:Suzanne"}')
+    report = drive(tmp_path, f"{venv_bin}:/usr/bin:/bin", pipeline=masked)
+    assert "error" not in report, report["error"]
+    assert report["result"] == report["again"] == ["FINISHED"]
+    frame = gbuffer.read(report["image"]["filepath"])
+    m = matte(frame, "cryptomatte:Suzanne")
+    assert (m >= 1).sum() > 100  # the add-on switched the Cryptomatte passes on
+    depict, combined = frame.layer("ViewLayer.Depict"), frame.layer("ViewLayer.Combined")
+    after, before = (np.dstack([layer[c] for c in "RGB"]) for layer in (depict, combined))
+    changed = (after != before).any(axis=-1)
+    assert changed.sum() > 50 and not changed[m == 0].any()
 
 
 def test_addon_with_a_depict_server(tmp_path: Path) -> None:

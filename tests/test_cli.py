@@ -96,6 +96,7 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
         "camera_fit",
         "missing",
         "depict",
+        "cryptomatte",
         "problems",
         "operators",
         "warnings",

@@ -485,6 +485,7 @@ def test_describe_is_json(tmp_path: Path, scene: F.Scene) -> None:
         "camera_fit",
         "missing",
         "depict",
+        "cryptomatte",
         "warnings",
     ]
     assert info["camera_source"] == "file header (V-Ray cameraTransform)"

@@ -51,7 +51,7 @@ def run(tmp: Path, name: str, url: str | None = None) -> subprocess.CompletedPro
 
 
 def test_the_readme_marks_its_tested_blocks() -> None:
-    assert set(blocks()) == {"tour", "python", "http", "client"}
+    assert set(blocks()) == {"tour", "python", "http", "client", "masks"}
 
 
 def test_tour(tmp_path: Path) -> None:
@@ -60,6 +60,14 @@ def test_tour(tmp_path: Path) -> None:
         assert (tmp_path / name).is_file(), name
     assert "camera source: solved from ViewLayer.Position.X,Y,Z" in done.stdout
     assert "depict: result in ViewLayer.Depict" in done.stdout
+
+
+def test_masks(tmp_path: Path) -> None:
+    done = run(folder(tmp_path), "masks")
+    assert "cryptomatte ViewLayer.CryptoObject (4 ranks)" in done.stdout
+    assert "suzanne.png (cryptomatte:Suzanne: 2783 pixels inside, 533 partly)" in done.stdout
+    for name in ("suzanne.png", "ids.png", "hero.exr"):
+        assert (tmp_path / name).is_file(), name
 
 
 def shot(tmp: Path) -> Path:

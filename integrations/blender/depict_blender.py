@@ -5,7 +5,8 @@ Then Properties > Render > Depict (or the Image Editor's sidebar, tab Depict): c
 operator and its main parameters, press Enhance. The add-on
 
 1. takes the last render, or renders the scene when there is none or when the view layer lacked
-   a pass Depict needs (Z, Normal, Position are switched on for it);
+   a pass Depict needs (Z, Normal, Position are switched on for it; the Cryptomatte passes too
+   when a step's ``mask`` names Cryptomatte, e.g. the panel's Mask ``cryptomatte:Suzanne``);
 2. saves it as a multilayer EXR with every pass, and the scene camera as Depict's camera JSON
    (``world_to_camera`` and the field of view of the whole frame, from Blender's own projection
    matrix, so the sensor fit is Blender's);
@@ -47,6 +48,12 @@ bl_info = {
 RESULT_IMAGE = "Depict Result"
 RESULT_NODE = "Depict Result"
 PASSES = ("use_pass_z", "use_pass_normal", "use_pass_position")
+#: Switched on too when the pipeline names a Cryptomatte mask.
+CRYPTOMATTE_PASSES = (
+    "use_pass_cryptomatte_object",
+    "use_pass_cryptomatte_material",
+    "use_pass_cryptomatte_asset",
+)
 OPERATORS = (
     ("radiance_scaling", "Radiance Scaling", "scale reflected light by curvature (Vergne 2011)"),
     ("light_alignment", "Light Alignment", "align the lights with the shape, per scale (2021)"),
@@ -132,6 +139,13 @@ class DepictSettings(bpy.types.PropertyGroup):
         description='Depict pipeline JSON, e.g. {"steps": [{"op": "radiance_scaling"}]}',
         default='{"steps": [{"op": "radiance_scaling", "params": {"gamma": 2}}]}',
     )
+    mask: StringProperty(
+        name="Mask",
+        description="restrict the step to a matte: cryptomatte:NAME (objects, materials; "
+        "wildcards, commas), index:ViewLayer.IndexOB=3, or a layer; ! inverts; empty: the "
+        "whole frame",
+        default="",
+    )
     render: BoolProperty(
         name="Render first", description="render the scene even if there is a last render"
     )
@@ -151,6 +165,8 @@ class DepictSettings(bpy.types.PropertyGroup):
         if self.operator == "custom":
             return self.pipeline
         step = {"op": self.operator, "params": params.get(self.operator, {})}
+        if self.mask.strip():
+            step["params"]["mask"] = self.mask.strip()
         return json.dumps({"steps": [step]})
 
 
@@ -180,11 +196,13 @@ def camera_json(scene):
     return out
 
 
-def ensure_render(context, force):
-    """Switch on the passes Depict needs; render when asked, when they were off, or when there
-    is no last render. Returns the Render Result image."""
+def ensure_render(context, force, cryptomatte=False):
+    """Switch on the passes Depict needs (and Cryptomatte's when a mask names it); render when
+    asked, when they were off, or when there is no last render. Returns the Render Result
+    image."""
     layer = context.view_layer
-    missing = [name for name in PASSES if not getattr(layer, name)]
+    needed = PASSES + (CRYPTOMATTE_PASSES if cryptomatte else ())
+    missing = [name for name in needed if not getattr(layer, name)]
     for name in missing:
         setattr(layer, name, True)
     image = bpy.data.images.get("Render Result")
@@ -340,7 +358,7 @@ def enhance(context, pipeline_text, render, compositor):
     out = os.path.join(folder, "render_depict.exr")
     camera = os.path.join(folder, "camera.json")
     pipe = os.path.join(folder, "pipeline.json")
-    save_render(ensure_render(context, render), scene, src)
+    save_render(ensure_render(context, render, "cryptomatte" in pipeline_text), scene, src)
     with open(camera, "w") as fh:
         json.dump(camera_json(scene), fh)
     with open(pipe, "w") as fh:
@@ -409,8 +427,10 @@ def draw_settings(layout, settings):
         layout.prop(settings, "amount")
     elif op == "apparent_relief":
         layout.prop(settings, "style")
-    elif op == "custom":
+    if op == "custom":
         layout.prop(settings, "pipeline", text="")
+    else:
+        layout.prop(settings, "mask")
     layout.prop(settings, "render")
     layout.prop(settings, "compositor")
     layout.operator(DEPICT_OT_enhance.bl_idname, icon="SHADING_RENDERED")

@@ -1,15 +1,18 @@
-"""``depict enhance``, ``preview`` and ``ops``: run locally (``--server``: :mod:`.remote`)."""
+"""``depict enhance``, ``preview``, ``mask``, ``ops``: run here (``--server``: :mod:`.remote`)."""
 
 from __future__ import annotations
 
 import argparse
 import json
 
+import numpy as np
+
 from gbuffer.atomic import check_outputs
 from gbuffer.preview import picture, write_png
 from service import pipeline
 from service.cli.common import read_request, steps, warn
 from service.enhance import WriteRequest, enhance
+from service.masks import matte
 from service.registry import operators
 
 
@@ -30,6 +33,16 @@ def cmd_preview(args: argparse.Namespace) -> int:
     frame = read_request(args).read(args.file)
     write_png(picture(frame, args.layer, exposure=args.exposure), args.output)
     print(f"wrote {args.output} ({args.layer})")
+    return 0
+
+
+def cmd_mask(args: argparse.Namespace) -> int:
+    check_outputs([args.output], [args.file, args.camera])
+    frame = read_request(args).read(args.file)
+    m = matte(frame, args.spec, args.feather, args.amount)
+    write_png(np.repeat(m[..., None], 3, axis=2), args.output)
+    inside, edge = int(np.count_nonzero(m >= 1.0)), int(np.count_nonzero((m > 0) & (m < 1)))
+    print(f"wrote {args.output} ({args.spec}: {inside} pixels inside, {edge} partly)")
     return 0
 
 

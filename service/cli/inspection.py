@@ -68,6 +68,9 @@ def _inspection_lines(info: dict[str, Any]) -> list[str]:
         )
         if "pipeline" in made:
             lines.append(f"  depict pipeline: {json.dumps(made['pipeline'])}")
+    for layer in info.get("cryptomatte", []):
+        names = ", ".join(f"{name} ({px:g} px)" for name, px in layer["names"].items())
+        lines.append(f"  cryptomatte {layer['name']} ({layer['ranks']} ranks): {names}")
     lines += [f"  missing: {line}" for line in info.get("missing", [])]
     ops = info["operators"]
     if not ops["not_runnable"]:

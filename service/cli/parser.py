@@ -89,7 +89,11 @@ def add_frame_commands(sub: Any) -> None:
     p = sub.add_parser("preview", help="an 8-bit PNG of any layer")
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="output PNG")
-    p.add_argument("--layer", default="beauty", help="buffer or layer (beauty, normal, ...)")
+    p.add_argument(
+        "--layer",
+        default="beauty",
+        help="buffer or layer (beauty, normal, ...); cryptomatte[/LAYER]: the Cryptomatte ids",
+    )
     p.add_argument(
         "--exposure",
         type=bounded(float, -20.0, 20.0),
@@ -98,6 +102,15 @@ def add_frame_commands(sub: Any) -> None:
     )
     add_read_options(p)
     p.set_defaults(command="service.cli.frames:cmd_preview")
+
+    p = sub.add_parser("mask", help="write the matte of a step's mask as a PNG, to check it")
+    p.add_argument("file")
+    p.add_argument("spec", help="cryptomatte:NAME, index:LAYER=V, a layer; ! inverts (--help)")
+    p.add_argument("-o", "--output", required=True, help="output PNG (white: m = 1)")
+    p.add_argument("--feather", type=bounded(float, 0.0, 0.5), default=0.0, help="σ / image height")
+    p.add_argument("--amount", type=bounded(float, 0.0, 1.0), default=1.0, help="m times this")
+    add_read_options(p)
+    p.set_defaults(command="service.cli.frames:cmd_mask")
 
     p = sub.add_parser(
         "warmup", help="compile the per-pixel kernels now (image builds, new farm nodes)"

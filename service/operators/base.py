@@ -11,10 +11,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
-from pydantic import BaseModel, ConfigDict, ValidationError, model_validator
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gbuffer.frame import Frame
 from service.errors import PipelineError
+from service.masks import MASK_SYNTAX, blend_layers, matte
+from service.masks import parse as parse_mask
 
 
 class Params(BaseModel):
@@ -27,6 +30,37 @@ class Params(BaseModel):
 
     model_config = ConfigDict(extra="forbid", validate_assignment=True)
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
+
+    mask: str | None = Field(
+        None,
+        max_length=4096,
+        description=f"restrict the step to a matte (pixels of m = 0 stay bit-exact): {MASK_SYNTAX}",
+    )
+    mask_feather: float = Field(
+        0.0, ge=0.0, le=0.5, description="σ of a Gaussian softening the mask, per image height"
+    )
+    mask_amount: float = Field(1.0, ge=0.0, le=1.0, description="the mask times this")
+    mask_stats: bool = Field(
+        False,
+        description="measure the step's statistics inside the mask only (the automatic white "
+        "level of radiance_scaling and unsharp_masking, the congruence score and its "
+        "normalisation), so a small object is not normalised by the rest of the frame",
+    )
+
+    @field_validator("mask", mode="before")
+    @classmethod
+    def _mask_list(cls, value: Any) -> Any:
+        """A list (what ``--set mask=cryptomatte:a,b`` parses to) is the comma list it was."""
+        if isinstance(value, list):
+            return ",".join(str(v) for v in value)
+        return value
+
+    @field_validator("mask")
+    @classmethod
+    def _mask(cls, value: str | None) -> str | None:
+        if value is not None:
+            parse_mask(value)  # raises ValueError naming what is wrong
+        return value
 
     @model_validator(mode="before")
     @classmethod
@@ -48,12 +82,18 @@ class Context:
     and records what it measured in ``measured`` so a batch can pin it for later frames.
     ``files``: whether parameters may name image files on this machine (matcaps, environment
     maps, gain maps, ARMs); the HTTP service runs with ``files=False``.
+    ``region``: where a step with ``mask_stats`` measures its statistics (:mod:`service.masks`).
     """
 
     debug_layers: bool = False
     files: bool = True
     pinned: dict[str, float] = field(default_factory=dict)
     measured: dict[str, float] = field(default_factory=dict)
+    region: np.ndarray | None = None
+
+    def counted(self, covered: np.ndarray) -> np.ndarray:
+        """``covered`` (H, W) bool, within the step's mask when it restricts statistics."""
+        return covered if self.region is None else covered & self.region
 
     def statistic(self, key: str, compute: Callable[[], float]) -> float:
         """The pinned value of ``key``, else ``compute()`` (recorded in ``measured``)."""
@@ -79,6 +119,25 @@ class Operator:
     writes: tuple[str, ...]
     apply: Apply
     needs_camera: bool = False
+
+    def run(self, frame: Frame, params: Params, context: Context) -> None:
+        """``apply``, restricted to the step's ``mask`` when it has one (:mod:`service.masks`):
+        every array the step replaced, added or dropped is blended with the one before.
+        Operators do not change arrays in place, so an array the step kept is the same object."""
+        if params.mask is None:
+            self.apply(frame, params, context)
+            return
+        m = matte(frame, params.mask, params.mask_feather, params.mask_amount, context.files)
+        buffers, outputs = dict(frame.buffers), dict(frame.outputs)
+        region = context.region
+        if params.mask_stats:
+            context.region = m > 0 if region is None else region & (m > 0)
+        try:
+            self.apply(frame, params, context)
+        finally:
+            context.region = region
+        blend_layers(frame.buffers, buffers, m)
+        blend_layers(frame.outputs, outputs, m)
 
     def parse(self, values: dict[str, Any]) -> Params:
         """Validate ``values`` into the parameter model, or raise :class:`PipelineError`."""

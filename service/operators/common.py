@@ -139,23 +139,6 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     return fraction * frame.image_height * float(np.median(pixel_size[covered]))
 
 
-def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
-    """One channel of the file by name: ``gain`` (its only channel, or X/Y/R) or ``gain.X``."""
-    channels = frame.layer(name)
-    if not channels:
-        layer, _, channel = name.rpartition(".")
-        channels = {k: v for k, v in frame.layer(layer).items() if k == channel} if layer else {}
-    if len(channels) == 1:
-        return next(iter(channels.values()))
-    for key in ("X", "Y", "R", "A"):
-        if key in channels:
-            return channels[key]
-    raise PipelineError(
-        f"{what}: no layer {name!r} with one channel in the file"
-        + (f" (it has {', '.join(sorted(channels))})" if channels else "")
-    )
-
-
 def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:
     """An (H, W, C) field as output channels ``{"X": ..., "Y": ..., "Z": ...}``."""
     planes = cv2.split(np.ascontiguousarray(field, np.float32))

@@ -5,16 +5,20 @@ It leaves the beauty as it is and writes the per-pixel score ``congruence.X``, i
 ``congruence.weight.X``, the two flows ``congruence.shading.X/Y`` and ``congruence.shape.X/Y``
 (camera x right, y up) and the mean score as the header attribute ``depict/congruence``. Put it
 last in a pipeline to measure what the steps before it did (``depict score`` prints it).
+With ``mask_stats``, the score, its strength normalisation and its mean are those of the
+pixels inside the step's mask only (e.g. one object's congruence).
 """
 
 from __future__ import annotations
 
 from typing import Literal
 
+import numpy as np
 from pydantic import Field
 
 from analysis.score import CONGRUENCE, score_frame
 from gbuffer.frame import Frame
+from service.masks import MASK_FIELDS
 from service.operators.base import Context, Params, register
 
 _DEFAULTS = CONGRUENCE
@@ -72,6 +76,12 @@ class CongruenceParams(Params):
     ),
 )
 def apply_congruence(frame: Frame, p: CongruenceParams, ctx: Context) -> None:
-    result = score_frame(frame, maps=True, **p.model_dump(exclude_none=True))
+    scored = frame
+    if ctx.region is not None:  # mask_stats: the score and its normalisation inside the mask
+        scored = frame.copy()
+        scored.buffers["coverage"] = np.where(ctx.region, frame.mask, np.float32(0))
+    result = score_frame(
+        scored, maps=True, **p.model_dump(exclude_none=True, exclude=set(MASK_FIELDS))
+    )
     frame.outputs.update(result["layers"])
     frame.attributes["depict/congruence"] = float(result["score"])

@@ -138,7 +138,7 @@ def _white(
         ctx,
         f"radiance_scaling.white.{key}",
         p.white,
-        lambda: white_level(light, mask, percentile=p.white_percentile),
+        lambda: white_level(light, ctx.counted(mask), percentile=p.white_percentile),
     )
 
 

@@ -20,7 +20,7 @@ from typing import Any, Literal
 
 import cv2
 import numpy as np
-from pydantic import Field, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
@@ -28,15 +28,18 @@ from ops import relief as rl
 from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
 from service.errors import PipelineError
-from service.operators.base import Context, Params, get, register
-from service.operators.common import Auto, channels, layer_plane, user_image
+from service.masks import layer_plane
+from service.operators.base import Context, get, register
+from service.operators.common import Auto, channels, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
 
 Style = Literal["cel", "counter", "xtoon", "mask", "descriptor"]
 
 
-class EffectStep(Params):
+class EffectStep(BaseModel):
     """A pipeline step run on a copy of the frame, for ``style: mask``."""
+
+    model_config = ConfigDict(extra="forbid")
 
     op: str = Field(description="operator name (e.g. exaggerated_shading, radiance_scaling)")
     params: dict[str, Any] = Field(default_factory=dict, description="its parameters")
@@ -216,7 +219,7 @@ def _effect(frame: Frame, step: EffectStep, ctx: Context) -> np.ndarray:
     copy = frame.copy()
     for buffer in op.needs:
         copy.need(buffer, f"needed by {op.name} (the mask effect)")
-    op.apply(copy, op.parse(step.params), ctx)
+    op.run(copy, op.parse(step.params), ctx)
     return copy.need("beauty", f"the result of {op.name}")
 
 

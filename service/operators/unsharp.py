@@ -24,10 +24,8 @@ Signals:
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Any, ClassVar, Literal
 
-import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
@@ -37,16 +35,15 @@ from ops import curvature as curv_ops
 from ops.scaling import luminance
 from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
 from service.errors import PipelineError
+from service.masks import plane
 from service.operators.base import Context, Params, register
 from service.operators.common import (
     Auto,
     kept_lighting_gain,
-    layer_plane,
     pixel_sizes,
     relative_pixel_sizes,
     relative_scene_sigma,
     statistic,
-    user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
 
@@ -164,12 +161,7 @@ def _relief(
 def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
     if p.gain_map is None:
         return None
-    name = p.gain_map
-    if not (ctx.files and Path(name).is_file()):  # a layer of the file, unless a file exists
-        return layer_plane(frame, name, "gain_map")
-    img = user_image(ctx, name, "gain_map", srgb=False, grey=True)
-    h, w = frame.shape
-    return np.asarray(cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
+    return plane(frame, p.gain_map, "gain_map", ctx.files)  # a layer, unless a file exists
 
 
 @register(
@@ -207,7 +199,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             ctx,
             f"unsharp_masking.white.{p.signal}",
             p.white,
-            lambda: color.auto_white(signal, covered),
+            lambda: color.auto_white(signal, ctx.counted(covered)),
         )
     gain = _gain_map(frame, p, ctx)
     relief = _relief(frame, p, sigma, pixel_size)
