@@ -20,7 +20,8 @@ canonical buffers).
 * ``"same"``: into the primary part, as above (every channel of that part is encoded again);
 * ``"part"``: into an added part of a multi-part file (named after ``depict/result``), with the
   header attributes; every part of the input is copied chunk for chunk, nothing is re-encoded
-  but the new layers (outputs that replace a channel of the input still replace it in place);
+  but the new layers (when an output replaces a channel of the primary part, e.g. a second
+  enhance of a ``part`` output, that part is re-encoded with every new layer, as ``"same"``);
 * ``"sidecar"``: a file with only the outputs and the header attributes (one part, ZIP, the
   frame's windows); the input stays where it is and holds the G-buffer.
 
@@ -160,6 +161,9 @@ def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
     header, channels = parts[pt.primary]
     shape = _grid_shape(pt)
     added: dict[str, Any] = {}
+    # a part that is re-encoded anyway (an output replaces one of its channels) takes the new
+    # layers too, so that its header and theirs cannot disagree
+    own_part = layout == "part" and not any(name in channels for name in frame.outputs)
     for name, arr in frame.outputs.items():
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
@@ -173,12 +177,11 @@ def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
                 pixels = pixels.astype(np.float16)
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:
-            (added if layout == "part" else channels)[name] = OpenEXR.Channel(name, pixels)
+            (added if own_part else channels)[name] = OpenEXR.Channel(name, pixels)
     compression = header.get("compression")
-    replaced = [name for name in frame.outputs if name in pt.parts[pt.primary][1]]
-    if (replaced or not added) and frame.outputs and compression is not None:
+    if not added and frame.outputs and compression is not None:
         if int(compression) in exr.LOSSY_COMPRESSIONS:
-            new = [name for name in channels if name not in pt.parts[pt.primary][1]]
+            new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
             warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
     if added:  # the header attributes go with the added layers
         header = _added_part(parts, header, frame.attributes)

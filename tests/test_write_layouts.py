@@ -5,6 +5,7 @@ the CLI in process; Blender's compositor reads the ``part`` output when ``blende
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -129,3 +130,15 @@ def test_an_unknown_layout_is_refused(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_blenders_compositor_reads_the_added_part(outputs: dict[str, Path], tmp_path: Path) -> None:
     passes = blender_passes(outputs["part"], tmp_path)
     assert "Depict" in passes and "Combined" in passes and "Position" in passes
+
+
+def test_debug_layers_of_a_second_part_enhance_join_the_result_part(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    again = tmp_path / "again.exr"
+    argv = ("enhance", outputs["part"], "-o", again, "--layout", "part", "--debug-layers")
+    assert depict(*argv) == 0
+    _, (header, result) = parts(again)  # no third part: the result's part took them
+    assert set(RESULT) < set(result) and "curvature.H" in result
+    assert len(json.loads(str(header["depict/history"]))) == 2
+    assert chunks(again, 0) == chunks(BLENDER_EXR, 0)
