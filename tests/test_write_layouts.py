@@ -65,8 +65,11 @@ def outputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     return out
 
 
-def test_the_parser_offers_the_writers_layouts() -> None:
+def test_the_parser_and_the_http_form_offer_the_writers_layouts() -> None:
     assert CLI_LAYOUTS == LAYOUTS
+    schema = json.loads((ROOT / "openapi" / "openapi.json").read_text())
+    form = schema["components"]["schemas"]["Body_enhance_v1_enhance_post"]["properties"]
+    assert tuple(form["layout"]["enum"]) == LAYOUTS and form["layout"]["default"] == "same"
 
 
 def test_part_layout_copies_the_input_and_adds_only_the_result(outputs: dict[str, Path]) -> None:
