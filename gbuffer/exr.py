@@ -25,7 +25,9 @@ pLinear) and header attribute:
   identical); new or changed values are serialised by the binding.
 
 The container (magic, version flags, headers, offset tables, chunks) is assembled here and
-written to a temporary file in the target directory, renamed into place only when complete.
+written to a temporary file in the target directory, renamed into place only when complete;
+chunks kept from the source are copied from it one at a time (never all held in memory), and a
+re-encoded part's chunks are views of the binding's encoding (not copies).
 
 Known limits of the binding, reported as :class:`FrameError`: deep parts are not read; a
 *changed* part cannot have subsampled channels; a changed mip-mapped part is written with one
