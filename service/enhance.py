@@ -25,7 +25,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 from gbuffer.camera import Camera
 from gbuffer.frame import Frame
@@ -34,8 +34,9 @@ from gbuffer.io import write as write_exr
 from gbuffer.limits import Limits
 from gbuffer.presets import ReadOptions
 from gbuffer.preview import picture, write_png
-from service import pipeline
-from service.registry import Context
+
+if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline runs, not to read a frame
+    from service import pipeline
 
 
 @dataclass(frozen=True)
@@ -100,6 +101,9 @@ def enhance(
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
     whether parameters may name image files on this machine (False for the HTTP service).
     """
+    from service import pipeline
+    from service.registry import Context
+
     read, write = read or ReadRequest(), write or WriteRequest()
     frame = read.read(in_path)
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
