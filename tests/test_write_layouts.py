@@ -18,7 +18,7 @@ from gbuffer import exr
 from gbuffer.io import LAYOUTS
 from service.cli import main
 from service.cli.args import LAYOUTS as CLI_LAYOUTS
-from tests.test_output_layout import blender_passes
+from tests.test_output_layout import blender_passes, write_compressed
 
 ROOT = Path(__file__).resolve().parents[1]
 BLENDER_EXR = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
@@ -26,7 +26,7 @@ SPOT = ROOT / "examples" / "spot.obj"
 RESULT = [f"ViewLayer.Depict.{c}" for c in "RGBA"]
 
 
-def depict(*argv: str | Path) -> int:
+def depict(*argv: str | Path | int) -> int:
     try:
         return main([str(a) for a in argv])
     except SystemExit as exc:
@@ -43,16 +43,15 @@ def parts(path: Path) -> list[tuple[dict[str, object], dict[str, np.ndarray]]]:
 
 
 def chunks(path: Path, index: int) -> list[bytes]:
-    """The compressed chunks of part ``index``, without the multi-part part number."""
+    """The compressed chunks of part ``index`` (scanline or tiled), without the multi-part part
+    number."""
     layout = exr.read_layout(path)
     part = layout.parts[index]
     skip = 4 if layout.multipart else 0
+    with open(path, "rb") as f:
+        sizes = [exr._chunk_size(f, off, part, layout.multipart) for off in part.offsets]
     data = path.read_bytes()
-    out = []
-    for off in part.offsets:
-        (size,) = np.frombuffer(data, "<i4", 1, off + skip + 4)
-        out.append(data[off + skip : off + skip + 8 + int(size)])
-    return out
+    return [data[off + skip : off + n] for off, n in zip(part.offsets, sizes, strict=True)]
 
 
 @pytest.fixture(scope="module")
@@ -145,3 +144,15 @@ def test_debug_layers_of_a_second_part_enhance_join_the_result_part(
     assert set(RESULT) < set(result) and "curvature.H" in result
     assert len(json.loads(str(header["depict/history"]))) == 2
     assert chunks(again, 0) == chunks(BLENDER_EXR, 0)
+
+
+def test_part_layout_keeps_a_lossy_part_as_it_was(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = write_compressed(BLENDER_EXR, tmp_path / "dwaa.exr", "DWAA", tiled=True)
+    out = tmp_path / "out.exr"
+    assert depict("enhance", src, "-o", out, "--layout", "part") == 0
+    assert "DWAA" not in capsys.readouterr().err  # nothing re-quantised, nothing to warn about
+    assert chunks(out, 0) == chunks(src, 0)
+    layout = exr.read_layout(out)
+    assert [exr.COMPRESSION_NAMES[p.compression] for p in layout.parts] == ["DWAA", "ZIP"]
