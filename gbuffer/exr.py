@@ -554,6 +554,61 @@ def _decode(out: ExrPassthrough, where: str) -> None:
         raise FrameError(f"{where}: cannot decode ({_one_line(exc)})") from exc
 
 
+class ReleasedChannel:
+    """A channel of an :class:`ExrPassthrough` whose decoded pixels were let go
+    (:func:`release_pixels`): its name, pixel type and sampling stay; ``pixels`` decodes the
+    file again (once for all its channels) the first time anything asks for them."""
+
+    def __init__(self, name: str, channel: Any, source: _Redecode) -> None:
+        self.name = name
+        self.xSampling = getattr(channel, "xSampling", 1)
+        self.ySampling = getattr(channel, "ySampling", 1)
+        self.pLinear = getattr(channel, "pLinear", False)
+        self.dtype = channel.pixels.dtype
+        self._source = source
+        self._part = -1
+
+    @property
+    def pixels(self) -> np.ndarray:
+        return self._source.pixels(self._part, self.name)
+
+
+@dataclass
+class _Redecode:
+    """The file of a passthrough decoded again, on first use, for its released channels."""
+
+    path: str
+    parts: list[dict[str, Any]] | None = None
+
+    def pixels(self, part: int, name: str) -> np.ndarray:
+        if self.parts is None:
+            with captured_output():
+                decoded = OpenEXR.File(self.path, separate_channels=True).parts
+                self.parts = [dict(p.channels) for p in decoded]
+        pixels: np.ndarray = self.parts[part][name].pixels
+        pixels.flags.writeable = False
+        return pixels
+
+
+def release_pixels(pt: Passthrough) -> None:
+    """Let go of the decoded pixels of every channel of ``pt`` (an :class:`ExrPassthrough` read
+    from a file), keeping what writing needs: its parts are still copied chunk for chunk, and a
+    channel's ``pixels`` are decoded again if something reads them. For a write that adds
+    layers beside the input's parts (the ``part`` and ``sidecar`` layouts), once the frame's
+    buffers are made: the file's decoded channels need not stay in memory beside them."""
+    if not isinstance(pt, ExrPassthrough) or not pt.path or pt.layout is None:
+        return
+    source = _Redecode(pt.path)
+    for index, (_, channels) in enumerate(pt.parts):
+        for name, channel in list(channels.items()):
+            if isinstance(channel, ReleasedChannel) or not hasattr(channel, "pixels"):
+                continue
+            released = ReleasedChannel(name, channel, source)
+            released._part = index
+            channels[name] = released
+            pt.channel_ids[index][name] = (id(released), 0)
+
+
 def _library_words(printed: list[str], where: str) -> str:
     """The most telling line the OpenEXR library printed: its last error, without the path."""
     errors = [line for line in printed if "ERR" in line or "rror" in line] or printed
@@ -755,6 +810,10 @@ def _unchanged_pixels(pt: Passthrough, index: int, header: dict[str, Any]) -> bo
     if set(channels) != set(ids):
         return False
     for name, ch in channels.items():
+        if isinstance(ch, ReleasedChannel):  # its pixels, if decoded again, are read-only
+            if id(ch) != ids[name][0]:
+                return False
+            continue
         pixels = getattr(ch, "pixels", None)
         if (id(ch), id(pixels)) != ids[name] or pixels is None or pixels.flags.writeable:
             return False
@@ -976,10 +1035,12 @@ __all__ = [
     "Limits",
     "PartLayout",
     "RawAttribute",
+    "ReleasedChannel",
     "box2i",
     "compression_name",
     "read_layout",
     "read_parts",
+    "release_pixels",
     "storage_name",
     "window",
     "write_parts",

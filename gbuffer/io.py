@@ -168,12 +168,13 @@ def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
         if old is not None:
-            old_pixels = getattr(old, "pixels", old)
-            if old_pixels.dtype == np.uint32:
+            released = isinstance(old, exr.ReleasedChannel)
+            old_type = old.dtype if released else getattr(old, "pixels", old).dtype
+            if old_type == np.uint32:
                 raise FrameError(f"output '{name}' would overwrite a UINT channel of the file")
             if getattr(old, "xSampling", 1) != 1 or getattr(old, "ySampling", 1) != 1:
                 raise FrameError(f"output '{name}' would overwrite a subsampled channel")
-            if old_pixels.dtype == np.float16:
+            if old_type == np.float16:
                 pixels = pixels.astype(np.float16)
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
 from gbuffer.camera import Camera
+from gbuffer.exr import release_pixels
 from gbuffer.frame import Frame
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
@@ -106,6 +107,8 @@ def enhance(
 
     read, write = read or ReadRequest(), write or WriteRequest()
     frame = read.read(in_path)
+    if write.layout != "same" and not write.preview:  # the input's parts are copied, not encoded
+        release_pixels(frame.passthrough)
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
     out, op_s = pipeline.run_timed(frame, steps, context)
     out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)

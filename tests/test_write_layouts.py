@@ -156,3 +156,21 @@ def test_part_layout_keeps_a_lossy_part_as_it_was(
     assert chunks(out, 0) == chunks(src, 0)
     layout = exr.read_layout(out)
     assert [exr.COMPRESSION_NAMES[p.compression] for p in layout.parts] == ["DWAA", "ZIP"]
+
+
+def test_released_pixels_come_back_when_read_and_the_input_is_still_copied(
+    tmp_path: Path,
+) -> None:
+    frame = gbuffer.read(BLENDER_EXR)
+    before = frame.layer("ViewLayer.Combined")
+    exr.release_pixels(frame.passthrough)
+    channels = frame.passthrough.parts[0][1]
+    assert all(isinstance(c, exr.ReleasedChannel) for c in channels.values())
+    again = frame.layer("ViewLayer.Combined")  # decoded again from the file
+    assert sorted(again) == sorted(before)
+    for name, pixels in before.items():
+        np.testing.assert_array_equal(again[name], pixels)
+    frame.outputs["ViewLayer.Extra.X"] = np.ones(frame.shape, np.float32)
+    out = tmp_path / "out.exr"
+    gbuffer.write(frame, out, layout="part")
+    assert chunks(out, 0) == chunks(BLENDER_EXR, 0)
