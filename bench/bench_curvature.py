@@ -26,7 +26,7 @@ from bench.common import HD, Report
 from ops.curvature import isotropic, isotropic_field, principal_curvatures
 from ops.jit import kernel
 from ops.parallel import run_strips
-from ops.scaling import scale_lobes
+from ops.radiance_scaling import scale_lobes
 from tests.analytic import two_spheres
 
 #: normal, depth, mask, lobes, lights

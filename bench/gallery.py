@@ -50,8 +50,8 @@ from bench.compare_meshes import VIEWS
 from gbuffer.frame import Frame
 from gbuffer.preview import picture, srgb_encode
 from ops import relief as rl
+from ops.color import luminance
 from ops.curvature import DEFAULT_GAIN
-from ops.scaling import luminance
 from ops.unsharp import plain_unsharp_mask
 from service import pipeline
 from service.operators.radiance_scaling import Scenario

@@ -34,7 +34,7 @@ import numpy as np
 from bench import corpus, quality
 from bench.gallery import DEFAULT_OUT, Box, Tile, change_pic, pic, save, sheet
 from gbuffer.frame import Frame
-from ops.scaling import luminance
+from ops.color import luminance
 
 #: Height of every row of a sheet (a 240p frame at 100 %), pixels.
 ROW = 240

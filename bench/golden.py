@@ -22,7 +22,7 @@ import numpy as np
 from bench import corpus
 from gbuffer.frame import Frame
 from gbuffer.preview import srgb_encode
-from ops.scaling import luminance
+from ops.color import luminance
 from service import pipeline, registry
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -66,8 +66,8 @@ from numpy.typing import NDArray
 
 from analysis.score import CONGRUENCE, score_image
 from gbuffer.frame import Frame
+from ops.color import luminance
 from ops.congruence import CongruenceResult
-from ops.scaling import luminance
 
 F32 = NDArray[np.float32]
 Mask = NDArray[np.bool_]

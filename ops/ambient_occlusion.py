@@ -32,6 +32,8 @@ from concurrent.futures import ThreadPoolExecutor
 import cv2
 import numpy as np
 
+__all__ = ["ssao"]
+
 _FAR = np.float32(1e18)  # finite stand-in for background depth (d² stays finite in float32)
 
 #: 4×4 Bayer order, /16: per-pixel rotation and step jitter, removed by the 4×4 blur.

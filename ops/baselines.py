@@ -20,9 +20,19 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.checks import CONTRAST, ES_SCALE, FRACTION, WEIGHT, WEIGHT_EXPONENT
 from ops.curvature import DEFAULT_GAIN, DEFAULT_SCALE, isotropic, principal_curvatures
 from ops.parallel import run_strips
 from ops.shading import dot, lambert, normalize
+
+__all__ = [
+    "ES_SCALES",
+    "exaggerated_shading",
+    "lambert_image",
+    "light_warping",
+    "smoothed_normals",
+    "warp_light",
+]
 
 F32 = NDArray[np.float32]
 
@@ -339,14 +349,11 @@ def exaggerated_shading(
     cov = _coverage(n, depth, mask)
     sc = [float(s) for s in scales]
     increasing = all(b > a for a, b in itertools.pairwise(sc))
-    if not sc or any(not (0.0 < s <= 0.5) for s in sc) or not increasing:
-        raise ValueError(f"scales must be increasing values in (0, 0.5], got {scales!r}")
-    if not (np.isfinite(contrast) and contrast > 0):
-        raise ValueError(f"contrast must be > 0, got {contrast!r}")
-    if not (np.isfinite(weight_exponent) and -4.0 <= weight_exponent <= 4.0):
-        raise ValueError(f"weight_exponent must be in [-4, 4], got {weight_exponent!r}")
-    if not (np.isfinite(ambient) and 0.0 <= ambient <= 1.0):
-        raise ValueError(f"ambient must be in [0, 1], got {ambient!r}")
+    if not sc or any(s not in ES_SCALE for s in sc) or not increasing:
+        raise ValueError(f"scales must be increasing values in {ES_SCALE}, got {scales!r}")
+    CONTRAST.check(contrast, "contrast")
+    WEIGHT_EXPONENT.check(weight_exponent, "weight_exponent")
+    FRACTION.check(ambient, "ambient")
     light = _light(light_dir)
 
     href = n.shape[0] if image_height is None else int(image_height)
@@ -482,8 +489,7 @@ def light_warping(
     """
     n = _normal_field(normal)
     cov = _coverage(n, depth, mask)
-    if not (np.isfinite(strength) and 0.0 <= strength <= 10.0):
-        raise ValueError(f"strength must be in [0, 10], got {strength!r}")
+    WEIGHT.check(strength, "strength")
     light = _light(light_dir)
     if curvature is None:
         curv = principal_curvatures(

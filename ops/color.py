@@ -39,11 +39,15 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from ops.checks import PERCENTILE, WHITE
+from ops.jit import kernel
+from ops.numerics import dot3_row
 from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
 __all__ = [
+    "REC709_Y",
     "RGB_TO_XYZ",
     "auto_white",
     "lab_phi_to_rgb",
@@ -69,8 +73,10 @@ RGB_TO_XYZ = np.array(
 )
 #: The D65 white of that matrix (its row sums): XYZ of RGB (1, 1, 1).
 _WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)
-#: Rec.709 luminance weights (the Y row).
-_LUMA = RGB_TO_XYZ[1]
+#: Rec. 709 / sRGB luminance weights of linear RGB (ITU-R BT.709-6, item 3.3: Y = 0.2126 R +
+#: 0.7152 G + 0.0722 B); RGB_TO_XYZ's Y row is the same to four decimals.
+REC709_Y = (0.2126, 0.7152, 0.0722)
+_LUMA_ROWS = 64  # rows per strip of luminance()
 
 _DELTA = 6.0 / 29.0
 _DELTA3 = _DELTA**3
@@ -146,29 +152,43 @@ def _check_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.float32)
 
 
-def _check_white(white: float) -> float:
-    w = float(white)
-    if not np.isfinite(w) or w <= 0.0:
-        raise ValueError(f"white must be a finite number > 0 (or 'auto'), got {white!r}")
-    return w
-
-
 def _flat(a: np.ndarray) -> np.ndarray:
     """A single-channel (H, W*C) view, so that cv2 scalar ops apply to every channel."""
     return a.reshape(a.shape[0], -1)
 
 
-def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Rec.709 relative luminance Y = 0.2127 R + 0.7152 G + 0.0722 B of linear RGB.
+def luminance(rgb: np.ndarray, weights: tuple[float, float, float] = REC709_Y) -> np.ndarray:
+    """Relative luminance Y = w_R R + w_G G + w_B B of linear RGB, by default Rec. 709's
+    Y = 0.2126 R + 0.7152 G + 0.0722 B (:data:`REC709_Y`).
 
-    ``rgb`` has shape (..., 3); the result has the leading shape, float32.
+    ``rgb`` has shape (..., 3); the result has the leading shape, float32 (the weights are
+    rounded to float32, the sum is taken in float32).
+
+    >>> luminance(np.array([[1.0, 1.0, 1.0], [2.0, 0.0, 0.0]])).tolist() == [
+    ...     np.float32(0.2126) + np.float32(0.7152) + np.float32(0.0722), np.float32(0.4252)]
+    True
     """
-    arr = np.asarray(rgb, dtype=np.float32)
+    arr = np.ascontiguousarray(rgb, dtype=np.float32)
     if arr.ndim == 0 or arr.shape[-1] != 3:
         raise ValueError(f"rgb must have shape (..., 3), got {arr.shape}")
-    flat = np.ascontiguousarray(arr.reshape(-1, 1, 3))
-    y = _cv.transform(flat, _LUMA[None, :].astype(np.float32))
-    return np.asarray(y, dtype=np.float32).reshape(arr.shape[:-1])
+    if arr.size == 0:
+        return np.zeros(arr.shape[:-1], np.float32)
+    grid = arr.reshape(-1, arr.shape[-2] if arr.ndim > 1 else 1, 3)  # (rows, width, 3)
+    w0, w1, w2 = (np.float32(w) for w in weights)
+    out = np.empty(grid.shape[:2], np.float32)
+    run_strips(
+        grid.shape[0],
+        lambda r0, r1: _luma_rows(grid[r0:r1], w0, w1, w2, out[r0:r1]),
+        _LUMA_ROWS,
+    )
+    return out.reshape(arr.shape[:-1])
+
+
+@kernel
+def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
+    wid = out.shape[1]
+    for i in range(out.shape[0]):
+        dot3_row(rgb[i].reshape(3 * wid), w0, w1, w2, out[i])
 
 
 def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: float = 99.0) -> float:
@@ -182,13 +202,12 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     A sequence should pin the white level (pass a number to the operators) so that it does not
     flicker from frame to frame (DESIGN.md).
     """
-    if not 0.0 < percentile <= 100.0:
-        raise ValueError(f"percentile must be in (0, 100], got {percentile}")
+    percentile = PERCENTILE.check(percentile, "percentile")
     arr = _check_rgb(rgb, "rgb")
     h, w = arr.shape[:2]
     step = 4 if h * w >= 16 * 65536 else 1
     sub = np.ascontiguousarray(arr[::step, ::step])
-    y = _cv.transform(sub, _LUMA[None, :].astype(np.float32))
+    y = luminance(sub)
     ok = np.isfinite(y) & (y > 0.0)
     if mask is not None:
         m = np.asarray(mask)
@@ -208,7 +227,7 @@ def resolve_white(white: White, rgb: np.ndarray, mask: np.ndarray | None = None)
         if white != "auto":
             raise ValueError(f"white must be 'auto' or a number > 0, got {white!r}")
         return auto_white(rgb, mask)
-    return _check_white(white)
+    return WHITE.check(white, "white")
 
 
 def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
@@ -223,7 +242,7 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     Computed as φ = cbrt(max(t, δ³)) + min(t, δ³)/(3δ²) − δ (the CIE linear segment below δ³).
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(_check_white(white))
+    m = _to_t(WHITE.check(white, "white"))
     h, w = arr.shape[:2]
     out = np.empty_like(arr)
 
@@ -246,7 +265,7 @@ def lab_phi_to_rgb(
     float32 array (or view) to write the result into; the result is returned either way.
     """
     arr = _check_rgb(phi, "phi")
-    m_inv = _from_t(_check_white(white))
+    m_inv = _from_t(WHITE.check(white, "white"))
     h, w = arr.shape[:2]
     res = np.empty_like(arr) if out is None else out
 
@@ -292,7 +311,7 @@ def lightness_rows(white: float = 1.0) -> Callable[[np.ndarray, np.ndarray], Non
     ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
     C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
     which the dozen calls of :func:`lightness`'s checks per strip would add up."""
-    m = _to_t(_check_white(white))[1:2]
+    m = _to_t(WHITE.check(white, "white"))[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
         _write(_cv.transform(rgb, m, dst=out), out)
@@ -334,7 +353,7 @@ def scale_lab(
         Where to write the result; it is returned either way.
     """
     arr = _check_rgb(rgb, "rgb")
-    w = _check_white(white)
+    w = WHITE.check(white, "white")
     hh, ww = arr.shape[:2]
     if callable(k):
         k_of = k

@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = ["ARC_AZIMUTHS_DEG", "ARC_THETAS_DEG", "N_DIRECTIONS", "comparison_directions"]
+
 #: Angles to the view axis on each arc, degrees.
 ARC_THETAS_DEG: tuple[float, ...] = (30.0, 60.0, 90.0, 120.0, 150.0)
 #: Azimuths of the arcs, degrees (0 = from the right, 90 = from above).

@@ -4,7 +4,7 @@ Shape-enhancement operators (Radiance Scaling, Light Alignment, unsharp masking)
 detail where there is relief, not relight a frame. Two pieces keep them there on path-traced
 frames:
 
-* a lobe's light averaged over covered pixels at a small scale (:func:`ops.masked.
+* a lobe's light averaged over covered pixels at a small scale (:func:`ops.pyramid.
   masked_gaussian`), so the reflectance mapping δ̄ of Radiance Scaling follows the lighting
   rather than each pixel's Monte-Carlo noise (the scaling σ(κ, δ̄) then multiplies the noise
   like any other light, it does not amplify it);
@@ -20,8 +20,10 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.scaling import luminance
+from ops.color import luminance
 from ops.unsharp import surface_blur
+
+__all__ = ["lighting_gain"]
 
 F32 = NDArray[np.float32]
 

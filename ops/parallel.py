@@ -22,6 +22,8 @@ from concurrent.futures import ThreadPoolExecutor
 
 import cv2
 
+__all__ = ["STRIP_PIXELS", "run_strips", "strip_rows", "workers"]
+
 #: Pixels per strip that keep a few float32 planes of it in the caches (:func:`strip_rows`).
 STRIP_PIXELS = 1 << 17
 

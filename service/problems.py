@@ -21,6 +21,7 @@ wrong ``Content-Type``, unknown mesh format              415      ``unsupported-
 :class:`gbuffer.errors.OptionError` (map, camera given)  422      ``invalid-request``
 :class:`gbuffer.errors.MissingBufferError`               422      ``missing-buffer``
 :class:`gbuffer.errors.MissingCameraError`               422      ``missing-camera``
+a newer preview of the same frame was asked for         409      ``superseded``
 queue full                                               429      ``busy`` (``Retry-After``)
 the service cannot work (no worker can start)            503      ``unavailable``
 the worker running the job died (signal, out of memory)  503      ``worker-lost``
@@ -55,6 +56,7 @@ KINDS: dict[str, tuple[int, str]] = {
     "not-found": (404, "Not Found"),
     "method-not-allowed": (405, "Method Not Allowed"),
     "request-timeout": (408, "Request Timeout"),
+    "superseded": (409, "Superseded"),
     "limit": (413, "Content Too Large"),
     "unsupported-media-type": (415, "Unsupported Media Type"),
     "invalid-request": (422, "Invalid Request"),

@@ -9,6 +9,8 @@ importing this module registers the built-in ones.
 
 from __future__ import annotations
 
+from typing import Any
+
 import service.operators  # noqa: F401  (registers the built-in operators)
 from service.errors import PipelineError
 from service.operators.base import (
@@ -33,9 +35,25 @@ __all__ = [
     "get",
     "operators",
     "register",
+    "runnable",
 ]
 
 
 def operators() -> dict[str, Operator]:
     """Every registered operator, by name, in registration order."""
     return REGISTRY
+
+
+def runnable(info: dict[str, Any]) -> dict[str, Any]:
+    """Which operators can run on the inspected frame, and what the others lack."""
+    have = set(info["buffers"])
+    if "position" in have:
+        have.add("depth")
+    blocked = {}
+    for op in operators().values():
+        lacks = [b for b in op.needs if b not in have]
+        if op.needs_camera and info["camera"] is None:
+            lacks.append("camera")
+        if lacks:
+            blocked[op.name] = lacks
+    return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}

@@ -24,6 +24,11 @@ variable                       default        meaning
 ``DEPICT_QUEUE``               ``8``          jobs waiting for a worker; one more answers 429
 ``DEPICT_TIMEOUT_S``           ``120``        time limit of a job, queue wait included (504
                                               after)
+``DEPICT_VIEWER_TTL_S``        ``3600``       how long the web viewer keeps an uploaded frame after
+                                              its last use, seconds
+``DEPICT_VIEWER_MAX_MB``       ``2048``       the viewer's frames on disk, all together, MiB (the
+                                              least recently used go first)
+``DEPICT_VIEWER_MAX_FRAMES``   ``32``         most frames the viewer keeps
 ``DEPICT_LOG_LEVEL``           ``info``       ``debug``, ``info``, ``warning`` or ``error``
 ``DEPICT_EXR_THREADS``         cores          OpenEXR's (de)compression threads (gbuffer.exr)
 =============================  =============  ======================================================
@@ -70,6 +75,11 @@ class Settings(BaseSettings):
     timeout_s: float = Field(
         default=120.0, gt=0, description="time limit of a job, queue wait included"
     )
+    viewer_ttl_s: float = Field(
+        default=3600.0, gt=0, description="seconds the viewer keeps a frame after its last use"
+    )
+    viewer_max_mb: float = Field(default=2048.0, gt=0, description="the viewer's frames, MiB")
+    viewer_max_frames: int = Field(default=32, ge=1, description="most frames the viewer keeps")
     log_level: Literal["debug", "info", "warning", "error"] = Field(
         default="info", description="log level of the JSON logs"
     )

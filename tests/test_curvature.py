@@ -628,7 +628,7 @@ def test_bad_shapes_and_mapping_parameters_raise() -> None:
 
 
 def test_row_strips_give_the_same_result_as_one_pass(monkeypatch: pytest.MonkeyPatch) -> None:
-    import ops.curvature as oc
+    import ops.curvature._common as oc
 
     s = analytic.two_spheres(300, width=260)
     for scale in (0.003, 0.012):

@@ -4,19 +4,21 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 
 from ops import shading
 from ops.filtering import multiscale_normals, normal_pyramid
 from ops.light_alignment import (
-    _guide_soa,
-    _Work,
     align_components,
     align_light,
     align_lights,
+    align_scale,
+    rotate_towards,
     w_gamma,
 )
+from ops.light_alignment._stages import _guide_soa, _Work
 from tests import analytic
 from tests.test_filtering import bumpy_dome
 
@@ -32,19 +34,6 @@ def lambert(n: np.ndarray, light: np.ndarray) -> np.ndarray:
 
 def constant_fields(vectors: list[np.ndarray], shape: tuple[int, int] = (4, 5)) -> list[np.ndarray]:
     return [np.broadcast_to(unit(tuple(v)), (*shape, 3)).copy() for v in vectors]
-
-
-def rotate_towards(light: np.ndarray, g: np.ndarray, theta: float) -> np.ndarray:
-    """Reference rotation of ``light`` towards ``g`` by ``theta`` (float64 Rodrigues)."""
-    light = light.astype(np.float64)
-    g = g.astype(np.float64)
-    axis = np.cross(light, g)
-    axis /= np.linalg.norm(axis)
-    return (
-        light * math.cos(theta)
-        + np.cross(axis, light) * math.sin(theta)
-        + axis * (axis @ light) * (1 - math.cos(theta))
-    )
 
 
 def angle(a: np.ndarray, b: np.ndarray) -> float:
@@ -137,6 +126,41 @@ def test_scales_apply_from_coarse_to_fine() -> None:
     coarse = align_light(light, [f[1], f[2]], [0.5])
     chained = align_components(coarse, [f[0], f[1]], {"diffuse": [0.7]})["diffuse"]
     np.testing.assert_allclose(both, chained, atol=1e-5)
+
+
+def test_rotate_towards_keeps_length_and_reaches_the_guide() -> None:
+    rng = np.random.default_rng(7)
+    ell = rng.normal(size=(500, 3))
+    ell /= np.linalg.norm(ell, axis=1, keepdims=True)
+    g = rng.normal(size=(500, 3))
+    g /= np.linalg.norm(g, axis=1, keepdims=True)
+    omega = np.arccos(np.clip(np.sum(ell * g, axis=1), -1.0, 1.0))
+    onto = rotate_towards(ell, g, omega)
+    np.testing.assert_allclose(np.linalg.norm(onto, axis=1), 1.0, atol=1e-6)
+    np.testing.assert_allclose(onto, g, atol=1e-5)  # θ = Ω: onto g
+    half = rotate_towards(ell, g, omega / 2)  # halfway: the bisector
+    np.testing.assert_allclose(np.sum(half * ell, axis=1), np.cos(omega / 2), atol=1e-5)
+    np.testing.assert_allclose(np.sum(half * g, axis=1), np.cos(omega / 2), atol=1e-5)
+
+
+def test_the_fused_kernel_is_eq1_as_written() -> None:
+    """One scale of the compiled Eq. 1 (align_light on two fields) against
+    :func:`ops.light_alignment.align_scale`, the paper's formula in float64 NumPy, on every
+    pixel of a bumpy dome (fine normals over their smoothed base) for lights all around."""
+    s = bumpy_dome(96, 128)
+    fine = s.normal
+    base = np.asarray(shading.normalize(cv2.GaussianBlur(fine, (0, 0), 6.0)), np.float32)
+    cov = s.mask & (np.linalg.norm(base, axis=2) > 0.5)
+    for light in ((-0.4, 0.6, 0.7), (0.8, 0.1, 0.6), (0.0, -0.3, 0.95)):
+        ell = unit(light)
+        for sigma, gamma in ((1.0, 3.0), (0.4, 0.0)):
+            fused = align_light(ell, [fine, base], [sigma], gamma=gamma, mask=cov)
+            written = align_scale(np.broadcast_to(ell, fine.shape), fine, base, sigma, gamma)
+            err = np.linalg.norm(fused - written, axis=2)[cov]
+            # float32 rounding of nearly parallel fields moves a few pixels (module docstring)
+            assert np.median(err) < 1e-6 and np.percentile(err, 99) < 1e-4 and err.max() < 5e-3
+            turned = np.linalg.norm(written - ell, axis=2)[cov]
+            assert turned.max() > 0.1  # the case turns the light
 
 
 # -- on images ------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ import pytest
 
 from ops import radiance_scaling as rs
 from ops.curvature import Curvature, anisotropic, isotropic, principal_curvatures
-from ops.scaling import sigma
+from ops.radiance_scaling import sigma
 from ops.shading import Light
 from ops.shading import ashikhmin_shirley as as_brdf
 from tests import analytic

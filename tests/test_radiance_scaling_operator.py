@@ -18,8 +18,8 @@ from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
-from ops.masked import masked_gaussian
-from ops.scaling import reflectance_delta, sigma
+from ops.pyramid.masked import masked_gaussian
+from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
 from service import pipeline
 from service.registry import Context, PipelineError

@@ -94,6 +94,20 @@ def test_plane_is_the_centre() -> None:
     assert np.abs(interior_s("plane", curvedness_norm=1.0)).max() < 1e-4
 
 
+@pytest.mark.parametrize("shape", ["sphere", "saddle", "trough"])
+def test_fused_descriptor_is_the_papers_s_equals_d_times_l(shape: str) -> None:
+    """The compiled descriptor gives :func:`ops.relief.relief_vector` (S = D · L as written)
+    from the same curvatures, below the rim and on it."""
+    curv = curv_of(SHAPES[shape](), scale=0.004)  # its working grid is the image's
+    rims = []
+    for norm in (0.1, 1.0, 5.0):
+        got = R.descriptor(curv, curvedness_norm=norm).s
+        want = R.relief_vector(curv.k1, curv.k2, norm, curv.weight)
+        np.testing.assert_allclose(got, want, atol=2e-7)
+        rims.append(float(np.hypot(want[..., 0], want[..., 1]).max()))
+    assert rims[0] > 0.999 > rims[-1] > 0.0  # clamped to the rim, and below it
+
+
 def test_pinned_norm_scales_the_length_and_auto_reports_it() -> None:
     scene = SHAPES["sphere"]()
     curv = curv_of(scene)

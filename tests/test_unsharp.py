@@ -22,6 +22,7 @@ from ops.unsharp import (
     depth_unsharp_masking,
     plain_unsharp_mask,
     surface_blur,
+    unsharp_lightness,
     unsharp_masking,
 )
 
@@ -428,6 +429,21 @@ def test_orthographic_pixel_size_and_slanted_plane() -> None:
     c = _lightness(out) - _lightness(beauty)
     assert c[:, w // 2 - 1].max() < -2.0 and c[:, w // 2].min() > 2.0
     assert np.abs(c[:, :20]).max() < 0.1
+
+
+def test_fused_unsharp_masking_is_eq1_on_the_surface_blur() -> None:
+    """The strip-fused operator gives the lightness of Eq. 1 written plainly
+    (:func:`unsharp_lightness`) with L_σ from :func:`surface_blur` of the same surfaces."""
+    h, w = 96, 160
+    depth, normal, mask, ps = _plane(h, w, 3.0)
+    beauty = _grey(np.where(np.arange(w) < w // 2, 0.1, 0.4).astype(np.float32)[None, :] + 0 * ps)
+    kw = dict(sigma_scene=0.05, pixel_size=ps)
+    out = unsharp_masking(beauty, depth, normal, mask, amount=1.5, adaptive=False, white=1.0, **kw)
+    lum = _lightness(beauty).astype(np.float32)
+    smooth = surface_blur(lum, depth, normal, mask, **kw)
+    expect = unsharp_lightness(lum, smooth, 1.5)
+    assert np.abs(lum - expect).max() > 5.0  # the case has contrast to add
+    np.testing.assert_allclose(_lightness(out), expect, atol=1e-3)
 
 
 def test_adaptive_gain_raises_enhancement_on_texture() -> None:

@@ -12,22 +12,7 @@ from gbuffer.exr import read_layout
 from gbuffer.io import describe_layout, inspect
 from service.cli.args import printable
 from service.cli.common import read_request
-from service.registry import operators
-
-
-def _runnable(info: dict[str, Any]) -> dict[str, Any]:
-    """Which operators can run on the inspected frame, and what the others lack."""
-    have = set(info["buffers"])
-    if "position" in have:
-        have.add("depth")
-    blocked = {}
-    for op in operators().values():
-        lacks = [b for b in op.needs if b not in have]
-        if op.needs_camera and info["camera"] is None:
-            lacks.append("camera")
-        if lacks:
-            blocked[op.name] = lacks
-    return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}
+from service.registry import runnable
 
 
 def _camera_lines(info: dict[str, Any]) -> list[str]:
@@ -90,7 +75,7 @@ def cmd_inspect(args: argparse.Namespace) -> int:
         raise
     except FrameError as exc:  # the pixels cannot be decoded: describe the header alone
         info = _describe_header(args.file, exc)
-    info["operators"] = _runnable(info)
+    info["operators"] = runnable(info)
     if args.json:
         print(json.dumps(info, indent=2))
     else:

@@ -13,6 +13,8 @@ Routes (the contract is ``openapi/openapi.json``, regenerated with ``python -m s
 ``POST /v1/compare``        multipart ``file`` (EXR or mesh) + ``options`` -> JSON comparison
 ``POST /v1/relief/pick``    multipart ``file`` + ``x``, ``y`` -> the Apparent Relief descriptor
 ``GET /v1/operators``       every operator with its parameter JSON schema
+``/v1/frames``, ``/ui/``    the web viewer: frames kept for a session, previews, the page
+                            (:mod:`service.viewer`)
 ``GET /healthz``            alive (never needs the key, answers while the workers are saturated)
 ``GET /readyz``             ready: the worker pool is up and an OSMesa context could be created
 ``GET /metrics``            Prometheus text format (key required unless DEPICT_METRICS_PUBLIC)

@@ -13,6 +13,7 @@ from service.http.middleware import middleware
 from service.http.middleware.auth import DOCS_ASSETS
 from service.http.routes import analysis, frames, health, operators
 from service.settings import Settings
+from service.viewer import routes as viewer
 
 API_VERSION = "1"
 
@@ -39,5 +40,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(operators.router)
     app.include_router(health.router)
     app.include_router(analysis.router)
+    app.include_router(viewer.router)
+    viewer.mount_static(app)
     app.openapi = lambda: openapi.document(app)  # type: ignore[method-assign]
     return app

@@ -24,25 +24,33 @@ from service.http.pool import JobPool
 from service.metrics import Metrics
 from service.problems import Problem
 from service.settings import Settings
+from service.viewer.store import FrameStore
 
 _NOT_RUNNING = "the server is starting or stopping; retry shortly"
 
 
 @dataclass
 class Services:
-    """One app's settings, metrics, worker pool and temporary root (the last two while the app
-    runs)."""
+    """One app's settings, metrics, worker pool, temporary root and the viewer's frames (the
+    last three while the app runs)."""
 
     settings: Settings
     metrics: Metrics = field(default_factory=Metrics)
     pool: JobPool | None = None
     root: Path | None = None
+    frames: FrameStore | None = None
 
     def running_pool(self) -> JobPool:
         """The worker pool; 503 while the app is not running."""
         if self.pool is None:
             raise Problem("unavailable", _NOT_RUNNING)
         return self.pool
+
+    def frame_store(self) -> FrameStore:
+        """The viewer's frames; 503 while the app is not running."""
+        if self.frames is None:
+            raise Problem("unavailable", _NOT_RUNNING)
+        return self.frames
 
     async def run(self, kind: str, fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
         """``fn(*args)`` on a worker (:meth:`JobPool.submit`): its dict, or a problem."""
@@ -56,9 +64,15 @@ class Services:
         self.root = Path(tempfile.mkdtemp(prefix="depict-"))
         self.pool = JobPool(s.workers, s.queue, s.timeout_s, self.metrics, s.log_level)
         self.pool.start()
+        mb = 1024 * 1024
+        frames_root = self.root / "frames"
+        self.frames = FrameStore(
+            frames_root, s.viewer_ttl_s, int(s.viewer_max_mb * mb), s.viewer_max_frames
+        )
         try:
             yield
         finally:
+            self.frames = None
             await self.pool.shutdown()
             shutil.rmtree(self.root, ignore_errors=True)
 

@@ -6,8 +6,8 @@ proves the worker can render. :func:`run_job` runs around each job: job function
 dict, and errors come back as ``{"ok": False, "kind": KIND, "detail": TEXT}``
 (:mod:`service.problems` kinds), so no exception has to survive pickling.
 
-The jobs are :func:`enhance_job` and :func:`render_job` here, and the analysis jobs of
-:mod:`service.jobs`, the same functions the CLI runs.
+The jobs are :func:`enhance_job` and :func:`render_job` here, the analysis jobs of
+:mod:`service.jobs` (the same functions the CLI runs) and the viewer's (:mod:`service.viewer.work`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import service.jobs  # noqa: F401  (the analysis jobs' modules, imported before the first job)
+# the jobs' modules, imported before the first job: the analysis jobs and the viewer's
+import service.jobs
+import service.viewer.work  # noqa: F401
 from service import allocator
 from service.enhance import ReadRequest, WriteRequest, enhance
 from service.pipeline import Pipeline
@@ -65,6 +67,11 @@ def warm_worker() -> dict[str, Any]:
         render(trimesh.creation.icosahedron(), 8, 8)
     except Exception as exc:
         return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
+    finally:
+        # What exists now (modules, compiled kernels) lives as long as the worker: kept out of
+        # the collection after each job (:func:`_trim_memory`), which would walk it every time
+        # (about 200 ms a job, as long as a preview's operators).
+        gc.freeze()
     return {"osmesa": True}
 
 

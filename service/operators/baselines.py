@@ -5,10 +5,13 @@ writes the beauty (× the frame's albedo, or a constant)."""
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import numpy as np
 from pydantic import Field, field_validator
 
 from gbuffer.frame import Frame
+from ops import checks
 from ops.baselines import ES_SCALES, exaggerated_shading, light_warping
 from ops.curvature import isotropic
 from ops.shading import parse_light
@@ -22,7 +25,7 @@ class OneLightParams(Params):
 
     light: str = Field("-0.4,0.6,0.7", description="directional light, camera space (towards it)")
     albedo: float | None = Field(
-        None, ge=0.0, le=10.0, description="constant albedo (default: the frame's, else 0.8)"
+        None, **checks.WEIGHT.bounds, description="constant albedo (default: the frame's, else 0.8)"
     )
 
     @field_validator("light")
@@ -48,15 +51,21 @@ def _shade(frame: Frame, p: OneLightParams, shading: np.ndarray) -> None:
 class ExaggeratedParams(OneLightParams):
     """Exaggerated Shading (RBD06)."""
 
-    scales: list[float] = Field(
+    scales: list[Annotated[float, Field(**checks.ES_SCALE.bounds)]] = Field(
         default_factory=lambda: list(ES_SCALES),
         min_length=1,
         max_length=12,
         description="smoothing σ of each scale, relative to the image height",
     )
-    contrast: float = Field(8.0, gt=0.0, le=100.0, description="exaggeration a of clamp(a n·ℓ)")
-    weight_exponent: float = Field(-0.5, ge=-4.0, le=4.0, description="k_i ∝ σ_i^exponent")
-    ambient: float = Field(0.5, ge=0.0, le=1.0, description="ambient of the half-Lambertian")
+    contrast: float = Field(
+        8.0, **checks.CONTRAST.bounds, description="exaggeration a of clamp(a n·ℓ)"
+    )
+    weight_exponent: float = Field(
+        -0.5, **checks.WEIGHT_EXPONENT.bounds, description="k_i ∝ σ_i^exponent"
+    )
+    ambient: float = Field(
+        0.5, **checks.FRACTION.bounds, description="ambient of the half-Lambertian"
+    )
 
 
 @register(
@@ -85,7 +94,9 @@ def apply_exaggerated_shading(frame: Frame, p: ExaggeratedParams, ctx: Context) 
 class WarpingParams(OneLightParams, CurvatureParams):
     """Light Warping approximation for a directional light."""
 
-    strength: float = Field(1.0, ge=0.0, le=10.0, description="how far curvature warps the light")
+    strength: float = Field(
+        1.0, **checks.WEIGHT.bounds, description="how far curvature warps the light"
+    )
 
 
 @register(

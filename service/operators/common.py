@@ -11,15 +11,18 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from gbuffer.frame import Frame
+from ops import checks
+from ops.color import luminance
 from ops.lighting import lighting_gain
-from ops.scaling import luminance
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
 from service.images import load_image
 from service.operators.base import Context, Params
 
-Fraction = Annotated[float, Field(gt=0.0, lt=1.0)]
-Magnitude = Annotated[float, Field(ge=0.0, le=100.0)]
+#: α of Radiance Scaling's Eq. 2.
+Alpha = Annotated[float, Field(**checks.ALPHA.bounds)]
+#: γ of Radiance Scaling's Eq. 2.
+Gamma = Annotated[float, Field(**checks.GAMMA.bounds)]
 #: ``"auto"`` (measured on the frame, pinnable for a sequence) or a number.
 Auto = Literal["auto"]
 

@@ -18,6 +18,7 @@ from pydantic import Field
 
 from analysis.score import CONGRUENCE, score_frame
 from gbuffer.frame import Frame
+from ops import checks
 from service.masks import MASK_FIELDS
 from service.operators.base import Context, Params, register
 
@@ -29,20 +30,17 @@ class CongruenceParams(Params):
 
     gradient_scale: float = Field(
         _DEFAULTS["gradient_scale"],
-        gt=0.0,
-        le=0.1,
+        **checks.GRADIENT_SCALE.bounds,
         description="σ of the gradients, relative to the image height",
     )
     integration_scale: float = Field(
         _DEFAULTS["integration_scale"],
-        gt=0.0,
-        le=0.25,
+        **checks.INTEGRATION_SCALE.bounds,
         description="σ integrating the structure tensors, relative to the image height",
     )
     percentile: float = Field(
         _DEFAULTS["percentile"],
-        gt=0.0,
-        le=100.0,
+        **checks.PERCENTILE.bounds,
         description="percentile each strength is divided by (both e in [0, 1])",
     )
     shape: Literal["normals", "depth"] = Field(
@@ -52,11 +50,11 @@ class CongruenceParams(Params):
         "which gives receding floors most of the weight)",
     )
     depth_jump: float = Field(
-        0.05, gt=0.0, le=100.0, description="largest log-depth step still one surface"
+        0.05, **checks.DEPTH_JUMP.bounds, description="largest log-depth step still one surface"
     )
     shading_norm: float | None = Field(
         None,
-        gt=0.0,
+        **checks.SHADING_NORM.bounds,
         description="shading strength mapped to 1 (default: the image's own percentile); pin "
         "it to compare frames or renderings on one scale",
     )

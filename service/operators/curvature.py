@@ -6,6 +6,7 @@ from __future__ import annotations
 from pydantic import Field
 
 from gbuffer.frame import Frame
+from ops import checks
 from ops import curvature as curv_ops
 from service.operators.base import Context, Params, register
 
@@ -18,26 +19,22 @@ class CurvatureParams(Params):
 
     scale: float = Field(
         curv_ops.DEFAULT_SCALE,
-        gt=0.0,
-        le=0.1,
+        **checks.CURVATURE_SCALE.bounds,
         description="derivative scale, relative to the image height (Gaussian σ, at least a pixel)",
     )
     gain: float = Field(
         curv_ops.DEFAULT_GAIN,
-        gt=0.0,
-        le=100.0,
+        **checks.CURVATURE_GAIN.bounds,
         description="curvature gain s in κ = tanh(s·(κ1+κ2)), curvature per image height",
     )
     foreshortening: float = Field(
         curv_ops.DEFAULT_FORESHORTENING,
-        ge=0.0,
-        le=1.0,
+        **checks.FRACTION.bounds,
         description="foreshortening f in g = −(n_x, n_y)/n_z^f (0: none, 1: full)",
     )
     depth_jump: float = Field(
         curv_ops.DEFAULT_DEPTH_JUMP,
-        gt=0.0,
-        le=10.0,
+        **checks.CURVATURE_DEPTH_JUMP.bounds,
         description="relative depth jump treated as a discontinuity (no curvature across it)",
     )
 

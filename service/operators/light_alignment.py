@@ -27,14 +27,14 @@ The aligned directions are written as ``lla_light.<component>.X/Y/Z`` (the first
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, ClassVar, Literal, cast
+from typing import Annotated, Any, ClassVar, Literal, cast
 
 import cv2
 import numpy as np
 from pydantic import Field, model_validator
 
 from gbuffer.frame import LOBES, Frame
-from ops import filtering
+from ops import checks, filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
 from service.operators.base import Context, register
@@ -42,7 +42,7 @@ from service.operators.common import LightsParams, channels, frame_albedo, kept_
 
 Component = Literal["diffuse", "specular", "transmission"]
 COMPONENTS: tuple[Component, ...] = ("diffuse", "specular", "transmission")
-Sigmas = list[float]
+Sigmas = list[Annotated[float, Field(**checks.LLA_SIGMA.bounds)]]
 #: σ_1 … σ_5 of the paper's "fine-tuned" 6-scale result (LLA Fig. 7), finest first.
 PAPER_SIGMAS = [0.5, 0.3, 0.1, 0.2, 0.2]
 #: The default: less of the finest scale, whose filtering is a few pixels wide and shows the
@@ -87,23 +87,23 @@ class LightAlignmentParams(LightsParams):
         description="components whose light is aligned (others keep the original light; "
         "transmission only changes frames with a transmission lobe)",
     )
-    gamma: float = Field(DEFAULT_GAMMA, ge=0.0, le=20.0, description="γ of W_γ (Eq. 1)")
+    gamma: float = Field(DEFAULT_GAMMA, **checks.LLA_GAMMA.bounds, description="γ of W_γ (Eq. 1)")
     base: float = Field(
         filtering.DEFAULT_BASE,
-        gt=0.0,
-        le=0.1,
+        **checks.LLA_BASE.bounds,
         description="spatial σ of the first filtering, relative to the image height (§5)",
     )
     factor: float = Field(
-        filtering.DEFAULT_FACTOR, ge=1.0, le=4.0, description="spatial σ growth per scale (§5)"
+        filtering.DEFAULT_FACTOR,
+        **checks.FACTOR.bounds,
+        description="spatial σ growth per scale (§5)",
     )
     depth_sigma: float = Field(
         filtering.DEFAULT_DEPTH_SIGMA,
-        gt=0.0,
-        le=10.0,
+        **checks.LLA_DEPTH_SIGMA.bounds,
         description="range σ of the bilateral filter on log depth (relative depth)",
     )
-    ior: float = Field(1.5, gt=0.0, le=10.0, description="index of refraction (transmission)")
+    ior: float = Field(1.5, **checks.IOR.bounds, description="index of refraction (transmission)")
     form: Literal["auto", "relight", "ratio"] = Field(
         "auto",
         description="relight: deferred shading with the aligned lights; ratio: scale the "
@@ -113,32 +113,34 @@ class LightAlignmentParams(LightsParams):
     specular: Literal["none", "blinn_phong", "ggx"] = Field(
         "blinn_phong", description="specular model"
     )
-    shininess: float = Field(32.0, gt=0.0, le=10000.0, description="Blinn-Phong exponent")
+    shininess: float = Field(32.0, **checks.SHININESS.bounds, description="Blinn-Phong exponent")
     specular_color: float = Field(
-        0.3, ge=0.0, le=10.0, description="k_s of Blinn-Phong (GGX: white, Fresnel gives f0)"
+        0.3, **checks.WEIGHT.bounds, description="k_s of Blinn-Phong (GGX: white, Fresnel gives f0)"
     )
     roughness: float | Literal["frame"] = Field(
         0.4, description="GGX roughness in (0, 1], or 'frame' for the frame's roughness pass"
     )
-    f0: float = Field(0.04, ge=0.0, le=1.0, description="GGX reflectance at normal incidence")
-    ambient: float = Field(0.1, ge=0.0, le=10.0, description="ambient light (× AO when present)")
+    f0: float = Field(
+        0.04, **checks.FRACTION.bounds, description="GGX reflectance at normal incidence"
+    )
+    ambient: float = Field(
+        0.1, **checks.AMBIENT.bounds, description="ambient light (× AO when present)"
+    )
     albedo: float | None = Field(
-        None, ge=0.0, le=10.0, description="constant albedo (default: the frame's, else 0.8)"
+        None, **checks.WEIGHT.bounds, description="constant albedo (default: the frame's, else 0.8)"
     )
     transmission_weight: float = Field(
-        0.0, ge=0.0, le=10.0, description="relight: weight of a transmission lobe (0: none)"
+        0.0, **checks.WEIGHT.bounds, description="relight: weight of a transmission lobe (0: none)"
     )
     ratio_floor: float = Field(
         0.05,
-        gt=0.0,
-        le=10.0,
+        **checks.RATIO_FLOOR.bounds,
         description="ratio form: ε in (shade_aligned + ε)/(shade_original + ε), relative to "
         "the lights' irradiance",
     )
     ratio_max: float = Field(
         2.0,
-        ge=1.0,
-        le=1000.0,
+        **checks.RATIO_MAX.bounds,
         description="ratio form: largest factor (more brightens grazing rims at silhouettes)",
     )
     keep_lighting: bool = Field(
@@ -149,8 +151,7 @@ class LightAlignmentParams(LightsParams):
     )
     lighting_scale: float = Field(
         0.04,
-        gt=0.0,
-        le=0.5,
+        **checks.LIGHTING_SCALE.bounds,
         description="σ of the lighting kept by `keep_lighting`, relative to the image height",
     )
 
@@ -160,12 +161,10 @@ class LightAlignmentParams(LightsParams):
             values = getattr(self, name)
             if values is None:
                 continue
-            if any(not 0.0 <= v <= 1.0 for v in values):
-                raise ValueError(f"{name} must be in [0, 1], got {values}")
             if len(values) != len(self.sigmas):
                 raise ValueError(f"{name} must have {len(self.sigmas)} values, like sigmas")
-        if isinstance(self.roughness, float) and not 0.0 < self.roughness <= 1.0:
-            raise ValueError(f"roughness must be in (0, 1] or 'frame', got {self.roughness}")
+        if isinstance(self.roughness, float):
+            checks.ROUGHNESS.check(self.roughness, "roughness")
         return self
 
     def sigmas_of(self, component: str) -> list[float]:

@@ -9,16 +9,18 @@ import numpy as np
 from pydantic import Field, field_validator
 
 from gbuffer.frame import LOBES, Frame
+from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
-from ops.bilinear import Upsampled
-from ops.masked import masked_gaussian
-from ops.scaling import luminance, scale_lobes, white_level
+from ops.color import luminance
+from ops.pyramid.masked import masked_gaussian
+from ops.pyramid.upsample import Upsampled
+from ops.radiance_scaling import scale_lobes, white_level
 from service.operators.base import Context, register
 from service.operators.common import (
-    Fraction,
+    Alpha,
+    Gamma,
     LightsParams,
-    Magnitude,
     frame_albedo,
     kept_lighting_gain,
     statistic,
@@ -62,31 +64,34 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
         "(§5.3.1); mirror / refraction: an environment map (§5.3.2); auto: lobes when the "
         "frame has them, else beauty",
     )
-    alpha: Fraction = Field(0.5, description="scaling-invariant point α in (0, 1) (Eq. 2)")
+    alpha: Alpha = Field(0.5, description="scaling-invariant point α in (0, 1) (Eq. 2)")
     preset: Literal["default", "paper"] = Field(
         "default",
         description="default: enhance shape and keep the lighting (δ̄ from the light smoothed "
         "at `light_scale`, `keep_lighting`, γ = 1); paper: Eq. 2 and 4 as printed (γ = 3, δ̄ "
         "per pixel, no lighting kept); parameters given with it override it",
     )
-    gamma: Magnitude = Field(1.0, description="scaling magnitude γ ≥ 0 for every lobe (Eq. 2)")
-    gamma_ambient: Magnitude | None = Field(None, description="γ of the ambient lobe")
-    gamma_diffuse: Magnitude | None = Field(None, description="γ of the diffuse lobe")
-    gamma_specular: Magnitude | None = Field(None, description="γ of the specular lobe")
-    gamma_transmission: Magnitude | None = Field(None, description="γ of the transmission lobe")
+    gamma: Gamma = Field(1.0, description="scaling magnitude γ ≥ 0 for every lobe (Eq. 2)")
+    gamma_ambient: Gamma | None = Field(None, description="γ of the ambient lobe")
+    gamma_diffuse: Gamma | None = Field(None, description="γ of the diffuse lobe")
+    gamma_specular: Gamma | None = Field(None, description="γ of the specular lobe")
+    gamma_transmission: Gamma | None = Field(None, description="γ of the transmission lobe")
     anisotropy: float = Field(
-        0.0, ge=-1.0, le=1.0, description="λ ∈ [−1, 1] of the anisotropic mapping κ(ℓ) (§4)"
+        0.0,
+        **checks.ANISOTROPY.bounds,
+        description="λ ∈ [−1, 1] of the anisotropic mapping κ(ℓ) (§4)",
     )
     white: float | Literal["auto"] = Field(
         "auto",
         description="white level of δ̄ (lobes, beauty): a number pins it for sequences; auto = "
         "the `white_percentile` of the covered pixels",
     )
-    white_percentile: float = Field(99.0, gt=50.0, le=100.0, description="percentile of auto")
+    white_percentile: float = Field(
+        99.0, **checks.PERCENTILE.bounds, description="percentile of auto"
+    )
     light_scale: float | None = Field(
         None,
-        ge=0.0,
-        le=0.1,
+        **checks.CURVATURE_SCALE.bounds,
         description="lobes, beauty: δ̄ from the light averaged over this σ, relative to the image "
         "height (at least a pixel), so Monte-Carlo noise does not drive σ (default: the "
         "curvature `scale`; 0: each pixel's own light, as the paper)",
@@ -99,20 +104,21 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
     )
     lighting_scale: float = Field(
         0.04,
-        gt=0.0,
-        le=0.5,
+        **checks.LIGHTING_SCALE.bounds,
         description="σ of the lighting kept by `keep_lighting`, relative to the image height",
     )
     lobes: list[str] | None = Field(
         None, description="renderer lobes to scale (default: every lobe the frame has)"
     )
-    ambient: float = Field(0.1, ge=0.0, le=10.0, description="k_a of Phong")
-    specular: float = Field(0.3, ge=0.0, le=10.0, description="k_s of Phong")
-    shininess: float = Field(32.0, gt=0.0, le=10000.0, description="Phong exponent η")
-    zeta: float = Field(0.5, ge=0.0, le=1.0, description="sub-Lambertian exponent ζ (§5.1)")
-    toon_levels: int = Field(4, ge=2, le=64, description="bands of toon shading")
-    as_exponent: float = Field(100.0, gt=0.0, le=100000.0, description="Ashikhmin-Shirley n")
-    ior: float = Field(1.5, gt=0.0, le=5.0, description="refraction index (refraction)")
+    ambient: float = Field(0.1, **checks.AMBIENT.bounds, description="k_a of Phong")
+    specular: float = Field(0.3, **checks.WEIGHT.bounds, description="k_s of Phong")
+    shininess: float = Field(32.0, **checks.SHININESS.bounds, description="Phong exponent η")
+    zeta: float = Field(
+        0.5, **checks.FRACTION.bounds, description="sub-Lambertian exponent ζ (§5.1)"
+    )
+    toon_levels: int = Field(4, **checks.TOON_LEVELS.bounds, description="bands of toon shading")
+    as_exponent: float = Field(100.0, **checks.EXPONENT.bounds, description="Ashikhmin-Shirley n")
+    ior: float = Field(1.5, **checks.IOR.bounds, description="refraction index (refraction)")
     matcap: str | None = Field(None, description="lit sphere image (default: a clay sphere)")
     environment: str | None = Field(
         None, description="equirectangular environment (EXR/HDR/PNG; default: a simple sky)"

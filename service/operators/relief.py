@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from ops import checks
 from ops import relief as rl
 from ops.parallel import run_strips
 from ops.shading import lambert, light_vectors, parse_light
@@ -50,8 +51,7 @@ class ReliefParams(CurvatureParams):
 
     scale: float = Field(
         rl.DEFAULT_SCALE,
-        gt=0.0,
-        le=0.1,
+        **checks.CURVATURE_SCALE.bounds,
         description="curvature scale relative to the image height: the level of detail",
     )
     arm: str = Field(
@@ -64,12 +64,14 @@ class ReliefParams(CurvatureParams):
         description="curvedness mapped to |S| = 1, per image height (auto: the `percentile` of "
         "the surface; pin it for sequences)",
     )
-    percentile: float = Field(rl.DEFAULT_PERCENTILE, gt=0.0, le=100.0, description="of auto")
+    percentile: float = Field(
+        rl.DEFAULT_PERCENTILE, **checks.PERCENTILE.bounds, description="of auto"
+    )
     style: Style = Field("cel", description="cel, counter, xtoon, mask or descriptor")
     light: str = Field(
         "-0.4,0.6,0.7", description="counter / xtoon: the light giving n·ℓ (camera space)"
     )
-    threshold: float = Field(0.5, ge=0.0, le=1.0, description="counter shading threshold")
+    threshold: float = Field(0.5, **checks.FRACTION.bounds, description="counter shading threshold")
     toon: str | None = Field(
         None, description="xtoon: a 2-D toon texture image (default: a warm 3-tone ramp)"
     )
@@ -89,8 +91,8 @@ class ReliefParams(CurvatureParams):
             raise ValueError(
                 'style \'mask\' needs `effect`: a step such as {"op": "radiance_scaling"}'
             )
-        if isinstance(self.curvedness_norm, float) and not 0.0 < self.curvedness_norm <= 1e6:
-            raise ValueError("curvedness_norm must be in (0, 1e6] or 'auto'")
+        if isinstance(self.curvedness_norm, float):
+            checks.CURVEDNESS_NORM.check(self.curvedness_norm, "curvedness_norm")
         return self
 
 

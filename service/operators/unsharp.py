@@ -23,16 +23,15 @@ Signals:
 
 from __future__ import annotations
 
-import math
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
 
 from gbuffer.frame import Frame
-from ops import color
+from ops import checks, color
 from ops import curvature as curv_ops
-from ops.scaling import luminance
+from ops.color import luminance
 from ops.unsharp import depth_unsharp_masking, surface_blur, unsharp_masking
 from service.errors import PipelineError
 from service.masks import plane
@@ -68,18 +67,22 @@ class UnsharpParams(Params):
         "above `fine_scale` (noise and flat surfaces kept as rendered); paper: §4 as printed, "
         "every pixel's own lightness, everywhere; parameters given with it override it",
     )
-    amount: float = Field(1.0, ge=-10.0, le=10.0, description="λ (users preferred 1.7-2, §6)")
+    amount: float = Field(
+        1.0, **checks.UNSHARP_AMOUNT.bounds, description="λ (users preferred 1.7-2, §6)"
+    )
     sigma: float | Auto = Field(
         "auto",
         description="σ of the smooth signal in scene units (> 0), or auto: `sigma_fraction` of "
         "the image height at the surface's median depth",
     )
     sigma_fraction: float = Field(
-        0.04, gt=0.0, le=0.5, description="auto σ, relative to the image height"
+        0.04, **checks.RELATIVE_SIGMA.bounds, description="auto σ, relative to the image height"
     )
     adaptive: bool = Field(True, description="λ_adapt = λ √(1 + Var(S)) (Eq. 1)")
     variance_sigma: float | None = Field(
-        None, gt=0.0, description="neighbourhood of Var(S), scene units (default σ/4)"
+        None,
+        **checks.POSITIVE.bounds,
+        description="neighbourhood of Var(S), scene units (default σ/4)",
     )
     gain_map: str | None = Field(
         None,
@@ -94,15 +97,18 @@ class UnsharpParams(Params):
         "auto", description="linear white level of CIELAB (auto: 99th percentile; pin it)"
     )
     depth_sigma: float = Field(
-        1.0, gt=0.0, le=100.0, description="depth gap (in σ) above which surfaces do not mix"
+        1.0,
+        **checks.UNSHARP_SIGMA.bounds,
+        description="depth gap (in σ) above which surfaces do not mix",
     )
     normal_sigma: float | None = Field(
-        1.0, gt=0.0, le=100.0, description="normal change counted as one σ (null: no crease term)"
+        1.0,
+        **checks.UNSHARP_SIGMA.bounds,
+        description="normal change counted as one σ (null: no crease term)",
     )
     fine_scale: float = Field(
         0.002,
-        ge=0.0,
-        le=0.1,
+        **checks.FINE_SCALE.bounds,
         description="σ of the lightness the contrast is taken from, relative to the image height "
         "(at least a pixel): Monte-Carlo noise finer than it is not amplified (0: each pixel's "
         "own, as the paper)",
@@ -121,10 +127,10 @@ class UnsharpParams(Params):
 
     @model_validator(mode="after")
     def _check(self) -> UnsharpParams:
-        if isinstance(self.sigma, float) and not (math.isfinite(self.sigma) and self.sigma > 0):
-            raise ValueError(f"sigma must be > 0 scene units or 'auto', got {self.sigma}")
-        if isinstance(self.white, float) and not self.white > 0:
-            raise ValueError(f"white must be > 0 or 'auto', got {self.white}")
+        if isinstance(self.sigma, float):
+            checks.POSITIVE.check(self.sigma, "sigma")
+        if isinstance(self.white, float):
+            checks.WHITE.check(self.white, "white")
         if self.signal == "shadows" and not self.unlit:
             raise ValueError("signal 'shadows' needs `unlit`: the layer rendered without shadows")
         return self
@@ -243,9 +249,9 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
 class DepthUnsharpParams(Params):
     """Unsharp masking of the depth buffer (Luft et al. 2006)."""
 
-    amount: float = Field(1.0, ge=-10.0, le=10.0, description="λ, on normalised depth")
+    amount: float = Field(1.0, **checks.UNSHARP_AMOUNT.bounds, description="λ, on normalised depth")
     sigma: float = Field(
-        0.02, gt=0.0, le=1.0, description="Gaussian σ relative to the image height"
+        0.02, **checks.RELATIVE_SIGMA.bounds, description="Gaussian σ relative to the image height"
     )
     mode: Literal["darken", "both"] = Field(
         "darken", description="darken: L + λ·min(ΔD, 0) (MegaMol's default); both: L + λ·ΔD"

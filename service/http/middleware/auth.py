@@ -1,5 +1,6 @@
-"""The API key: when ``DEPICT_API_KEY`` is set, every route but the public ones needs
-``Authorization: Bearer <key>`` (401 problem otherwise), checked before any body byte is read."""
+"""The API key: when ``DEPICT_API_KEY`` is set, every route but the public ones (health, the API
+docs, the viewer's static page) needs ``Authorization: Bearer <key>`` (401 problem otherwise),
+checked before any body byte is read."""
 
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ PUBLIC_PATHS = (
     "/docs/oauth2-redirect",
     "/redoc",
 )
+#: The web viewer's page and scripts (its API calls carry the key).
+VIEWER = "/ui"
 #: Where the Swagger UI and ReDoc assets are served from (fastapi-offline's copies: no CDN).
 DOCS_ASSETS = "/docs-assets"
 
@@ -30,6 +33,8 @@ def is_public(path: str, settings: Settings) -> bool:
     return (
         path in PUBLIC_PATHS
         or path.startswith(f"{DOCS_ASSETS}/")
+        or path == VIEWER
+        or path.startswith(f"{VIEWER}/")
         or (path == "/metrics" and settings.metrics_public)
     )
 

@@ -1,0 +1,240 @@
+"""The congruence of shading flow and shape flow, LLA Eq. 2 (see :mod:`ops.congruence`)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from ops.checks import (
+    DEPTH_JUMP,
+    GRADIENT_SCALE,
+    INTEGRATION_SCALE,
+    PERCENTILE,
+    SHADING_NORM,
+)
+from ops.congruence._common import _REL_CURVED, _SHAPE_COUNTED, F32
+from ops.congruence._flow import (
+    _LOW_MAPS,
+    _brightness,
+    _covered_level,
+    _f32,
+    _flow,
+    _reach,
+    _tensor_products,
+    _window,
+)
+from ops.congruence.result import CongruenceResult
+from ops.parallel import run_strips
+
+__all__ = ["congruence"]
+
+
+def _checked(
+    image: NDArray[np.floating],
+    depth: NDArray[np.floating],
+    mask: NDArray[np.generic] | None,
+    image_height: int | None,
+) -> tuple[np.ndarray, np.ndarray, int]:
+    """The image (H, W) or (H, W, 3) and the depth (H, W) checked, and the image height."""
+    img = np.asarray(image)
+    dep = np.asarray(depth)
+    if dep.ndim != 2:
+        raise ValueError(f"depth must be (H, W), got shape {dep.shape}")
+    h, w = dep.shape
+    if h < 3 or w < 3:
+        raise ValueError(f"depth must be at least 3x3, got shape {dep.shape}")
+    if img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img.shape[:2] != (h, w) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
+        raise ValueError(
+            f"image must be (H, W, 3) or (H, W) matching depth {dep.shape}, got {img.shape}"
+        )
+    if mask is not None and np.shape(mask) != (h, w):
+        raise ValueError(f"mask must be (H, W) = {dep.shape}, got shape {np.shape(mask)}")
+    href = h if image_height is None else int(image_height)
+    if href <= 0:
+        raise ValueError(f"image_height must be a positive number of pixels, got {image_height!r}")
+    return img, dep, href
+
+
+def _eq2(
+    e_shape: F32,
+    e_shading: F32,
+    shading_dir: tuple[F32, F32],
+    shape_dir: tuple[F32, F32],
+    defined: np.ndarray,
+    area: F32,
+    outside: np.ndarray,
+) -> tuple[F32, float]:
+    """Eq. 2 on the analysis level: the per-pixel score (1 − ⌊e_shape − e_shading⌋) |v·v'| and
+    the score Σ e_shape·area·map / Σ e_shape·area. The directions are (cos 2φ, sin 2φ), so
+    |v·v'| = √((1 + cos 2(φ − φ'))/2); it is 0 where either is undefined (not ``defined``)."""
+    (ca, sa), (cb, sb) = shading_dir, shape_dir
+    cosd = ca * cb
+    cosd += sa * sb  # cos of the doubled-angle difference
+    cosd += 1.0
+    cosd *= 0.5
+    dot = np.sqrt(np.clip(cosd, 0.0, 1.0, out=cosd), out=cosd)
+    dot[~defined] = 0.0
+    smap = np.subtract(e_shape, e_shading)
+    np.clip(smap, 0.0, 1.0, out=smap)
+    np.subtract(1.0, smap, out=smap)
+    smap *= dot
+    smap[outside] = 0.0
+    wgt = e_shape * area
+    den = float(wgt.sum(dtype=np.float64))
+    wgt *= smap
+    score = float(wgt.sum(dtype=np.float64) / den) if den > 0 else 0.0
+    return smap, score
+
+
+def congruence(
+    image: NDArray[np.floating],
+    depth: NDArray[np.floating],
+    mask: NDArray[np.generic] | None = None,
+    *,
+    gradient_scale: float = 0.002,
+    integration_scale: float = 0.01,
+    image_height: int | None = None,
+    percentile: float = 95.0,
+    depth_jump: float = 0.05,
+    shading_norm: float | None = None,
+    normal: NDArray[np.floating] | None = None,
+) -> CongruenceResult:
+    """Congruence score between shading and shape flows (Mestres et al. 2021, §7, Eq. 2).
+
+    ``s = Σ e_shape (1 − ⌊e_shape − e_shading⌋) |v_shape·v_shading| / Σ e_shape`` over the
+    covered pixels, with (v, e) the dominant eigenvector and mean eigenvalue of the structure
+    tensor ``G_σi * (∇f ∇fᵀ)`` of f = luminance (shading) and, for the shape, the normal's
+    components summed (``normal`` given: a curvature flow) or f = log depth; the gradient taken
+    at σ_g. See the module docstring for the shape flow and the normalisation of e.
+
+    Parameters
+    ----------
+    image : (H, W, 3) or (H, W) float
+        Linear RGB (or luminance) rendering to score.
+    depth : (H, W) float
+        Planar depth, positive; +inf (or <= 0) on background.
+    mask : (H, W), optional
+        Coverage; pixels with mask <= 0.5 are background.
+    gradient_scale : float
+        σ of the gradient (derivative-of-Gaussian) scale, relative to the image height, (0, 0.1].
+    integration_scale : float
+        σ of the Gaussian integrating the tensor, relative to the image height, (0, 0.25].
+    image_height : int, optional
+        Height the relative scales refer to (defaults to H; pass the full frame's height when
+        scoring a crop).
+    percentile : float
+        Percentile (over covered pixels) each strength is divided by before clipping to [0, 1],
+        in (0, 100].
+    depth_jump : float
+        Largest change of log depth between neighbouring pixels (of the gradient level) still
+        treated as a continuous surface, > 0; above it the pixels are not scored.
+    shading_norm : float, optional
+        The shading strength mapped to 1, instead of this image's own ``percentile``: pass the
+        :attr:`CongruenceResult.shading_norm` of a reference rendering of the same frame (same
+        parameters) to put several renderings on one scale, so that a shading with more contrast
+        than the reference is not normalised back down (the clamp of Eq. 2 then does what the
+        paper says: exaggeration, e_shading > e_shape, does not lower the score).
+    normal : (H, W, 3) float, optional
+        Camera-space unit normals: the shape flow is then the structure tensor of the normal's
+        gradients, which is 0 on planes (see the module docstring); without them, of the log
+        depth's gradients.
+
+    Returns
+    -------
+    CongruenceResult
+        The score and its per-pixel maps.
+    """
+    img, dep, href = _checked(image, depth, mask, image_height)
+    h, w = dep.shape
+    sg = GRADIENT_SCALE.check(gradient_scale, "gradient_scale") * href
+    si = INTEGRATION_SCALE.check(integration_scale, "integration_scale") * href
+    PERCENTILE.check(percentile, "percentile")
+    DEPTH_JUMP.check(depth_jump, "depth_jump")
+    if shading_norm is not None:
+        SHADING_NORM.check(shading_norm, "shading_norm")
+
+    img = img.astype(np.float32, copy=False)
+    dep = dep.astype(np.float32, copy=False)
+
+    # --- gradient level: area-downsample by f1 so that sigma_g is 1-2 px there; area-average
+    # the covered depth, luminance and coverage, blur them, and normalise by the coverage.
+    f1 = max(1, min(int(sg), h // 8 or 1, w // 8 or 1))
+    size1 = (max(w // f1, 3), max(h // f1, 3)) if f1 > 1 else (w, h)
+    nrm = None if normal is None else np.asarray(normal, np.float32)
+    if nrm is not None and nrm.shape != (h, w, 3):
+        raise ValueError(f"normal must be (H, W, 3) matching depth {dep.shape}, got {nrm.shape}")
+    level = _covered_level(img, dep, mask, f1, size1, nrm)
+    lum0, dep0, cov0 = level[:3]
+    # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small
+    # copies (a sum accumulated in float64 cannot overflow: it is finite iff every value is)
+    if not np.isfinite(cv2.sumElems(lum0)[0] + cv2.sumElems(dep0)[0]):
+        if np.isnan(dep).any():
+            raise ValueError("depth contains NaN (use +inf for background)")
+        raise ValueError("image contains NaN or infinite values")
+    lref = _brightness(lum0, cov0)
+
+    # --- integration level: area-downsample the tensor products by f2 so that sigma_i is
+    # 2-4 px there.
+    w1, h1 = size1
+    s1, si1 = sg / f1, si / f1
+    f2 = max(1, min(int(si1 / 2.0), h1 // 8 or 1, w1 // 8 or 1))
+    size2 = (max(w1 // f2, 3), max(h1 // f2, 3)) if f2 > 1 else (w1, h1)
+    s2 = si1 / f2
+    low = {k: np.zeros(size2[::-1], np.float32) for k in _LOW_MAPS}
+    # Everything below is 0 away from the covered pixels: work on their bounding box, grown by
+    # more than the blurs' and stencils' reach (the result is the same as on the whole level)
+    win = _window(cov0, f2, size2, max(_reach(s1) + 2, (_reach(s2) + 2) * f2))
+    if win is None:  # nothing covered
+        return CongruenceResult(0.0, (size2[1], size2[0]), shading_norm or 0.0, (h, w), low)
+    (y0, y1, x0, x1), (v0, v1, u0, u1) = win
+    crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in level]
+    jump = 0.5 * float(depth_jump)
+    prods = _tensor_products(crop, s1, jump, f2, (u1 - u0, v1 - v0))
+    area = prods[6]  # fraction of each analysis pixel with valid gradients
+    tens = list(prods)
+
+    def integrate(a: int, b: int) -> None:
+        for i in range(a, b):
+            tens[i] = _f32(cv2.GaussianBlur(prods[i], (0, 0), s2))
+
+    run_strips(len(tens), integrate, 1)
+    wsum = tens[6]
+    invw = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 1e-4)
+
+    inside = area > 0.5
+    outside = ~inside
+    # signal scales for the noise floors: lref (brightness) above; log depth and unit normals
+    # are dimensionless
+    dref = 1.0
+
+    # with normals, the scales are measured where there is shape: planes (0) do not set the
+    # shape's, nor a floor's cast shadows the shading's; the log depth's flow is strong on
+    # floors too, so it counts every pixel
+    curved = None
+    if nrm is not None:
+        e_shape = np.multiply(np.add(tens[3], tens[5]), invw)
+        curved = inside & (e_shape > _REL_CURVED * float(e_shape.max(initial=0.0)))
+        curved = curved if curved.any() else None
+    ec, cb, sb, dc, _ = _flow(
+        tens[3], tens[4], tens[5], invw, inside, outside, dref, percentile, None, curved
+    )
+    counted = None if curved is None else inside & (ec > _SHAPE_COUNTED)
+    counted = counted if counted is not None and counted.any() else None
+    es, ca, sa, ds, norm_s = _flow(
+        tens[0], tens[1], tens[2], invw, inside, outside, lref, percentile, shading_norm, counted
+    )
+    smap, score = _eq2(ec, es, (ca, sa), (cb, sb), ds & dc, area, outside)
+
+    maps = (smap, es, ec, np.where(inside, area, np.float32(0)), ca, sa, cb, sb)
+    for name, m in zip(_LOW_MAPS, maps, strict=True):
+        low[name][v0:v1, u0:u1] = m
+    return CongruenceResult(
+        score=float(np.clip(score, 0.0, 1.0)),
+        analysis_shape=(size2[1], size2[0]),
+        shading_norm=norm_s,
+        _out_shape=(h, w),
+        _low=low,
+    )

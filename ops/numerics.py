@@ -1,0 +1,167 @@
+"""Vectorisable float32 numerics that the compiled kernels of ``ops/`` share.
+
+Numba does not vectorise calls to libm here (no SVML), so a kernel that needs a transcendental
+function in its inner loop calls one of these instead: polynomials with branch-free range
+reduction that LLVM inlines and vectorises with the caller's loop. Each states its domain and
+its error; the tests compare them with NumPy's float64 functions.
+
+* :func:`expf`: e^x (Cephes), within 2 ulp;
+* :func:`exp_neg`: e^{−u} for u ≥ 0, 2e-7 absolute, for range weights near 1;
+* :func:`atan2_upper`: atan2(y, x) for y ≥ 0, ~1e-7 rad;
+* :func:`sincos_upper`: (sin θ, cos θ) for θ ∈ [0, π], ~1e-8;
+* :func:`dot3_row`: a row of interleaved triples dotted with constant weights (luminance).
+
+Constants are ``np.float32``: a Python float would promote a kernel's arithmetic to float64.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
+
+from ops.jit import inline_kernel, kernel
+
+__all__ = ["EXPF_MAX", "atan2_upper", "dot3_row", "exp_neg", "expf", "sincos_upper"]
+
+_F0, _F1 = np.float32(0.0), np.float32(1.0)
+_TINY = np.float32(1e-12)
+
+
+@intrinsic
+def _float32_from_bits(typingctx, bits):
+    """The float32 whose IEEE-754 bit pattern is the int32 ``bits`` (a bit cast, no conversion)."""
+    sig = types.float32(types.int32)
+
+    def codegen(context, builder, signature, args):
+        return builder.bitcast(args[0], ir.FloatType())
+
+    return sig, codegen
+
+
+# Cephes expf (S. L. Moshier, "Methods and Programs for Mathematical Functions", 1989): ln 2 in
+# two parts for the reduction, and the degree-6 minimax polynomial of e^r on |r| <= ln(2)/2.
+_LOG2E = np.float32(1.44269504088896341)
+_LN2_HI, _LN2_LO = np.float32(0.693359375), np.float32(-2.12194440e-4)
+_EXPF_P = tuple(
+    np.float32(c)
+    for c in (1.9875691500e-4, 1.3981999507e-3, 8.3334519073e-3, 4.1665795894e-2, 1.6666665459e-1)
+)
+_EXPF_P5 = np.float32(5.0000001201e-1)
+#: Arguments of :func:`expf` are clamped to ± this (e^±87 stays a normal float32).
+EXPF_MAX = np.float32(87.0)
+
+
+@inline_kernel
+def expf(x):
+    """e^x in float32 for |x| <= :data:`EXPF_MAX` (clamped there), within 2 ulp of the exact
+    value, vectorisable (no library call): x = n ln 2 + r, e^r from Cephes' polynomial and 2^n
+    from its bits. NaN must be handled by the caller (it gives an undefined value)."""
+    one = np.float32(1.0)
+    x = min(max(x, -EXPF_MAX), EXPF_MAX)
+    z = np.floor(x * _LOG2E + np.float32(0.5))
+    r = x - z * _LN2_HI - z * _LN2_LO
+    p = _EXPF_P[0]
+    for c in _EXPF_P[1:]:
+        p = p * r + c
+    y = (p * r + _EXPF_P5) * (r * r) + r + one
+    return y * _float32_from_bits((np.int32(z) + np.int32(127)) << np.int32(23))  # type: ignore[call-arg]
+
+
+# e^{-u} of the range kernel: u clamped here (e^-64 ≈ 1.6e-28 counts as 0), halved this many
+# times before the polynomial (see exp_neg).
+_EXP_U_MAX = np.float32(64.0)
+_EXP_SQUARINGS = 5
+_EXP_SCALE = np.float32(1.0 / (1 << _EXP_SQUARINGS))
+_E2, _E3, _E4, _E5 = (np.float32((-1.0) ** n / math.factorial(n)) for n in (2, 3, 4, 5))
+
+
+@kernel
+def exp_neg(u):
+    """e^{−u} for u ≥ 0, vectorisable (no exp call), within 2e-7 absolute (0 for u ≥ 64):
+    e^{−u} = (e^{−t})^32 with t = min(u, 64)/32 ∈ [0, 2] and e^{−t} ≈ 1 + q, q the degree-5
+    Taylor polynomial less 1; the 5 squarings are done on q, (1 + q)² = 1 + q (q + 2), so that
+    weights near 1 keep their relative precision."""
+    t = min(u, _EXP_U_MAX) * _EXP_SCALE
+    q = ((((_E5 * t + _E4) * t + _E3) * t + _E2) * t - _F1) * t
+    for _ in range(_EXP_SQUARINGS):
+        q = q * (q + np.float32(2.0))
+    return q + _F1
+
+
+_PI_F = np.float32(math.pi)
+_HALF_PI_F = np.float32(math.pi / 2.0)
+# atan(t) ≈ t P(t²) on [0, 1]: minimax, error 4e-8 rad (1.3e-7 evaluated in float32)
+_AT0 = np.float32(0.9999993356019542)
+_AT1 = np.float32(-0.33329860818634105)
+_AT2 = np.float32(0.19946565712599593)
+_AT3 = np.float32(-0.13908628858035077)
+_AT4 = np.float32(0.09642193828012686)
+_AT5 = np.float32(-0.05591226181184129)
+_AT6 = np.float32(0.021862903744628806)
+_AT7 = np.float32(-0.004054550244039307)
+# sin(u) ≈ u S(u²), cos(u) ≈ C(u²) on [−π/2, π/2]: minimax, errors 3e-9 and 2e-10
+_S0 = np.float32(0.9999999765894195)
+_S1 = np.float32(-0.16666647634345014)
+_S2 = np.float32(0.008332899818385985)
+_S3 = np.float32(-0.00019800897458455147)
+_S4 = np.float32(2.5904878875604442e-06)
+_C0 = np.float32(0.9999999997806464)
+_C1 = np.float32(-0.4999999935846119)
+_C2 = np.float32(0.04166663625765576)
+_C3 = np.float32(-0.001388836139486635)
+_C4 = np.float32(2.4760161070974673e-05)
+_C5 = np.float32(-2.6051490159550994e-07)
+
+
+@kernel
+def atan2_upper(y, x):
+    """atan2(y, x) ∈ [0, π] for y ≥ 0 (0 at the origin), vectorisable: octant reduction by
+    selects and the minimax polynomial of atan on [0, 1]."""
+    ax = abs(x)
+    big = y > ax
+    hi = y if big else ax
+    lo = ax if big else y
+    hi = hi if hi > _TINY else _TINY
+    t = lo / hi
+    z = t * t
+    p = _AT6 + z * _AT7
+    p = _AT5 + z * p
+    p = _AT4 + z * p
+    p = _AT3 + z * p
+    p = _AT2 + z * p
+    p = _AT1 + z * p
+    p = _AT0 + z * p
+    r = t * p
+    r = _HALF_PI_F - r if big else r
+    return _PI_F - r if x < _F0 else r
+
+
+@kernel
+def sincos_upper(theta):
+    """(sin θ, cos θ) for θ ∈ [0, π] (minimax polynomials on [0, π/2], by sin(π − θ) = sin θ,
+    cos(π − θ) = −cos θ)."""
+    big = theta > _HALF_PI_F
+    u = _PI_F - theta if big else theta
+    z = u * u
+    s = _S3 + z * _S4
+    s = _S2 + z * s
+    s = _S1 + z * s
+    s = _S0 + z * s
+    s = u * s
+    c = _C4 + z * _C5
+    c = _C3 + z * c
+    c = _C2 + z * c
+    c = _C1 + z * c
+    c = _C0 + z * c
+    return s, (-c if big else c)
+
+
+@inline_kernel
+def dot3_row(rgb, w0, w1, w2, out):
+    """out[j] = (w0, w1, w2) · triple j of the flat interleaved row ``rgb`` (3 · len(out))."""
+    for j in range(out.shape[0]):
+        out[j] = w0 * rgb[3 * j] + w1 * rgb[3 * j + 1] + w2 * rgb[3 * j + 2]

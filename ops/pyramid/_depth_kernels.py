@@ -1,0 +1,152 @@
+"""The compiled kernels of the depth-aware pyramid: front-most block selection and the 2×2
+reductions of geometry and unit fields, and the gather of unit vectors for its upsampling."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ops.jit import kernel
+
+#: Log depth of background pixels at level 0 is at least this (a finite sentinel, so that
+#: products with zero weights stay 0).
+BACKGROUND = np.float32(1e30)
+
+
+_F0 = np.float32(0.0)
+_F1 = np.float32(1.0)
+_QUARTER = np.float32(0.25)
+_INF = np.float32(np.inf)
+
+
+@kernel
+def _gather_unit(idx, w, planes, out):
+    """out[n, c] = Σ_t w[t, n] planes[c][idx[t, n]] (the weighted samples of
+    :meth:`DepthPyramid.up_sparse`), then each group of 3 channels renormalised as by
+    :func:`normalize_field` (0 where |v|² ≤ 1e-20)."""
+    n_ch = out.shape[1]
+    for n in range(out.shape[0]):
+        for c in range(n_ch):
+            plane = planes[c]
+            acc = np.float32(0.0)
+            for t in range(idx.shape[0]):
+                acc += w[t, n] * plane[idx[t, n]]
+            out[n, c] = acc
+        for c0 in range(0, n_ch - 2, 3):
+            x, y, z = out[n, c0], out[n, c0 + 1], out[n, c0 + 2]
+            n2 = x * x + y * y + z * z
+            inv = np.float32(1.0) / np.sqrt(n2) if n2 > np.float32(1e-20) else np.float32(0.0)
+            out[n, c0], out[n, c0 + 1], out[n, c0 + 2] = x * inv, y * inv, z * inv
+
+
+@kernel
+def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):
+    """One row of 2×2 blocks of :meth:`DepthPyramid._down_geometry` from two rows ``la``,
+    ``lb`` of log depth with :data:`BACKGROUND` on background (covered iff below it): the keep
+    flags ``ka``, ``kb`` (covered and within ``thr`` of the block's front, i.e. minimum, log
+    depth), the kept fraction ``cover``, the kept log-depth mean ``low`` (0 when nothing is
+    kept), ``m_low`` = cover > 0 and ``lost`` (a covered member was left out). ``front``: a
+    scratch row. One short loop per output: LLVM vectorises a loop only with few runtime alias
+    checks, i.e. few arrays written."""
+    wh = cover.shape[0]
+    for j in range(wh):
+        front[j] = min(min(la[2 * j], la[2 * j + 1]), min(lb[2 * j], lb[2 * j + 1]))
+    for lr, kr in ((la, ka), (lb, kb)):
+        for j in range(wh):
+            f = front[j]
+            l0, l1 = lr[2 * j], lr[2 * j + 1]
+            kr[2 * j] = np.float32((l0 < BACKGROUND) & (l0 - f <= thr))
+            kr[2 * j + 1] = np.float32((l1 < BACKGROUND) & (l1 - f <= thr))
+    for j in range(wh):
+        cover[j] = (ka[2 * j] + ka[2 * j + 1] + kb[2 * j] + kb[2 * j + 1]) * _QUARTER
+    for j in range(wh):
+        s = la[2 * j] * ka[2 * j] + la[2 * j + 1] * ka[2 * j + 1]
+        s += lb[2 * j] * kb[2 * j] + lb[2 * j + 1] * kb[2 * j + 1]
+        # covered blocks have cover ≥ 1/4: max(cover, 1/4) leaves them exact, empty ones 0
+        low[j] = s * _QUARTER / max(cover[j], _QUARTER)
+    for j in range(wh):
+        m_low[j] = np.float32(cover[j] > _F0)
+    for j in range(wh):
+        n_cov = np.float32(la[2 * j] < BACKGROUND) + np.float32(la[2 * j + 1] < BACKGROUND)
+        n_cov += np.float32(lb[2 * j] < BACKGROUND) + np.float32(lb[2 * j + 1] < BACKGROUND)
+        lost[j] = n_cov > cover[j] * np.float32(4.0)
+
+
+@kernel
+def _build01_rows(depth, mask8, thr, logd0, mask0, keep0, cover, logd1, mask1, excl1):
+    """Levels 0 and 1 of :class:`DepthPyramid` on rows of an even-sized level 0.
+
+    ``depth``: (2 n, W) planar depth; ``mask8``: (2 n, W) uint8 coverage, or (0, W) for none;
+    ``logd0``: on input the log of the clamped depth, on output the level-0 log depth with
+    :data:`BACKGROUND` on background (depth not finite or ≤ 0, or mask 0); ``mask0``, ``keep0``
+    (2 n, W); ``cover``, ``logd1``, ``mask1``, ``excl1`` (n, W / 2): the blocks of
+    :func:`_block_row` (``excl1``: a covered pixel was left out).
+    """
+    wd = depth.shape[1]
+    ones = np.ones(wd, np.uint8)
+    use_mask = mask8.shape[0] > 0
+    front = np.empty(cover.shape[1], np.float32)
+    for r in range(depth.shape[0]):
+        d, lg = depth[r], logd0[r]
+        m = mask8[r] if use_mask else ones
+        for x in range(wd):
+            dx = d[x]
+            valid = (dx > _F0) & (dx < _INF) & (m[x] != 0)
+            lg[x] = lg[x] if valid else BACKGROUND
+        v_r = mask0[r]
+        for x in range(wd):
+            v_r[x] = np.float32(lg[x] < BACKGROUND)
+    for i in range(cover.shape[0]):
+        _block_row(
+            logd0[2 * i], logd0[2 * i + 1], thr, front, keep0[2 * i], keep0[2 * i + 1],
+            cover[i], logd1[i], mask1[i], excl1[i],
+        )  # fmt: skip
+
+
+@kernel
+def _down_geometry_rows(logd, m, excl, thr, keep, cover, logd_low, m_low, excl_low):
+    """Level k → k+1 of :class:`DepthPyramid` (k ≥ 1) on rows of an even-sized (padded)
+    level: ``logd``, ``m`` (covered where > 0), ``excl`` (samples excluded below, bool)
+    (2 n, w); outputs ``keep`` (2 n, w) and ``cover``, ``logd_low``, ``m_low``, ``excl_low``
+    (n, w / 2) as in :func:`_build01_rows` (``excl_low`` also where a member was excluded)."""
+    wd = logd.shape[1]
+    wh = cover.shape[1]
+    far = np.empty((2, wd), np.float32)
+    front = np.empty(wh, np.float32)
+    for i in range(cover.shape[0]):
+        for r in range(2):
+            lr, mr, fr = logd[2 * i + r], m[2 * i + r], far[r]
+            for x in range(wd):
+                fr[x] = lr[x] if mr[x] > _F0 else BACKGROUND
+        e_r = excl_low[i]
+        _block_row(
+            far[0], far[1], thr, front, keep[2 * i], keep[2 * i + 1],
+            cover[i], logd_low[i], m_low[i], e_r,
+        )  # fmt: skip
+        ea, eb = excl[2 * i], excl[2 * i + 1]
+        for j in range(wh):
+            e_r[j] = e_r[j] | ea[2 * j] | ea[2 * j + 1] | eb[2 * j] | eb[2 * j + 1]
+
+
+@kernel
+def _down_unit_rows(v, keep, out):
+    """``out`` (n, w / 2, 3) = the 2×2 block sums / 4 of ``v`` (2 n, w, 3) weighted by ``keep``
+    (2 n, w) (:meth:`DepthPyramid._down_unit`): the keep-weighted sum of each row pair in a
+    row buffer, then the sums of column pairs (two short loops that LLVM vectorises)."""
+    wh = out.shape[1]
+    wd = 2 * wh
+    acc = np.empty(3 * wd, np.float32)
+    for i in range(out.shape[0]):
+        ra, rb = v[2 * i].reshape(3 * wd), v[2 * i + 1].reshape(3 * wd)
+        ka, kb = keep[2 * i], keep[2 * i + 1]
+        for x in range(wd):
+            a, b = ka[x], kb[x]
+            p = 3 * x
+            acc[p] = a * ra[p] + b * rb[p]
+            acc[p + 1] = a * ra[p + 1] + b * rb[p + 1]
+            acc[p + 2] = a * ra[p + 2] + b * rb[p + 2]
+        o = out[i].reshape(3 * wh)
+        for j in range(wh):
+            p, q = 6 * j, 3 * j
+            o[q] = (acc[p] + acc[p + 3]) * _QUARTER
+            o[q + 1] = (acc[p + 1] + acc[p + 4]) * _QUARTER
+            o[q + 2] = (acc[p + 2] + acc[p + 5]) * _QUARTER

@@ -1,0 +1,116 @@
+"""The compiled row kernels of the multi-light shaders: per-light terms, their sums, lobe radiance
+and the ratio relighting."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ops.jit import kernel
+
+
+@kernel
+def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):
+    """Per pixel of the rows of (rows, 3W) ``nrm``: the diffuse term max(n·ℓ_d, 0) (Lambert) or
+    ((n·ℓ_d + 1)/2)² (half-Lambert, ``half``) times the coverage (|n|² > 0.25) into ``d_term``;
+    with ``spec``, n·h = max((n·ℓ_s + n·v)/|ℓ_s + v|, 0) (0 where |ℓ_s + v| <= 1e-6) into ``nh``
+    and the coverage where n·ℓ_s > 0 into ``gate`` (Blinn-Phong's (n·h)^s is ``nh`` to the s).
+    ``ld``, ``ls``, ``v`` are rows like ``nrm``, or one row used for all (``ldc``, ``lsc``,
+    ``vc``): the formulas of :func:`lambert`, :func:`half_lambert` and :func:`blinn_phong`."""
+    zero, one, two, half_ = np.float32(0.0), np.float32(1.0), np.float32(2.0), np.float32(0.5)
+    quarter, tiny = np.float32(0.25), np.float32(1e-6)
+    for i in range(nrm.shape[0]):
+        n = nrm[i]
+        a = ld[0 if ldc else i]
+        b = ls[0 if lsc else i]
+        w = v[0 if vc else i]
+        dt, hr, gr = d_term[i], nh[i], gate[i]
+        for j in range(dt.shape[0]):
+            nx, ny, nz = n[3 * j], n[3 * j + 1], n[3 * j + 2]
+            cov = one if nx * nx + ny * ny + nz * nz > quarter else zero
+            nd = nx * a[3 * j] + ny * a[3 * j + 1] + nz * a[3 * j + 2]
+            hl = (nd + one) * half_
+            d = hl * hl if half else max(nd, zero)
+            dt[j] = d * cov
+        if not spec:
+            continue
+        for j in range(dt.shape[0]):
+            nx, ny, nz = n[3 * j], n[3 * j + 1], n[3 * j + 2]
+            cov = one if nx * nx + ny * ny + nz * nz > quarter else zero
+            lx, ly, lz = b[3 * j], b[3 * j + 1], b[3 * j + 2]
+            vx, vy, vz = w[3 * j], w[3 * j + 1], w[3 * j + 2]
+            nl = nx * lx + ny * ly + nz * lz
+            nv = nx * vx + ny * vy + nz * vz
+            lv = lx * vx + ly * vy + lz * vz
+            length = np.sqrt(max(two * lv + two, zero))
+            inv = one / max(length, tiny) if length > tiny else zero
+            hr[j] = max((nl + nv) * inv, zero)
+            gr[j] = cov if nl > zero else zero
+
+
+@kernel
+def _add_terms(d_term, nh, gate, e, first, spec, od, os_):
+    """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh × gate × E,
+    E = ``e`` (3,) the light's irradiance; outputs (rows, 3W)."""
+    e0, e1, e2 = e[0], e[1], e[2]
+    for i in range(od.shape[0]):
+        _add_row(d_term[i], e0, e1, e2, first, od[i])
+        if spec:
+            hr, gr, t = nh[i], gate[i], d_term[i]  # d_term's row is free now: nh × gate there
+            for j in range(hr.shape[0]):
+                t[j] = hr[j] * gr[j]
+            _add_row(t, e0, e1, e2, first, os_[i])
+
+
+@kernel
+def _add_row(t, e0, e1, e2, first, o):
+    """A row of (3W) ``o`` = (or += unless ``first``) ``t`` × (e0, e1, e2)."""
+    if first:
+        for j in range(t.shape[0]):
+            o[3 * j] = t[j] * e0
+            o[3 * j + 1] = t[j] * e1
+            o[3 * j + 2] = t[j] * e2
+    else:
+        for j in range(t.shape[0]):
+            o[3 * j] += t[j] * e0
+            o[3 * j + 1] += t[j] * e1
+            o[3 * j + 2] += t[j] * e2
+
+
+@kernel
+def _radiance_rows(lit, col, const, rad, beauty, first):
+    """Rows (3W) of :func:`lobe_radiance`: ``rad`` = lit × col (``col`` one row for all with
+    ``const``), ``beauty`` = (or += unless ``first``) rad."""
+    for i in range(lit.shape[0]):
+        a, c, r, b = lit[i], col[0 if const else i], rad[i], beauty[i]
+        if first:
+            for j in range(a.shape[0]):
+                v = a[j] * c[j]
+                r[j] = v
+                b[j] = v
+        else:
+            for j in range(a.shape[0]):
+                v = a[j] * c[j]
+                r[j] = v
+                b[j] += v
+
+
+@kernel
+def _ratio_rows(lobe, light, a, o, eps, rmax, new, new_light, acc):
+    """Rows (3W) of :func:`ratio_relight` for one lobe: ``new`` = ρ·lobe, ``acc`` += new − lobe
+    and, when ``light`` has rows, ``new_light`` = ρ·light."""
+    zero = np.float32(0.0)
+    with_light = light.shape[0] > 0
+    ratio = np.empty(lobe.shape[1], np.float32)
+    for i in range(lobe.shape[0]):
+        lb, ar, orow, nw, ac = lobe[i], a[i], o[i], new[i], acc[i]
+        for j in range(lb.shape[0]):
+            r = (ar[j] + eps) / (orow[j] + eps)
+            r = min(max(r, zero), rmax)
+            ratio[j] = r
+            v = lb[j] * r
+            nw[j] = v
+            ac[j] += v - lb[j]
+        if with_light:
+            lt, nlt = light[i], new_light[i]
+            for j in range(lt.shape[0]):
+                nlt[j] = lt[j] * ratio[j]

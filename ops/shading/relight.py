@@ -1,0 +1,127 @@
+"""Renderer lobes recombined (radiance = light × colour) and relit by the ratio of two shadings."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ops.parallel import run_strips
+from ops.shading._kernels import _radiance_rows, _ratio_rows
+from ops.shading.directions import _SHADE_ROWS, _flat_rows
+
+__all__ = ["lobe_radiance", "ratio_relight"]
+
+
+def lobe_radiance(
+    lights: dict[str, np.ndarray], colors: dict[str, np.ndarray]
+) -> tuple[dict[str, np.ndarray], np.ndarray]:
+    """Each lobe's radiance ``light_j × colour_j`` and the beauty ``Σ_j light_j × colour_j``.
+
+    Parameters
+    ----------
+    lights : lobe -> (H, W, 3) light without colour (e.g. :func:`shade_directions`).
+    colors : lobe -> (H, W, 3) or (3,) colour (albedo, specular colour).
+
+    Returns
+    -------
+    (lobe -> (H, W, 3) float32 radiance, (H, W, 3) float32 beauty); one compiled pass per row
+    strip, each light and colour read once, the beauty kept in cache.
+    """
+    names = list(lights)
+    if not names:
+        raise ValueError("lobe_radiance needs at least one lobe")
+    hgt, wid = lights[names[0]].shape[:2]
+    shape = (hgt, wid, 3)
+    flat = {
+        n: (
+            _flat_rows(lights[n], shape, f"lights[{n!r}]")[0],
+            _flat_rows(colors[n], shape, f"colors[{n!r}]", constant=True),
+        )
+        for n in names
+    }
+    radiance = {n: np.empty((hgt, wid, 3), np.float32) for n in names}
+    beauty = np.empty((hgt, wid, 3), np.float32)
+    rad = {n: r.reshape(hgt, 3 * wid) for n, r in radiance.items()}
+    out = beauty.reshape(hgt, 3 * wid)
+
+    def strip(r0: int, r1: int) -> None:
+        for k, n in enumerate(names):
+            lit, (col, const) = flat[n]
+            rows = col if const else col[r0:r1]
+            _radiance_rows(lit[r0:r1], rows, const, rad[n][r0:r1], out[r0:r1], k == 0)
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)
+    return radiance, beauty
+
+
+def ratio_relight(
+    beauty: np.ndarray,
+    lobes: dict[str, tuple[np.ndarray, np.ndarray | None]],
+    original: dict[str, np.ndarray],
+    aligned: dict[str, np.ndarray],
+    eps: float,
+    ratio_max: float,
+) -> tuple[np.ndarray, dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """Renderer lobes relit by a ratio of two shadings (Depict's ratio form of relighting)::
+
+        ρ_j = clamp((aligned_j + ε) / (original_j + ε), 0, ratio_max),
+        lobe_j' = ρ_j · lobe_j,   light_j' = ρ_j · light_j,
+        beauty' = beauty + Σ_j (lobe_j' − lobe_j)
+
+    so the renderer's own lighting, textures and indirect light are kept and only the change of
+    the shading (e.g. Local Light Alignment's aligned lights, :func:`shade_directions`) is applied.
+
+    Parameters
+    ----------
+    beauty : (H, W, 3) the beauty the lobes are part of.
+    lobes : lobe -> ((H, W, 3) radiance, (H, W, 3) light without colour or None).
+    original, aligned : lobe -> (H, W, 3) the two shadings of each lobe.
+    eps : ε > 0 keeps the ratio finite where the original shading is dark.
+    ratio_max : the largest ratio.
+
+    Returns
+    -------
+    (beauty', lobe -> lobe', lobe -> light' for the lobes given a light); one compiled pass per
+    row strip, every input read once.
+    """
+    hgt, wid = beauty.shape[:2]
+    shape = (hgt, wid, 3)
+
+    def flat(a: np.ndarray, what: str) -> np.ndarray:
+        return _flat_rows(a, shape, what)[0]
+
+    base = flat(beauty, "beauty")
+    names = list(lobes)
+    ins = {
+        n: (
+            flat(lobes[n][0], f"lobes[{n!r}]"),
+            None if lobes[n][1] is None else flat(lobes[n][1], f"light of {n!r}"),  # type: ignore[arg-type]
+            flat(aligned[n], f"aligned[{n!r}]"),
+            flat(original[n], f"original[{n!r}]"),
+        )
+        for n in names
+    }
+    out = np.empty(shape, np.float32)
+    new = {n: np.empty(shape, np.float32) for n in names}
+    new_light = {n: np.empty(shape, np.float32) for n in names if lobes[n][1] is not None}
+    acc = out.reshape(hgt, 3 * wid)
+    e, rmax = np.float32(eps), np.float32(ratio_max)
+
+    def strip(r0: int, r1: int) -> None:
+        acc[r0:r1] = base[r0:r1]
+        for n in names:
+            lobe, light, a, o = ins[n]
+            nl = new_light[n].reshape(hgt, 3 * wid)[r0:r1] if light is not None else acc[r0:r0]
+            _ratio_rows(
+                lobe[r0:r1],
+                lobe[r0:r0] if light is None else light[r0:r1],
+                a[r0:r1],
+                o[r0:r1],
+                e,
+                rmax,
+                new[n].reshape(hgt, 3 * wid)[r0:r1],
+                nl,
+                acc[r0:r1],
+            )
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)
+    return out, new, new_light

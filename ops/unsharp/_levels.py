@@ -1,0 +1,386 @@
+"""The coarser levels of the surface pyramid: front-most cells, selective reduction and the
+domain-transform smoothing of each level (on a thread of its own)."""
+
+from __future__ import annotations
+
+import functools
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any
+
+import cv2
+import numpy as np
+
+from ops import color
+from ops.parallel import STRIP_PIXELS
+from ops.pyramid.reduce import halve
+from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _ONE, _SIGMA_C, _WALL, Array
+from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface, _write
+
+_cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
+
+
+def _finish_first_level(lv: _Level, surf: _Surface, sig: Array) -> None:
+    """Level 1 as ``_surface`` averaged it (with the guide's slopes), the cells on a step
+    holding the front-most surface only (``sig``: the signal at full resolution)."""
+    _front_most_cells(lv, surf, sig)
+
+
+class _Gather:
+    """``a[rows, cols]`` of (H, W) or (H, W, C) arrays at fixed points, through the flat index
+    where ``a`` is C-contiguous (NumPy's fast path), by (row, column) elsewhere (a view with a
+    row stride is read in place, not copied)."""
+
+    def __init__(self, rows: Array, cols: Array, w: int) -> None:
+        self.rows, self.cols = rows, cols
+        self.flat = rows * w + cols
+
+    def __call__(self, a: Array) -> Array:
+        if a.flags.c_contiguous:  # (np.take: 3x faster than indexing for rows of channels)
+            return np.take(a.reshape(-1, *a.shape[2:]), self.flat, axis=0)
+        return a[self.rows, self.cols]
+
+
+def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
+    """Make the level-1 cells that straddle a depth step hold the front-most surface only.
+
+    The area average mixes the 2×2 pixels of a cell whatever they show; where a cell sits on a
+    step (it touches a block ``_block_flags`` rejects), its pixels are re-averaged keeping
+    those within _JUMP pixels (plus the cell's own slope) of the nearest one, as
+    ``_reduce_selective`` does for the coarser levels. A one-pixel-wide object in front of a
+    surface then keeps its own cells instead of half-mixing with what lies behind it.
+    """
+    thr = np.float32(_JUMP * 2)
+    fl = _block_flags(lv, thr)
+    cand = _cv.dilate(fl, _BLOCK, anchor=(0, 0))[:-1, :-1]  # cell touches a flagged block
+    _cv.bitwise_and(cand, lv.valid_u8, dst=cand)
+    pts = _cv.findNonZero(cand)
+    if pts is None:
+        return
+    pts = pts.reshape(-1, 2)
+    cx, cy = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
+    cell = cy * lv.cov.shape[1] + cx  # flat index of the cell in its level
+    hf, wf = surf.iz.shape
+    # (4, N): the cell's pixels (top-left, top-right, bottom-left, bottom-right), then cells
+    px = (2 * cx)[None, :] + np.array([0, 1, 0, 1], np.intp)[:, None]
+    py = (2 * cy)[None, :] + np.array([0, 0, 1, 1], np.intp)[:, None]
+    inside = (px < wf) & (py < hf)
+    np.minimum(px, wf - 1, out=px)
+    np.minimum(py, hf - 1, out=py)
+    at = _Gather(py, px, wf)
+    ok = inside & at(surf.valid).view(bool)
+    iz = at(surf.iz)
+    slope = np.float32(0.0)
+    if lv.grad is not None:
+        slope = (np.abs(lv.grad[0].ravel()[cell]) + np.abs(lv.grad[1].ravel()[cell]))[None, :]
+    front = np.where(ok, iz, np.float32(_BIG)).min(axis=0, keepdims=True)
+    # weight 1 within _JUMP/2 (+ the cell's slope) of the front, fading to 0 at _JUMP
+    half = np.float32(0.5) * thr
+    keep = (front + thr + 2.0 * slope - iz) / half
+    keep = np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
+    keep *= ok
+    n = _sum_taps(keep).astype(np.float32)
+    wk = keep / np.maximum(n, np.float32(1e-6))[None, :]
+    np.put(lv.cov, cell, n * np.float32(0.25))
+    vals = np.where(ok, at(sig), np.float32(0.0))  # the signal, 0 off the surface
+    np.put(lv.sig[0], cell, _sum_taps(wk * vals))
+    if len(lv.sig) > 1:  # and its square
+        np.put(lv.sig[1], cell, _sum_taps(wk * (vals * vals)))
+    iz_c = _sum_taps(wk * iz)
+    np.put(lv.iz, cell, iz_c)
+    if surf.lps is not None:
+        np.put(lv.lps, cell, _sum_taps(wk * at(surf.lps)))
+    else:
+        a, b = surf.lps_from
+        np.put(lv.lps, cell, a * iz_c + b)
+    if lv.nrm is not None and surf.normal is not None:
+        nv = at(surf.normal)  # (4, N, 3)
+        np.copyto(nv, np.float32(0.0), where=np.isnan(nv))  # (normals off the surface: any)
+        nv *= wk[:, :, None]
+        nc = _sum_taps(nv)  # (N, 3)
+        for i in range(3):
+            np.put(lv.nrm[i], cell, nc[:, i])
+        if lv.grad is not None:  # the re-averaged cells' slopes
+            gx, gy = _plane_slope(
+                nc[:, 0],
+                nc[:, 1],
+                nc[:, 2],
+                cy.astype(np.float32),
+                cx.astype(np.float32),
+                1,
+                surf,
+            )
+            bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
+            gx[bad] = 0.0
+            gy[bad] = 0.0
+            np.put(lv.grad[0], cell, gx)
+            np.put(lv.grad[1], cell, gy)
+    lv._valid = None
+    # the blocks' flags after the change: only blocks touching a changed cell can differ (cell
+    # validity is kept: each changed cell keeps at least its front-most pixel)
+    lv.flags = (float(thr), _update_flags(lv, thr, fl, cand))
+
+
+def _touching(cells: Array) -> Array:
+    """uint8 (h + 1, w + 1): the 2×2 blocks (the bilinear taps, as in ``_block_flags``) that
+    hold a cell where ``cells`` (uint8, (h, w)) is non-zero; block (i, j) holds cells
+    i−1…i, j−1…j."""
+    near = _cv.copyMakeBorder(cells, 1, 0, 1, 0, _cv.BORDER_CONSTANT, value=0)
+    return _cv.dilate(near, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_CONSTANT, borderValue=0)
+
+
+def _update_flags(lv: _Level, thr: np.float32, fl: Array, changed: Array) -> Array:
+    """``_block_flags(lv, thr)`` from ``fl``, the flags before the cells where ``changed``
+    (uint8, non-zero) changed their guide or slope (not their validity): the blocks touching
+    them are tested again, sparsely, with the same float32 operations."""
+    h, w = lv.cov.shape
+    pts = _cv.findNonZero(_touching(changed))
+    out = fl.copy()
+    if pts is None:
+        return out
+    pts = pts.reshape(-1, 2)
+    bi, bj = pts[:, 1].astype(np.int64), pts[:, 0].astype(np.int64)
+    # (np.clip is slow on small arrays)
+    r0, r1 = np.maximum(bi - 1, 0) * w, np.minimum(bi, h - 1) * w
+    c0, c1 = np.maximum(bj - 1, 0), np.minimum(bj, w - 1)
+    cells = (r0 + c0, r0 + c1, r1 + c0, r1 + c1)  # tl, tr, bl, br
+    cov = lv.cov.ravel()
+    bad = (cov[cells[0]] <= 0) | (cov[cells[1]] <= 0) | (cov[cells[2]] <= 0) | (cov[cells[3]] <= 0)
+    iz = lv.iz.ravel()
+    if lv.grad is None:
+        tl, tr, bl, br = (iz[c] for c in cells)
+    else:
+        hd = np.float32(0.5 * 2**lv.k)  # a power of 2: the products are exact, as in OpenCV
+        gx, gy = lv.grad[0].ravel(), lv.grad[1].ravel()
+        tl = gy[cells[0]] * hd + (gx[cells[0]] * hd + iz[cells[0]])
+        tr = gy[cells[1]] * hd + (gx[cells[1]] * -hd + iz[cells[1]])
+        bl = gy[cells[2]] * -hd + (gx[cells[2]] * hd + iz[cells[2]])
+        br = gy[cells[3]] * -hd + (gx[cells[3]] * -hd + iz[cells[3]])
+    hi = np.maximum(np.maximum(tl, tr), np.maximum(bl, br))
+    lo = np.minimum(np.minimum(tl, tr), np.minimum(bl, br))
+    step = (hi - lo) > thr
+    out[bi, bj] = (bad | step).view(np.uint8)
+    return out
+
+
+def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
+    """Next coarser level, each cell keeping only the front-most surface of its 2×2 block.
+
+    Each sample predicts the depth guide at the block centre along its own plane (normals); the
+    samples within _JUMP (at this level's scale) of the nearest prediction are averaged and the
+    others (a farther surface) dropped, so a coarse cell does not mix an object with what lies
+    behind it, while a steep surface keeps all its samples.
+    """
+    h, w = lv.cov.shape
+    hp, wp = h + h % 2, w + w % 2
+    d = float(2**lv.k)
+    # each sample's prediction at its block centre, half a cell away along its plane
+    if lv.grad is not None:
+        sc, sr = _parity(h, w, d)
+        p = _cv.add(lv.iz, _cv.multiply(lv.grad[0], sc))
+        _cv.add(p, _cv.multiply(lv.grad[1], sr), dst=p)
+    else:
+        p = lv.iz.copy()
+    p[~lv.valid] = _BIG
+    if (hp, wp) != (h, w):
+        p = _cv.copyMakeBorder(p, 0, hp - h, 0, wp - w, _cv.BORDER_CONSTANT, value=float(_BIG))
+    # the nearest prediction of each block (a 2×2 minimum), back on the cells
+    near = _cv.erode(p, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_REPLICATE)[::2, ::2]
+    # weight 1 within _JUMP/2 of the front, fading to 0 at _JUMP (no hard switch along a contact)
+    half = np.float32(0.5 * _JUMP * 2**lv.k)
+    near = near + np.float32(2.0) * half
+    keep = _cv.resize(near, (wp, hp), interpolation=_cv.INTER_NEAREST)[:h, :w]
+    np.subtract(keep, p[:h, :w], out=keep)
+    np.divide(keep, half, out=keep)
+    np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
+    sel = _cv.multiply(lv.cov, keep)
+    cov = halve(sel)
+    inv = np.divide(_ONE, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
+
+    def red(field: Array) -> Array:
+        return _cv.multiply(halve(_cv.multiply(field, sel)), inv)
+
+    iz = red(lv.iz)
+    if surf.lps is None:
+        a, b = surf.lps_from
+        lps = _cv.addWeighted(iz, a, iz, 0.0, b)
+    else:
+        lps = red(lv.lps)
+    out = _Level(
+        lv.k + 1,
+        cov,
+        [red(s) for s in lv.sig],
+        iz,
+        lps,
+        None if lv.nrm is None else [red(n) for n in lv.nrm],
+    )
+    out.grad = _guide_gradient(out, surf)
+    return out
+
+
+_BLOCK = np.ones((2, 2), np.uint8)
+
+
+@functools.lru_cache(maxsize=32)
+def _parity(h: int, w: int, d: float) -> tuple[Array, Array]:
+    """(+d/2, −d/2, +d/2, …) along the columns and along the rows of an (h, w) grid: the
+    offset of each cell from the centre of its 2×2 block, in image pixels. Read-only."""
+    alt = np.array([0.5 * d, -0.5 * d], np.float32)
+    sc = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (w + 1) // 2)[None, :w], (h, w)))
+    sr = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (h + 1) // 2)[:h, None], (h, w)))
+    sc.flags.writeable = False
+    sr.flags.writeable = False
+    return sc, sr
+
+
+@functools.lru_cache(maxsize=16)
+def _ramp(h: int, w: int) -> Array:
+    """(KNEE/2)(row + column), read-only (cached per level shape)."""
+    ramp = np.add.outer(np.arange(h, dtype=np.float32), np.arange(w, dtype=np.float32))
+    ramp *= np.float32(0.5 * _KNEE)
+    ramp.flags.writeable = False
+    return ramp
+
+
+_SMOOTHER: ThreadPoolExecutor | None = None
+_SMOOTHER_LOCK = threading.Lock()
+
+
+def _smoother() -> ThreadPoolExecutor:
+    """The thread the pyramid's domain transforms run on, in the background of the rest of
+    its work (one, shared, created on first use; a forked child makes its own)."""
+    global _SMOOTHER
+    with _SMOOTHER_LOCK:
+        if _SMOOTHER is None:
+            _SMOOTHER = ThreadPoolExecutor(1, "depict-smooth")
+        return _SMOOTHER
+
+
+def _forget_smoother() -> None:  # in a forked child: the parent's thread is not there
+    global _SMOOTHER, _SMOOTHER_LOCK
+    _SMOOTHER, _SMOOTHER_LOCK = None, threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_smoother)
+
+
+def _smooth_level(
+    lv: _Level, nsig: int, normal_sigma: float | None, box: tuple[slice, slice] | None = None
+) -> list[Array]:
+    """Domain-transform smoothing (normalised convolution, σ = 2 cells) of the first ``nsig``
+    signal channels of a level, guided by the depth guide (and normals), empty cells walled off.
+
+    The depth guide I enters as the pair I/2 ± (KNEE/2)(x + y): OpenCV's transform adds the L1
+    norm of the guide step, and |a + b| + |a − b| = 2 max(|a|, |b|), so each step costs
+    1 + max(|ΔI|, KNEE) instead of 1 + |ΔI|. Surfaces tilted less than atan(KNEE) are smoothed
+    as if flat (σ is rescaled by 1 + KNEE), steeper ones and depth steps are stretched as before:
+    this removes the crease that the L1 arc length |ΔI| has where the depth slope changes sign
+    (it showed as lines across the middle of a sphere in L* − L*_σ).
+    """
+    bx = box if box is not None else (slice(None), slice(None))
+    iz, valid = lv.iz[bx], lv.valid[bx]
+    h, w = iz.shape
+    gz = _cv.multiply(iz, 0.5 * _DT_DEPTH_GAIN / 2**lv.k)  # 0 in empty cells
+    _, top, _, _ = _cv.minMaxLoc(gz, mask=valid.view(np.uint8))
+    empty = (~valid).astype(np.float32)
+    _cv.scaleAdd(empty, top + 0.5 * _WALL, gz, dst=gz)  # walls around the surface
+    ramp = _ramp(h, w)
+    chans = [_cv.add(gz, ramp), _cv.subtract(gz, ramp)]
+    sigma = _SIGMA_C * (1.0 + _KNEE)
+    if lv.nrm is not None and normal_sigma is not None:
+        s = sigma / normal_sigma
+        chans += [_cv.multiply(n[bx], s) for n in lv.nrm[:2]]
+    guide = _cv.merge(chans)
+    src = _cv.merge([g[bx] for g in lv.sig[:nsig]]) if nsig > 1 else lv.sig[0][bx]
+    out = _cv.ximgproc.dtFilter(
+        guide,
+        src,
+        sigmaSpatial=sigma,
+        sigmaColor=sigma,
+        mode=_DT_MODE,
+        numIters=3,
+    )
+    # (empty cells hold whatever: nothing reads them - flagged blocks skip them)
+    return [np.ascontiguousarray(out[:, :, i]) for i in range(nsig)] if nsig > 1 else [out]
+
+
+_BIG = np.float32(1.0e30)
+
+
+def _block_flags(lv: _Level, thr: np.float32) -> Array:
+    """Per 2×2 block of cells (the bilinear taps), padded: 1 where it is not one surface.
+
+    Entry (i, j) covers cells (i−1…i, j−1…j) (clamped at the borders). A block is flagged when
+    one of its cells is empty, or when the four cells, each extrapolating the depth guide along
+    its own plane (``grad``) to the block's centre, disagree by more than ``thr``: a step
+    between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1). Large levels are
+    done in strips of block rows over the shared pool (OpenCV's element-wise operations run on
+    one thread each).
+    """
+    h, w = lv.cov.shape
+    out = np.empty((h + 1, w + 1), np.uint8)
+    rep = _cv.BORDER_REPLICATE
+    d = float(2**lv.k)
+
+    def rows(r: slice) -> None:
+        # block rows r read cell rows r.start − 1 … r.stop − 1, clamped (replicated)
+        c = slice(max(r.start - 1, 0), min(r.stop, h))
+        pad = (int(r.start == 0), int(r.stop > h), 1, 1)
+        inv = _cv.copyMakeBorder(_cv.compare(lv.cov[c], 0.0, _cv.CMP_LE), *pad, rep)
+        bad = _cv.dilate(inv, _BLOCK, anchor=(0, 0), borderType=rep)[:-1, :-1]  # 2×2 maximum
+        # the four cells' predictions at the block centre, I + (±½, ±½) 2^k ∇I
+        iz = _cv.copyMakeBorder(lv.iz[c], *pad, rep)
+        if lv.grad is None:
+            tl, tr, bl, br = iz[:-1, :-1], iz[:-1, 1:], iz[1:, :-1], iz[1:, 1:]
+        else:
+            gx, gy = (_cv.copyMakeBorder(g[c], *pad, rep) for g in lv.grad)
+            right, left = _cv.scaleAdd(gx, 0.5 * d, iz), _cv.scaleAdd(gx, -0.5 * d, iz)
+            tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
+            tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
+            bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
+            br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
+        hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
+        lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
+        step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
+        _write(_cv.min(_cv.bitwise_or(bad, step, dst=bad), 1, dst=out[r]), out, r)
+
+    if (h + 1) * (w + 1) >= 2 * STRIP_PIXELS:
+        color.row_strips(h + 1, w + 1, rows, max(1, STRIP_PIXELS // 2 // (w + 1)))
+    else:
+        rows(slice(0, h + 1))
+    return out
+
+
+def _sub_resize(a: Array, f: int, rows: slice, cols: slice) -> Array:
+    """Rows ``rows``, columns ``cols`` of the bilinear ×``f`` upsampling of ``a`` (as
+    ``cv2.resize(a, (w f, h f), INTER_LINEAR)``, bit for bit), resizing only the cells they
+    read: bilinear taps are local, and OpenCV's weights depend on the position relative to the
+    crop only through f · (first cell), an integer. A view (with a row stride) of a new array."""
+    hc, wc = a.shape[:2]
+    y0, y1 = max(rows.start // f - 1, 0), min((rows.stop - 1) // f + 2, hc)
+    x0, x1 = max(cols.start // f - 1, 0), min((cols.stop - 1) // f + 2, wc)
+    size = ((x1 - x0) * f, (y1 - y0) * f)
+    sub = _cv.resize(a[y0:y1, x0:x1], size, interpolation=_cv.INTER_LINEAR)
+    return sub[rows.start - y0 * f : rows.stop - y0 * f, cols.start - x0 * f : cols.stop - x0 * f]
+
+
+def _sum_taps(a: Array) -> Array:
+    """Sum of a (taps, points) array over its taps, in the order NumPy sums a (points, taps)
+    row (sequential below 8 terms, 8 partial sums and a pairwise tree from 8 to 128)."""
+    t = a.shape[0]
+    if t < 8:
+        res = a[0].copy()
+        for i in range(1, t):
+            res += a[i]
+        return res
+    r = a[:8].copy()
+    i = 8
+    while i + 8 <= t:
+        r += a[i : i + 8]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    for j in range(i, t):
+        res += a[j]
+    return res

@@ -1,0 +1,245 @@
+"""The viewer's work on the service's worker processes (:meth:`service.http.deps.Services.run`,
+so within its queue and time limits): what a frame holds, pictures of its layers, and previews.
+
+Previews run on a copy of the frame shrunk by a whole number near the ratio of its height to the
+preview height (:func:`shrink_factor`, :func:`downscale`), made once per frame and factor and
+kept in the frame's folder (``small_<factor>.pkl``, with the score of the input at that size).
+Every size of the operators is relative to the image height, so a look tuned on the preview
+carries to the full-resolution frame, which
+``GET /v1/frames/{id}/enhanced.exr`` enhances exactly as ``depict enhance`` does
+(:func:`service.http.worker.enhance_job`).
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import pickle
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from analysis.score import score_frame
+from gbuffer.atomic import atomic_path
+from gbuffer.errors import FrameError
+from gbuffer.exr import read_layout
+from gbuffer.frame import Frame, Passthrough
+from gbuffer.io import inspect
+from gbuffer.preview import picture, write_png
+from service import pipeline
+from service.enhance import ReadRequest
+from service.registry import Context, runnable
+
+#: The layer name of the per-pixel congruence score (LLA Eq. 2) in pictures.
+SCORE_MAP = "score_map"
+#: The geometry buffers: each preview pixel keeps one source pixel's depth, position, normal and
+#: coverage together, as a renderer's centre sample does (averaging them across a silhouette
+#: would invent surfaces between the object and what lies behind it, and averaged normals are
+#: not what the operators' surface filters expect); the radiance buffers are block averages.
+_GEOMETRY = ("depth", "position", "normal", "coverage")
+
+
+#: Parameters that may name a layer of the file (a mask, a gain map, an ARM, ...): a preview
+#: whose steps set one also loads the file's channels.
+FILE_PARAMETERS = frozenset({"mask", "gain_map", "unlit", "arm", "toon"})
+
+
+def reads_file_layers(steps: pipeline.Pipeline) -> bool:
+    """Whether a step sets a parameter of :data:`FILE_PARAMETERS`."""
+    return any(FILE_PARAMETERS & set(step.params) for step in steps.spec.steps)
+
+
+def shrink_factor(frame_height: int, height: int) -> int:
+    """The whole number the frame's height is divided by for a preview about ``height`` rows
+    high: the nearest to the ratio (a whole number, so that the geometry is sampled at the same
+    place of every block: a fractional step would alternate between two spacings, and the
+    operators' derivatives would show the pattern)."""
+    return max(1, round(frame_height / max(1, height)))
+
+
+def _centres(pixels: np.ndarray, factor: int) -> np.ndarray:
+    """The pixel at the centre of each whole factor × factor block (a view)."""
+    rows, cols = (max(1, n // factor) for n in pixels.shape[:2])
+    c = factor // 2
+    return pixels[c : rows * factor : factor, c : cols * factor : factor]
+
+
+def downscale(frame: Frame, factor: int) -> Frame:
+    """``frame`` shrunk by ``factor`` (blocks of factor × factor pixels: the centre pixel of
+    :data:`_GEOMETRY`, the mean of the rest), its display window and origin with it, without
+    the file's passthrough; the same buffers when ``factor`` is 1."""
+    if factor <= 1:
+        return replace(frame, passthrough=Passthrough(), holes=None, hole_beauty=None)
+    rows, cols = (max(1, n // factor) for n in frame.shape)
+    buffers = {}
+    for name, data in frame.buffers.items():
+        if name in _GEOMETRY:
+            small = _centres(data, factor)
+        else:
+            block = data[: rows * factor, : cols * factor]
+            small = cv2.resize(block, (cols, rows), interpolation=cv2.INTER_AREA)
+        buffers[name] = np.ascontiguousarray(small, np.float32).reshape(rows, cols, *data.shape[2:])
+    assert frame.display_size is not None
+    dw, dh = frame.display_size
+    return replace(
+        frame,
+        buffers=buffers,
+        display_size=(max(1, dw // factor), max(1, dh // factor)),
+        origin=(frame.origin[0] // factor, frame.origin[1] // factor),
+        outputs={},
+        passthrough=Passthrough(),
+        holes=None,
+        hole_beauty=None,
+    )
+
+
+#: Primaries and white point (x, y each: red, green, blue, white) of the usual colour spaces.
+_PRIMARIES = {
+    "Rec.709 / sRGB primaries": (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290),
+    "ACES2065-1 (AP0)": (0.7347, 0.2653, 0.0, 1.0, 0.0001, -0.077, 0.32168, 0.33767),
+    "ACEScg (AP1)": (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767),
+    "Rec.2020": (0.708, 0.292, 0.170, 0.797, 0.131, 0.046, 0.3127, 0.3290),
+}
+#: String attributes where renderers and tools name the colour space.
+_COLOUR_NAMES = ("colorSpace", "colorspace", "oiio:ColorSpace", "interpretation")
+
+
+def colour_space(source: str) -> str:
+    """The colour space the header states: its ``chromaticities`` matched against the usual
+    primaries, or a colour space name; OpenEXR's default (Rec.709 primaries) when none."""
+    attributes = read_layout(source).parts[0].attributes
+    for name in _COLOUR_NAMES:
+        raw = attributes.get(name)
+        if raw is not None and raw.type == "string":
+            return f"{raw.data.decode('utf-8', 'replace')} ({name} attribute)"
+    raw = attributes.get("chromaticities")
+    if raw is None or len(raw.data) != 32:
+        return "not stated: linear Rec.709 primaries assumed (OpenEXR's default)"
+    values = np.frombuffer(raw.data, "<f4")
+    for label, primaries in _PRIMARIES.items():
+        if np.allclose(values, primaries, atol=2e-3):
+            return f"{label} (chromaticities attribute)"
+    return "chromaticities " + ", ".join(f"{v:.4g}" for v in values)
+
+
+def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
+    """What ``depict inspect --json`` says of the uploaded frame, with the layers the viewer
+    can show (its buffers and the score map)."""
+    info = inspect(source, read.preset, read.camera, read.options)
+    info["operators"] = runnable(info)
+    info["colour_space"] = colour_space(source)
+    scored = "depth" in info["buffers"]
+    info["layers"] = [*info["buffers"], *([SCORE_MAP] if scored else [])]
+    return {"info": info}
+
+
+def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
+    """The frame shrunk by ``factor`` and the score of its beauty (None without depth), made on
+    first use and kept in the frame's folder, with the file's channels shrunk beside them
+    (:func:`_file_layers`)."""
+    cache = folder / f"small_{factor}.pkl"
+    if cache.is_file():
+        with open(cache, "rb") as f:
+            loaded: tuple[Frame, dict[str, Any] | None] = pickle.load(f)  # our own file
+        return loaded
+    frame = read.read(folder / "in.exr")
+    small = downscale(frame, factor)
+    score = _score(small)
+    for path, data in (
+        (cache.with_suffix(".layers.pkl"), shrink_passthrough(frame, factor)),
+        (cache, (small, score)),
+    ):
+        with atomic_path(path) as tmp, open(tmp, "wb") as f:
+            pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
+    return small, score
+
+
+def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
+    """``small`` with the file's channels (shrunk by ``factor``), for the steps that read a
+    layer of the file (:data:`FILE_PARAMETERS`)."""
+    with open(folder / f"small_{factor}.layers.pkl", "rb") as f:
+        passthrough: Passthrough = pickle.load(f)  # our own file
+    return replace(small, passthrough=passthrough)
+
+
+def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
+    """The channels of the frame's file on its pixel grid, shrunk by ``factor`` as the geometry
+    is (one source pixel a block: Cryptomatte ids and index passes stay exact), with the headers
+    as read (manifests, names); other channels are left out."""
+    parts = []
+    for header, channels in frame.passthrough.parts:
+        small = {}
+        for name, value in channels.items():
+            pixels = np.asarray(getattr(value, "pixels", value))
+            if pixels.shape[:2] == frame.shape:
+                small[name] = np.ascontiguousarray(_centres(pixels, factor))
+        parts.append((dict(header), small))
+    return Passthrough(parts, frame.passthrough.primary)
+
+
+def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | None:
+    """:func:`analysis.score.score_frame`, or None when the frame has no depth to score against."""
+    try:
+        return score_frame(frame, maps=maps, **params)
+    except FrameError:
+        return None
+
+
+def _png(rgb: np.ndarray, path: Path) -> str:
+    """The picture as a base64 PNG (written to ``path`` on the way)."""
+    write_png(rgb, path)
+    return base64.b64encode(path.read_bytes()).decode("ascii")
+
+
+def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
+    shown = frame.copy()
+    shown.outputs = dict(score["layers"])
+    return picture(shown, "congruence")
+
+
+def layer_job(folder: str, factor: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
+    """A picture of ``layer`` of the frame shrunk by ``factor``, written to ``out`` (PNG)."""
+    small, _ = _small(Path(folder), factor, read)
+    if layer == SCORE_MAP:
+        score = _score(small, maps=True)
+        if score is None:
+            raise FrameError("the frame has no depth: no score map")
+        write_png(_score_picture(small, score), out)
+    else:
+        write_png(picture(small, layer), out)
+    return {"size": list(small.shape[::-1])}
+
+
+def preview_job(
+    folder: str,
+    factor: int,
+    steps: pipeline.Pipeline,
+    read: ReadRequest,
+    work: str,
+    exposure: float,
+    score_map: bool,
+) -> dict[str, Any]:
+    """``steps`` on the frame shrunk by ``factor``: the result as a base64 PNG, the congruence
+    score of the input and of the result (on the input's scale) and, with ``score_map``, the
+    result's per-pixel score as a base64 PNG."""
+    small, before = _small(Path(folder), factor, read)
+    if reads_file_layers(steps):
+        small = _file_layers(Path(folder), factor, small)
+    out, op_s = pipeline.run_timed(small, steps, Context(files=False))
+    answer: dict[str, Any] = {
+        "image": _png(picture(out, "beauty", exposure), Path(work) / "after.png"),
+        "size": list(out.shape[::-1]),
+        "op_s": op_s,
+        "score": None,
+        "score_map": None,
+        "pipeline": json.loads(steps.spec.model_dump_json()),
+    }
+    if before is not None:
+        after = score_frame(out, maps=score_map, shading_norm=before["shading_norm"])
+        answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
+        if score_map:
+            answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
+    return answer

@@ -1,0 +1,99 @@
+"""The shared kernel numerics (ops/numerics.py): each polynomial within its stated error of
+NumPy's float64 function over its whole domain."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ops.jit import kernel
+from ops.numerics import EXPF_MAX, atan2_upper, dot3_row, exp_neg, expf, sincos_upper
+
+
+@kernel
+def _exp_all(x, out):  # type: ignore[no-untyped-def]
+    for j in range(x.shape[0]):
+        out[j] = expf(x[j])
+
+
+def _ulps(got: np.ndarray, x: np.ndarray) -> np.ndarray:
+    exact = np.exp(x.astype(np.float64))
+    return np.abs(got - exact) / np.spacing(exact.astype(np.float32))
+
+
+def test_expf_is_within_two_ulp_over_its_range() -> None:
+    x = np.concatenate(
+        [
+            np.linspace(-EXPF_MAX, EXPF_MAX, 1_000_001, dtype=np.float32),
+            np.linspace(-1.0, 1.0, 200_001, dtype=np.float32),
+            np.float32([1e-7, -1e-7, 1e-30, -1e-30]),
+        ]
+    )
+    got = np.empty_like(x)
+    _exp_all(x, got)
+    assert _ulps(got, x).max() <= 2.0
+
+
+def test_expf_is_exact_at_zero_and_clamps_outside_its_range() -> None:
+    x = np.float32([0.0, -0.0, 100.0, np.inf, -100.0, -np.inf])
+    got = np.empty_like(x)
+    _exp_all(x, got)
+    assert got[0] == 1.0 and got[1] == 1.0
+    top = np.float32(np.exp(np.float64(EXPF_MAX)))
+    bottom = np.float32(np.exp(-np.float64(EXPF_MAX)))
+    np.testing.assert_allclose(got[2:4], top, rtol=3e-7)
+    np.testing.assert_allclose(got[4:], bottom, rtol=3e-7)
+    assert np.isfinite(got).all()
+
+
+@kernel
+def _apply_exp_neg(u, out):  # type: ignore[no-untyped-def]
+    for j in range(u.shape[0]):
+        out[j] = exp_neg(u[j])
+
+
+@kernel
+def _apply_atan2(y, x, out):  # type: ignore[no-untyped-def]
+    for j in range(y.shape[0]):
+        out[j] = atan2_upper(y[j], x[j])
+
+
+@kernel
+def _apply_sincos(theta, s, c):  # type: ignore[no-untyped-def]
+    for j in range(theta.shape[0]):
+        s[j], c[j] = sincos_upper(theta[j])
+
+
+def test_exp_neg_is_within_2e7_and_zero_far_out() -> None:
+    u = np.concatenate([np.linspace(0.0, 70.0, 700_001, dtype=np.float32), np.float32([1e9])])
+    got = np.empty_like(u)
+    _apply_exp_neg(u, got)
+    assert np.abs(got - np.exp(-u.astype(np.float64))).max() <= 2e-7
+    assert got[0] == 1.0 and got[-1] < 1e-27
+
+
+def test_atan2_upper_is_within_4e7_rad_on_the_upper_half_plane() -> None:
+    rng = np.random.default_rng(1)
+    y = np.abs(rng.normal(size=200_000)).astype(np.float32)
+    x = rng.normal(size=200_000).astype(np.float32)
+    y[:3], x[:3] = 0.0, np.float32([1.0, -1.0, 0.0])  # the axis both ways and the origin
+    got = np.empty_like(y)
+    _apply_atan2(y, x, got)
+    exact = np.arctan2(y.astype(np.float64), x.astype(np.float64))
+    assert np.abs(got - exact).max() <= 4e-7  # 1.5 float32 ulp at π
+    assert got[0] == 0.0 and abs(got[1] - np.pi) < 1e-6 and got[2] == 0.0
+
+
+def test_sincos_upper_is_within_2e7_on_zero_to_pi() -> None:
+    theta = np.linspace(0.0, np.pi, 400_001, dtype=np.float32)
+    s, c = np.empty_like(theta), np.empty_like(theta)
+    _apply_sincos(theta, s, c)
+    t64 = theta.astype(np.float64)
+    assert np.abs(s - np.sin(t64)).max() <= 2e-7
+    assert np.abs(c - np.cos(t64)).max() <= 2e-7
+
+
+def test_dot3_row_weighs_interleaved_triples() -> None:
+    rgb = np.arange(12, dtype=np.float32)
+    out = np.empty(4, np.float32)
+    dot3_row(rgb, np.float32(1.0), np.float32(10.0), np.float32(100.0), out)
+    np.testing.assert_array_equal(out, [210.0, 543.0, 876.0, 1209.0])
