@@ -221,6 +221,7 @@ def test_not_an_exr_400(client: Any) -> None:
         ({"output_layer": "a/b"}, "output_layer"),
         ({"output_layer": "ViewLayer..Depict"}, "output_layer"),
         ({"normal_space": "up"}, "normal_space"),
+        ({"layout": "beside"}, "layout"),
     ],
 )
 def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> None:

@@ -59,6 +59,7 @@ def enhance(args: argparse.Namespace) -> int:
             normal_space=args.normal_space,
             debug_layers=args.debug_layers,
             output_layer=args.output_layer,
+            layout=args.layout,
         )
     print(f"wrote {args.output}")
     return 0
