@@ -26,7 +26,6 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
 import cv2
 import numpy as np
@@ -206,18 +205,83 @@ def _dlt_rms(p: np.ndarray, uv: np.ndarray, xyz: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum(res**2, axis=1))))
 
 
+@dataclass(frozen=True)
+class _Fit:
+    """A refinement's parameters and its robust cost."""
+
+    x: np.ndarray
+    cost: float
+
+
+#: The soft-L1 loss's scale: pixels off by more than this weigh less and less.
+_LOSS_SCALE_PX = 0.5
+
+
+def _robust_cost(r: np.ndarray) -> float:
+    """Σ C² (√(1 + (r/C)²) − 1): the soft-L1 loss, quadratic below C and linear beyond."""
+    c2 = _LOSS_SCALE_PX**2
+    return float(c2 * np.sum(np.sqrt(1.0 + r * r / c2) - 1.0))
+
+
+def _jacobian(f: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
+    """Central differences of ``f`` at ``x`` (a few parameters, a few thousand residuals)."""
+    cols = []
+    for i in range(len(x)):
+        h = 1e-6 * max(1.0, abs(float(x[i])))
+        step = np.zeros_like(x)
+        step[i] = h
+        cols.append((f(x + step) - f(x - step)) / (2.0 * h))
+    return np.stack(cols, axis=1)
+
+
 def _refine(
     residuals: Callable[..., np.ndarray],
     x0: np.ndarray,
     uv: np.ndarray,
     xyz: np.ndarray,
     centre: np.ndarray,
-) -> Any:
-    """Levenberg-Marquardt-style trust-region refinement with a robust (soft L1) loss: pixels
-    off by more than half a pixel (mixed edge samples) weigh less and less."""
-    from scipy.optimize import least_squares
+    iterations: int = 200,
+) -> _Fit:
+    """Levenberg-Marquardt with a robust (soft L1) loss: pixels off by more than half a pixel
+    (mixed edge samples) weigh less and less. Each step solves the Gauss-Newton system weighted
+    by the loss's slope (iteratively reweighted least squares), damped until the cost falls."""
 
-    return least_squares(residuals, x0, args=(uv, xyz, centre), loss="soft_l1", f_scale=0.5)
+    def f(x: np.ndarray) -> np.ndarray:
+        return residuals(x, uv, xyz, centre)
+
+    x = np.asarray(x0, np.float64)
+    r = f(x)
+    cost, damping = _robust_cost(r), 1e-3
+    for _ in range(iterations):
+        jac = _jacobian(f, x)
+        weight = 1.0 / np.sqrt(1.0 + r * r / _LOSS_SCALE_PX**2)
+        normal = jac.T @ (weight[:, None] * jac)
+        gradient = jac.T @ (weight * r)
+        while damping < 1e12:
+            damped = normal + damping * np.diag(np.diag(normal) + 1e-12)
+            step = np.linalg.solve(damped, -gradient)
+            r_new = f(x + step)
+            new_cost = _robust_cost(r_new)
+            if new_cost < cost:
+                break
+            damping *= 10.0
+        else:
+            break  # no step lowers the cost: a minimum
+        x, r, damping = x + step, r_new, max(damping / 10.0, 1e-12)
+        done = cost - new_cost <= 1e-12 * cost or np.linalg.norm(step) <= 1e-12 * (
+            np.linalg.norm(x) + 1e-12
+        )
+        cost = new_cost
+        if done:
+            break
+    return _Fit(x=x, cost=cost)
+
+
+def _rq(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """a = R Q, R upper triangular and Q orthogonal (a QR decomposition of a flipped)."""
+    flip = np.eye(3)[::-1]
+    q, r = np.linalg.qr((flip @ a).T)
+    return flip @ r.T @ flip, flip @ q.T
 
 
 # -- perspective ---------------------------------------------------------------------------------
@@ -225,11 +289,9 @@ def _refine(
 
 def _decompose(p: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
     """P = K [R | t] -> (focal in pixels, OpenGL rotation, OpenGL translation)."""
-    from scipy.linalg import rq  # scipy on first solve only: reading a frame need not pay it
-
     if np.linalg.det(p[:, :3]) < 0:
         p = -p
-    k, r = rq(p[:, :3])
+    k, r = _rq(p[:, :3])
     d = np.diag(np.sign(np.diag(k)))
     k, r = k @ d, d @ r
     t = np.linalg.solve(k, p[:, 3])

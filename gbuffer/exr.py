@@ -25,7 +25,9 @@ pLinear) and header attribute:
   identical); new or changed values are serialised by the binding.
 
 The container (magic, version flags, headers, offset tables, chunks) is assembled here and
-written to a temporary file in the target directory, renamed into place only when complete.
+written to a temporary file in the target directory, renamed into place only when complete;
+chunks kept from the source are copied from it one at a time (never all held in memory), and a
+re-encoded part's chunks are views of the binding's encoding (not copies).
 
 Known limits of the binding, reported as :class:`FrameError`: deep parts are not read; a
 *changed* part cannot have subsampled channels; a changed mip-mapped part is written with one
@@ -39,6 +41,7 @@ import io
 import math
 import os
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO
@@ -551,6 +554,61 @@ def _decode(out: ExrPassthrough, where: str) -> None:
         raise FrameError(f"{where}: cannot decode ({_one_line(exc)})") from exc
 
 
+class ReleasedChannel:
+    """A channel of an :class:`ExrPassthrough` whose decoded pixels were let go
+    (:func:`release_pixels`): its name, pixel type and sampling stay; ``pixels`` decodes the
+    file again (once for all its channels) the first time anything asks for them."""
+
+    def __init__(self, name: str, channel: Any, source: _Redecode) -> None:
+        self.name = name
+        self.xSampling = getattr(channel, "xSampling", 1)
+        self.ySampling = getattr(channel, "ySampling", 1)
+        self.pLinear = getattr(channel, "pLinear", False)
+        self.dtype = channel.pixels.dtype
+        self._source = source
+        self._part = -1
+
+    @property
+    def pixels(self) -> np.ndarray:
+        return self._source.pixels(self._part, self.name)
+
+
+@dataclass
+class _Redecode:
+    """The file of a passthrough decoded again, on first use, for its released channels."""
+
+    path: str
+    parts: list[dict[str, Any]] | None = None
+
+    def pixels(self, part: int, name: str) -> np.ndarray:
+        if self.parts is None:
+            with captured_output():
+                decoded = OpenEXR.File(self.path, separate_channels=True).parts
+                self.parts = [dict(p.channels) for p in decoded]
+        pixels: np.ndarray = self.parts[part][name].pixels
+        pixels.flags.writeable = False
+        return pixels
+
+
+def release_pixels(pt: Passthrough) -> None:
+    """Let go of the decoded pixels of every channel of ``pt`` (an :class:`ExrPassthrough` read
+    from a file), keeping what writing needs: its parts are still copied chunk for chunk, and a
+    channel's ``pixels`` are decoded again if something reads them. For a write that adds
+    layers beside the input's parts (the ``part`` and ``sidecar`` layouts), once the frame's
+    buffers are made: the file's decoded channels need not stay in memory beside them."""
+    if not isinstance(pt, ExrPassthrough) or not pt.path or pt.layout is None:
+        return
+    source = _Redecode(pt.path)
+    for index, (_, channels) in enumerate(pt.parts):
+        for name, channel in list(channels.items()):
+            if isinstance(channel, ReleasedChannel) or not hasattr(channel, "pixels"):
+                continue
+            released = ReleasedChannel(name, channel, source)
+            released._part = index
+            channels[name] = released
+            pt.channel_ids[index][name] = (id(released), 0)
+
+
 def _library_words(printed: list[str], where: str) -> str:
     """The most telling line the OpenEXR library printed: its last error, without the path."""
     errors = [line for line in printed if "ERR" in line or "rror" in line] or printed
@@ -598,20 +656,36 @@ def _physical_order(offsets: list[int]) -> list[int]:
     return sorted(range(len(offsets)), key=offsets.__getitem__)
 
 
-def _extract_chunks(data: bytes, layout: FileLayout, index: int) -> list[bytes]:
-    """Chunks of part ``index`` in table order, without the multi-part part-number prefix."""
+def _extract_chunks(data: io.BytesIO, layout: FileLayout, index: int) -> list[memoryview]:
+    """Chunks of part ``index`` in table order, without the multi-part part-number prefix (views
+    of ``data``'s buffer, not copies)."""
     part = layout.parts[index]
-    f = io.BytesIO(data)
     skip = 4 if layout.multipart else 0
+    view = data.getbuffer()
     chunks = []
     for off in part.offsets:
-        n = _chunk_size(f, off, part, layout.multipart)
-        chunks.append(data[off + skip : off + n])
+        n = _chunk_size(data, off, part, layout.multipart)
+        chunks.append(view[off + skip : off + n])
     return chunks
 
 
-def _source_chunks(pt: ExrPassthrough, index: int) -> list[bytes] | None:
-    """The original chunks of part ``index``, or None when the source file changed."""
+@dataclass
+class _FileChunks:
+    """Chunks of a part left in the source file: (start, size) byte ranges, in table order,
+    without the multi-part part-number prefix; copied to the output without being held."""
+
+    path: str
+    ranges: list[tuple[int, int]]
+
+    def __len__(self) -> int:
+        return len(self.ranges)
+
+    def size(self, k: int) -> int:
+        return self.ranges[k][1]
+
+
+def _source_chunks(pt: ExrPassthrough, index: int) -> _FileChunks | None:
+    """Where the original chunks of part ``index`` are, or None when the source file changed."""
     if pt.layout is None or not pt.path:
         return None
     try:
@@ -620,13 +694,12 @@ def _source_chunks(pt: ExrPassthrough, index: int) -> list[bytes] | None:
             return None
         part = pt.layout.parts[index]
         skip = 4 if pt.layout.multipart else 0
-        chunks = []
+        ranges = []
         with open(pt.path, "rb") as f:
             for off in part.offsets:
                 n = _chunk_size(f, off, part, pt.layout.multipart)
-                f.seek(off + skip)
-                chunks.append(f.read(n - skip))
-        return chunks
+                ranges.append((off + skip, n - skip))
+        return _FileChunks(pt.path, ranges)
     except OSError:
         return None
 
@@ -656,7 +729,7 @@ def _binding_attributes(values: dict[str, Any], where: str) -> dict[str, RawAttr
 
 def _encode_part(
     header: dict[str, Any], channels: dict[str, Any], storage: str, where: str, part_no: int
-) -> tuple[dict[str, RawAttribute], list[bytes], list[int], list[str]]:
+) -> tuple[dict[str, RawAttribute], list[memoryview], list[int], list[str]]:
     """Encode one part with the binding as a standalone file; its attributes and chunks."""
     warnings = []
     hdr = {k: _plain(header[k]) for k in _ENCODE_KEYS if k in header}
@@ -709,8 +782,10 @@ def _encode_part(
             f"part {part_no}: the OpenEXR binding cannot write it with {codec} "
             f"({_one_line(exc)}); written with ZIP"
         )
-    layout = _read_layout(io.BytesIO(data), len(data), where)
-    _read_offsets(io.BytesIO(data), layout, where)
+    size = data.seek(0, io.SEEK_END)
+    data.seek(0)
+    layout = _read_layout(data, size, where)
+    _read_offsets(data, layout, where)
     part = layout.parts[0]
     return (
         part.attributes,
@@ -720,11 +795,11 @@ def _encode_part(
     )
 
 
-def _encode(header: dict[str, Any], channels: dict[str, Any]) -> bytes:
+def _encode(header: dict[str, Any], channels: dict[str, Any]) -> io.BytesIO:
     """One part encoded by the binding as a standalone file (the binding may raise)."""
     buf = io.BytesIO()
     OpenEXR.File(header, dict(channels)).write(buf)
-    return buf.getvalue()
+    return buf
 
 
 def _unchanged_pixels(pt: Passthrough, index: int, header: dict[str, Any]) -> bool:
@@ -735,6 +810,10 @@ def _unchanged_pixels(pt: Passthrough, index: int, header: dict[str, Any]) -> bo
     if set(channels) != set(ids):
         return False
     for name, ch in channels.items():
+        if isinstance(ch, ReleasedChannel):  # its pixels, if decoded again, are read-only
+            if id(ch) != ids[name][0]:
+                return False
+            continue
         pixels = getattr(ch, "pixels", None)
         if (id(ch), id(pixels)) != ids[name] or pixels is None or pixels.flags.writeable:
             return False
@@ -772,7 +851,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
     )
     warnings: list[str] = []
     headers: list[dict[str, RawAttribute]] = []
-    all_chunks: list[list[bytes]] = []
+    all_chunks: list[list[memoryview] | _FileChunks] = []
     storages: list[str] = []
     orders: list[list[int]] = []
     for i, (header, channels) in enumerate(passthrough.parts):
@@ -794,7 +873,7 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         )
         if kind.startswith("deep"):
             raise FrameError(f"{where}: part {i} is deep; deep parts cannot be written")
-        chunks = None
+        chunks: list[memoryview] | _FileChunks | None = None
         if _unchanged_pixels(passthrough, i, header):
             assert exr_pt is not None
             chunks = _source_chunks(exr_pt, i)
@@ -839,27 +918,28 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         all_chunks.append(chunks)
         orders.append(order)
         storages.append(kind)
-    data = _assemble(headers, all_chunks, orders, storages, multipart)
     try:
         with atomic_path(path) as tmp:
             with open(tmp, "wb") as f:
-                f.write(data)
+                _assemble(f, headers, all_chunks, orders, storages, multipart)
     except OSError as exc:
         raise FrameError(f"{where}: cannot write ({exc.strerror or exc})") from None
     return warnings
 
 
 def _assemble(
+    out: BinaryIO,
     headers: list[dict[str, RawAttribute]],
-    chunks: list[list[bytes]],
+    chunks: Sequence[Sequence[bytes | memoryview] | _FileChunks],
     orders: list[list[int]],
     storages: list[str],
     multipart: bool,
-) -> bytes:
-    """Magic, version flags, headers, offset tables and chunks of an EXR file.
+) -> None:
+    """Write magic, version flags, headers, offset tables and chunks of an EXR file to ``out``.
 
     ``orders[p]`` lists part p's chunk indices in the order they are laid out in the file
-    (e.g. decreasing y for ``DECREASING_Y``); the offset table stays in index order.
+    (e.g. decreasing y for ``DECREASING_Y``); the offset table stays in index order. Chunks
+    left in a source file (:class:`_FileChunks`) are copied from it one at a time.
     """
     version = 2
     long_names = any(len(k) > 31 or len(r.type) > 31 for h in headers for k, r in h.items()) or any(
@@ -878,19 +958,31 @@ def _assemble(
         head += b"\0"
     if multipart:
         head += b"\0"
-    total = sum(len(c) for c in chunks)
-    pos = len(head) + 8 * total
-    tables = []
-    body = []
-    for index, (part_chunks, order) in enumerate(zip(chunks, orders, strict=True)):
-        prefix = struct.pack("<i", index) if multipart else b""
+    prefix_size = 4 if multipart else 0
+    pos = len(head) + 8 * sum(len(c) for c in chunks)
+    for part_chunks, order in zip(chunks, orders, strict=True):
         offsets = [0] * len(part_chunks)
         for k in order:
             offsets[k] = pos
-            body.append(prefix + part_chunks[k])
-            pos += len(prefix) + len(part_chunks[k])
-        tables.append(struct.pack(f"<{len(offsets)}Q", *offsets))
-    return bytes(head) + b"".join(tables) + b"".join(body)
+            pos += prefix_size + _size(part_chunks, k)
+        head += struct.pack(f"<{len(offsets)}Q", *offsets)
+    out.write(head)
+    for index, (part_chunks, order) in enumerate(zip(chunks, orders, strict=True)):
+        prefix = struct.pack("<i", index) if multipart else b""
+        if isinstance(part_chunks, _FileChunks):
+            with open(part_chunks.path, "rb") as src:
+                for k in order:
+                    start, size = part_chunks.ranges[k]
+                    src.seek(start)
+                    out.write(prefix + src.read(size))
+        else:
+            for k in order:
+                out.write(prefix)
+                out.write(part_chunks[k])
+
+
+def _size(chunks: Sequence[bytes | memoryview] | _FileChunks, k: int) -> int:
+    return chunks.size(k) if isinstance(chunks, _FileChunks) else len(chunks[k])
 
 
 def storage_name(header: dict[str, Any]) -> str:
@@ -943,10 +1035,12 @@ __all__ = [
     "Limits",
     "PartLayout",
     "RawAttribute",
+    "ReleasedChannel",
     "box2i",
     "compression_name",
     "read_layout",
     "read_parts",
+    "release_pixels",
     "storage_name",
     "window",
     "write_parts",

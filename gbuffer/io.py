@@ -15,6 +15,16 @@ canonical buffers).
   channels, PXR24 rounds new 32-bit layers to 24 bits; B44 keeps 32-bit layers exact);
 * parts and channels that did not change are copied chunk for chunk (bit-identical).
 
+``layout`` (:data:`LAYOUTS`) chooses where new channels go:
+
+* ``"same"``: into the primary part, as above (every channel of that part is encoded again);
+* ``"part"``: into an added part of a multi-part file (named after ``depict/result``), with the
+  header attributes; every part of the input is copied chunk for chunk, nothing is re-encoded
+  but the new layers (when an output replaces a channel of the primary part, e.g. a second
+  enhance of a ``part`` output, that part is re-encoded with every new layer, as ``"same"``);
+* ``"sidecar"``: a file with only the outputs and the header attributes (one part, ZIP, the
+  frame's windows); the input stays where it is and holds the G-buffer.
+
 A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
 canonical channel names (DESIGN.md): radiance (beauty, alpha, albedo, lobes) as HALF unless it
 exceeds the half range, everything else (normals, depth, position, AO, coverage, outputs) as
@@ -38,6 +48,7 @@ from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.presets import (
+    RESULT_ATTRIBUTE,
     ReadOptions,
     canonical_channels,
     detect,
@@ -52,6 +63,9 @@ PROTECTED_ATTRIBUTES = frozenset(
 )
 
 _HALF_MAX = 65000.0
+
+#: Where :func:`write` puts new channels (module docstring).
+LAYOUTS = ("same", "part", "sidecar")
 
 
 def _camera_arg(camera: Camera | dict[str, Any] | str | Path | None) -> Camera | None:
@@ -124,8 +138,8 @@ def _check_attributes(attributes: dict[str, Any]) -> None:
         )
 
 
-def write(frame: Frame, path: str | Path) -> list[str]:
-    """Write ``frame`` to ``path`` (see the module docstring for what goes where).
+def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
+    """Write ``frame`` to ``path`` in ``layout`` (see the module docstring for what goes where).
 
     Returns
     -------
@@ -138,36 +152,78 @@ def write(frame: Frame, path: str | Path) -> list[str]:
         or an I/O error.
     """
     _check_attributes(frame.attributes)
+    if layout not in LAYOUTS:
+        raise FrameError(f"layout {layout!r} is not one of {', '.join(LAYOUTS)}")
     pt = frame.passthrough
-    if not pt.parts:
-        return _write_fresh(frame, path)
+    if not pt.parts or layout == "sidecar":
+        return _write_fresh(frame, path, buffers=not pt.parts)
     warnings: list[str] = []
     parts = [(dict(h), dict(c)) for h, c in pt.parts]
     header, channels = parts[pt.primary]
     shape = _grid_shape(pt)
+    added: dict[str, Any] = {}
+    # a part that is re-encoded anyway (an output replaces one of its channels) takes the new
+    # layers too, so that its header and theirs cannot disagree
+    own_part = layout == "part" and not any(name in channels for name in frame.outputs)
     for name, arr in frame.outputs.items():
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
         if old is not None:
-            old_pixels = getattr(old, "pixels", old)
-            if old_pixels.dtype == np.uint32:
+            released = isinstance(old, exr.ReleasedChannel)
+            old_type = old.dtype if released else getattr(old, "pixels", old).dtype
+            if old_type == np.uint32:
                 raise FrameError(f"output '{name}' would overwrite a UINT channel of the file")
             if getattr(old, "xSampling", 1) != 1 or getattr(old, "ySampling", 1) != 1:
                 raise FrameError(f"output '{name}' would overwrite a subsampled channel")
-            if old_pixels.dtype == np.float16:
+            if old_type == np.float16:
                 pixels = pixels.astype(np.float16)
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:
-            channels[name] = OpenEXR.Channel(name, pixels)
+            (added if own_part else channels)[name] = OpenEXR.Channel(name, pixels)
     compression = header.get("compression")
-    if frame.outputs and compression is not None and int(compression) in exr.LOSSY_COMPRESSIONS:
-        new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
-        warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
+    if not added and frame.outputs and compression is not None:
+        if int(compression) in exr.LOSSY_COMPRESSIONS:
+            new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
+            warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
+    if added:  # the header attributes go with the added layers
+        header = _added_part(parts, header, frame.attributes)
+        parts.append((header, added))
     for key, value in frame.attributes.items():
         header[key] = value
     new_pt = dataclasses.replace(pt, parts=parts)
     warnings += exr.write_parts(new_pt, path)
     return warnings
+
+
+def _added_part(
+    parts: list[tuple[dict[str, Any], dict[str, Any]]],
+    primary: dict[str, Any],
+    attributes: dict[str, Any],
+) -> dict[str, Any]:
+    """The header of the part ``layout="part"`` adds: the primary part's windows, its compression
+    when lossless (else ZIP), a name no other part has (the result layer's, else ``depict``)."""
+    compression = primary.get("compression", OpenEXR.ZIP_COMPRESSION)
+    if int(compression) in exr.LOSSY_COMPRESSIONS:
+        compression = OpenEXR.ZIP_COMPRESSION
+    data_window = primary.get("dataWindow")
+    header: dict[str, Any] = {
+        "compression": compression,
+        "lineOrder": OpenEXR.INCREASING_Y,
+        "type": OpenEXR.scanlineimage,
+    }
+    for key in ("dataWindow", "displayWindow", "pixelAspectRatio"):
+        if key in primary:
+            header[key] = primary[key]
+    if data_window is not None and "displayWindow" not in header:
+        header["displayWindow"] = data_window
+    taken = {str(h.get("name") or f"part{i}") for i, (h, _) in enumerate(parts)}
+    base = str(attributes.get(RESULT_ATTRIBUTE) or "depict")
+    name, n = base, 0
+    while name in taken:
+        n += 1
+        name = f"{base}{n}"
+    header["name"] = name
+    return header
 
 
 #: Channel-name suffixes DWAA/DWAB quantise (OpenEXR's DWA rules, case-sensitive, HALF and FLOAT).
@@ -207,10 +263,13 @@ def _radiance_keys() -> set[str]:
     return keys
 
 
-def _write_fresh(frame: Frame, path: str | Path) -> list[str]:
+def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[str]:
+    """One part, ZIP: the frame's buffers under canonical names (``buffers``) and its outputs."""
     warnings: list[str] = []
-    channels = canonical_channels(frame)
-    radiance_names = set(canonical_channels(_subframe(frame, _radiance_keys())))
+    channels = canonical_channels(frame) if buffers else {}
+    radiance_names = (
+        set(canonical_channels(_subframe(frame, _radiance_keys()))) if buffers else set()
+    )
     shape = frame.shape
     pixels: dict[str, np.ndarray] = {}
     for name, arr in channels.items():

@@ -203,6 +203,7 @@ class Client:
         normal_space: str | None = None,
         debug_layers: bool = False,
         output_layer: str | None = None,
+        layout: str | None = None,
         preview: bool = False,
         exposure: float = 0.0,
         colorspace: str | None = None,
@@ -215,10 +216,15 @@ class Client:
         ``pipeline``: a PipelineSpec, dict, list of steps or JSON text (default: the server's
         default, Radiance Scaling). ``camera``: a dict, a Camera or a camera JSON path.
         ``colorspace``: the working space (a name of the server's OCIO config).
+        ``layout``: where new layers go (same, part, sidecar; default: the server's).
         """
         data = self._read_fields(preset, camera, mapping, normal_space, colorspace)
         data["debug_layers"] = "true" if debug_layers else "false"
-        optional = {"pipeline": _pipeline_json(pipeline), "output_layer": output_layer}
+        optional = {
+            "pipeline": _pipeline_json(pipeline),
+            "output_layer": output_layer,
+            "layout": layout,
+        }
         data.update({k: v for k, v in optional.items() if v is not None})
         params: dict[str, Any] = {}
         if preview:

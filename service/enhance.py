@@ -25,18 +25,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypedDict
+from typing import TYPE_CHECKING, TypedDict
 
 from gbuffer.camera import Camera
 from gbuffer.colorspace import View
+from gbuffer.exr import release_pixels
 from gbuffer.frame import Frame
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
 from gbuffer.limits import Limits
 from gbuffer.presets import ReadOptions
 from gbuffer.preview import picture, write_png
-from service import pipeline
-from service.registry import Context
+
+if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline runs, not to read a frame
+    from service import pipeline
 
 
 @dataclass(frozen=True)
@@ -62,8 +64,9 @@ class WriteRequest:
     """What to write: intermediate layers too (``debug_layers``), the result layer
     (``output_layer``, :mod:`service.output`), a tone-mapped PNG instead of the EXR (``preview``,
     at ``exposure`` stops, through ``view``: the OCIO config's default display and view unless
-    given), and the input's name recorded in the output (``input_name``; default:
-    the name of the file read)."""
+    given), and the input's name recorded in the output (``input_name``; default: the name of
+    the file read), and where new layers go (``layout``: :data:`gbuffer.io.LAYOUTS`, same part,
+    an added part, or a sidecar file with only them)."""
 
     debug_layers: bool = False
     output_layer: str | None = None
@@ -71,6 +74,7 @@ class WriteRequest:
     exposure: float = 0.0
     input_name: str | None = None
     view: View = field(default_factory=View)
+    layout: str = "same"
 
 
 class Enhanced(TypedDict):
@@ -101,16 +105,21 @@ def enhance(
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
     whether parameters may name image files on this machine (False for the HTTP service).
     """
+    from service import pipeline
+    from service.registry import Context
+
     read, write = read or ReadRequest(), write or WriteRequest()
     frame = read.read(in_path)
+    if write.layout != "same" and not write.preview:  # the input's parts are copied, not encoded
+        release_pixels(frame.passthrough)
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
     out, op_s = pipeline.run_timed(frame, steps, context)
-    out = pipeline.finish(out, write.output_layer, write.input_name)
+    out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)
     warnings: list[str] = []
     if write.preview:
         write_png(picture(out, "beauty", write.exposure, write.view), out_path)
     else:
-        warnings = write_exr(out, out_path)
+        warnings = write_exr(out, out_path, write.layout)
     h, w = out.shape
     return {
         "op_s": op_s,

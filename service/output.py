@@ -96,15 +96,16 @@ def _fresh_layer(channels: dict[str, Any], base: str = "input") -> str:
         n += 1
 
 
-def place_result(frame: Frame, layer: str) -> str | None:
+def place_result(frame: Frame, layer: str, keep_original: bool = True) -> str | None:
     """Write the beauty and alpha to ``layer``'s R, G, B, A; keep the input's R,G,B,A under a
-    fresh name when they are replaced and are the renderer's. Returns where the original is."""
+    fresh name when they are replaced and are the renderer's (and ``keep_original``). Returns
+    where the original is."""
     beauty = frame.need("beauty", "the enhanced image")
     alpha = frame.buffers.get("alpha", frame.mask)
     prefix = f"{layer}." if layer else ""
     channels = _channels(frame)
     original = _header(frame).get(ORIGINAL_ATTRIBUTE)
-    keep = not layer and _earlier_result(frame) is None
+    keep = keep_original and not layer and _earlier_result(frame) is None
     if keep and any(name in channels for name in _RGBA):
         original = _fresh_layer({**channels, **frame.outputs})
         for name in _RGBA:
@@ -164,12 +165,23 @@ def camera_attributes(frame: Frame) -> dict[str, Any]:
     return cam.to_header(frame.display_size)
 
 
-def finish(frame: Frame, output_layer: str | None = None, input_name: str | None = None) -> Frame:
-    """A copy of ``frame`` ready to write: the result in its layer, the header attributes of
-    the module docstring. ``input_name`` defaults to the name of the file read."""
+def finish(
+    frame: Frame,
+    output_layer: str | None = None,
+    input_name: str | None = None,
+    layout: str = "same",
+) -> Frame:
+    """A copy of ``frame`` ready to write in ``layout`` (:data:`gbuffer.io.LAYOUTS`): the result
+    in its layer, the header attributes of the module docstring. ``input_name`` defaults to the
+    name of the file read. In the ``part`` layout a result that would replace the input's
+    ``R,G,B,A`` goes to a fresh layer ``Depict`` instead (the added part then holds every new
+    channel and the input's parts are copied as they are); in the ``sidecar`` layout the input's
+    ``R,G,B,A`` are not copied (they stay in the input)."""
     out = frame.copy()
     layer = result_layer(out, output_layer)
-    original = place_result(out, layer)
+    if layout == "part" and not layer and output_layer is None and _earlier_result(out) is None:
+        layer = _fresh_layer({**_channels(out), **out.outputs}, "Depict")
+    original = place_result(out, layer, keep_original=layout != "sidecar")
     path = getattr(out.passthrough, "path", "")
     if input_name is None and path:
         input_name = Path(str(path)).name

@@ -215,9 +215,14 @@ def run(
     return out
 
 
-def finish(frame: Frame, output_layer: str | None = None, input_name: str | None = None) -> Frame:
-    """A copy of ``frame`` ready to write: the enhanced beauty in its result layer (``R,G,B,A``,
-    the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own ``R,G,B,A``
-    kept under ``input.*``, and the camera and provenance in the header
+def finish(
+    frame: Frame,
+    output_layer: str | None = None,
+    input_name: str | None = None,
+    layout: str = "same",
+) -> Frame:
+    """A copy of ``frame`` ready to write in ``layout``: the enhanced beauty in its result layer
+    (``R,G,B,A``, the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own
+    ``R,G,B,A`` kept under ``input.*``, and the camera and provenance in the header
     (:mod:`service.output` has the rules)."""
-    return place(frame, output_layer, input_name)
+    return place(frame, output_layer, input_name, layout)

@@ -468,15 +468,16 @@ def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
     probe.unlink()
     layout = exr._read_layout(io.BytesIO(data), len(data), str(path))
     exr._read_offsets(io.BytesIO(data), layout, str(path))
-    (chunk,) = exr._extract_chunks(data, layout, 0)
+    (chunk,) = exr._extract_chunks(io.BytesIO(data), layout, 0)
     attrs = dict(layout.parts[0].attributes)
     window = struct.pack("<4i", 0, 0, size - 1, size - 1)
     attrs["dataWindow"] = exr.RawAttribute("box2i", window)
     attrs["displayWindow"] = exr.RawAttribute("box2i", window)
     count = (size + 15) // 16
-    chunks = [struct.pack("<i", 16 * k) + chunk[4:] for k in range(count)]
+    chunks = [struct.pack("<i", 16 * k) + bytes(chunk[4:]) for k in range(count)]
     order = list(range(count))
-    path.write_bytes(exr._assemble([attrs], [chunks], [order], ["scanlineimage"], False))
+    with open(path, "wb") as f:
+        exr._assemble(f, [attrs], [chunks], [order], ["scanlineimage"], False)
     return path
 
 

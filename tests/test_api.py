@@ -223,6 +223,7 @@ def test_not_an_exr_400(client: Any) -> None:
         ({"normal_space": "up"}, "normal_space"),
         ({"colorspace": "nope"}, "colorspace: colour space 'nope' is not in the OCIO config"),
         ({"colorspace": "srgb_tx"}, "is not linear"),
+        ({"layout": "beside"}, "layout"),
     ],
 )
 def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> None:

@@ -21,6 +21,7 @@ import pytest
 import trimesh
 
 from analysis.score import score_frame
+from gbuffer.exr import read_layout
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
@@ -126,6 +127,21 @@ def test_enhance_blender_matches_local_cli_bit_for_bit(
     assert cli([*args, str(local)]) == 0
     assert cli([*args, str(remote), "--server", server.url]) == 0
     assert local.read_bytes() == remote.read_bytes()
+
+
+@pytest.mark.parametrize("layout", ["part", "sidecar"])
+def test_enhance_layouts_match_local_cli_bit_for_bit(
+    layout: str, server: Server, files: dict[str, Path], tmp_path: Path, remote_env: None
+) -> None:
+    local, remote = tmp_path / "local.exr", tmp_path / "remote.exr"
+    args = ["enhance", str(files["canonical"]), "--layout", layout, "-o"]
+    assert cli([*args, str(local)]) == 0
+    assert cli([*args, str(remote), "--server", server.url]) == 0
+    assert local.read_bytes() == remote.read_bytes()
+    written = [[c[0] for c in part.channels] for part in read_layout(remote).parts]
+    assert len(written) == (2 if layout == "part" else 1)
+    prefix = "Depict." if layout == "part" else ""  # a sidecar's result is its R,G,B,A
+    assert sorted(written[-1]) == [prefix + c for c in "ABGR"]
 
 
 @pytest.mark.parametrize("renderer", ["blender", "arnold", "karma"])

@@ -188,8 +188,8 @@ def test_output_layer_names(
     assert depict("enhance", blender_out, "-o", again, "--output-layer", "ViewLayer.Depict") == 0
 
 
-@pytest.mark.skipif(shutil.which("blender") is None, reason="Debian's blender is not installed")
-def test_blenders_compositor_lists_the_depict_pass(blender_out: Path, tmp_path: Path) -> None:
+def blender_passes(exr: Path, tmp_path: Path) -> list[str]:
+    """The passes Blender's compositor Image node lists for ``exr``."""
     script = tmp_path / "list.py"
     script.write_text(
         "import bpy, sys\n"
@@ -200,10 +200,15 @@ def test_blenders_compositor_lists_the_depict_pass(blender_out: Path, tmp_path: 
         "node.image = image\n"
         "print('PASSES', [s.name for s in node.outputs if s.enabled])\n"
     )
-    cmd = ["blender", "-b", "--factory-startup", "--python", str(script), "--", str(blender_out)]
+    cmd = ["blender", "-b", "--factory-startup", "--python", str(script), "--", str(exr)]
     run = subprocess.run(cmd, capture_output=True, text=True, timeout=300, check=True)
     line = next(x for x in run.stdout.splitlines() if x.startswith("PASSES"))
-    passes = eval(line[len("PASSES ") :])  # a printed Python list of strings
+    return list(eval(line[len("PASSES ") :]))  # a printed Python list of strings
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="Debian's blender is not installed")
+def test_blenders_compositor_lists_the_depict_pass(blender_out: Path, tmp_path: Path) -> None:
+    passes = blender_passes(blender_out, tmp_path)
     assert "Depict" in passes and "Combined" in passes and "Position" in passes
 
 

@@ -133,13 +133,20 @@ class ChannelReader:
 
     def plane(self, name: str, buffer: str, fill: float = 0.0) -> np.ndarray:
         """One channel as a new float32 (H, W) array on the grid (``fill`` outside its window)."""
+        pixels = self._pixels(name, buffer)[3]
+        arr = self._float32(name, buffer, fill)
+        return arr.copy() if arr is pixels else arr
+
+    def _float32(self, name: str, buffer: str, fill: float) -> np.ndarray:
+        """One channel as float32 (H, W) on the grid: the file's own (read-only) pixels when
+        they already are, else a new array (``fill`` outside the channel's window)."""
         part, header, channels, pixels = self._pixels(name, buffer)
         src = self.grid if part == self.primary else window(header, "dataWindow", channels)
         if pixels.dtype == np.float16:  # cv2 converts 16F -> 32F several times faster
             half = cv2.multiply(pixels, 1.0, dtype=cv2.CV_32F)  # type: ignore[call-overload]
             arr = np.asarray(half, np.float32)
         else:
-            arr = np.array(pixels, dtype=np.float32)
+            arr = np.asarray(pixels, dtype=np.float32)
         if src == self.grid:
             return arr
         out = np.full(self.shape, fill, np.float32)
@@ -153,10 +160,11 @@ class ChannelReader:
         return out
 
     def stack(self, names: Sequence[str], buffer: str, fill: float = 0.0) -> np.ndarray:
-        """Channels ``names`` as one new float32 (H, W) or (H, W, C) array on the grid."""
-        planes = [self.plane(name, buffer, fill) for name in names]
-        if len(planes) == 1:
-            return planes[0]
+        """Channels ``names`` as one new float32 (H, W) or (H, W, C) array on the grid (float32
+        channels are interleaved straight from the file's pixels, not copied first)."""
+        if len(names) == 1:
+            return self.plane(names[0], buffer, fill)
+        planes = [self._float32(name, buffer, fill) for name in names]
         return np.asarray(cv2.merge(planes), np.float32)
 
 

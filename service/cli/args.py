@@ -146,6 +146,25 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
     )
 
 
+#: ``--layout`` choices (:data:`gbuffer.io.LAYOUTS`, named here so the parser stays light).
+LAYOUTS = ("same", "part", "sidecar")
+DEFAULT_LAYOUT = "same"
+
+
+def add_write_options(p: argparse.ArgumentParser) -> None:
+    """Flags for writing an enhanced frame: debug layers, result layer, layout."""
+    p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
+    p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
+    p.add_argument(
+        "--layout",
+        choices=LAYOUTS,
+        default=DEFAULT_LAYOUT,
+        help="where new layers go: same (the input's part, re-encoded), part (an added part of "
+        "a multi-part file; the input's parts copied as they are), sidecar (a file with only "
+        f"the new layers); default {DEFAULT_LAYOUT}",
+    )
+
+
 def mapping(args: argparse.Namespace) -> dict[str, str]:
     """The ``--map BUFFER=CHANNELS`` items, by buffer."""
     out = {}

@@ -6,17 +6,22 @@ from __future__ import annotations
 
 import argparse
 import sys
+from typing import TYPE_CHECKING
 
 from gbuffer.camera import Camera
 from gbuffer.presets import ReadOptions
-from service import pipeline
 from service.cli.args import UsageError, mapping, printable
 from service.enhance import ReadRequest
+
+if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline is compiled
+    from service import pipeline
 
 
 def steps(args: argparse.Namespace) -> pipeline.Pipeline | None:
     """The pipeline of ``--pipeline`` or of the ``--op`` steps, compiled (validated before any
     pixel is read), or None when neither is given."""
+    from service import pipeline
+
     ops = getattr(args, "steps", None)
     if args.pipeline and ops:
         raise UsageError("give either --pipeline or --op steps, not both")

@@ -10,17 +10,22 @@ import numpy as np
 from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
-from service import pipeline
 from service.cli.common import read_request, steps, warn
 from service.enhance import WriteRequest, enhance
 from service.masks import matte
-from service.registry import operators
+
+# The operators (and Numba) are imported by the commands that run or list them, not by
+# ``preview`` and ``mask``.
 
 
 def cmd_enhance(args: argparse.Namespace) -> int:
+    from service import pipeline
+
     check_outputs([args.output], [args.input, args.camera, args.pipeline])
     compiled = steps(args) or pipeline.DEFAULT
-    write = WriteRequest(debug_layers=args.debug_layers, output_layer=args.output_layer)
+    write = WriteRequest(
+        debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
+    )
     result = enhance(args.input, args.output, compiled, read_request(args), write)
     warn(result["read_warnings"] + result["warnings"])
     print(f"wrote {args.output}")
@@ -49,6 +54,8 @@ def cmd_mask(args: argparse.Namespace) -> int:
 
 
 def cmd_ops(args: argparse.Namespace) -> int:
+    from service.registry import operators
+
     ops = operators()
     if args.json:
         print(json.dumps([op.schema() for op in ops.values()], indent=2))

@@ -12,6 +12,7 @@ from service.cli.args import (
     add_pipeline_options,
     add_read_options,
     add_server_option,
+    add_write_options,
     bounded,
 )
 from service.version import version
@@ -138,8 +139,7 @@ def add_frame_commands(sub: Any) -> None:
     p.add_argument("input")
     p.add_argument("-o", "--output", required=True, help="output EXR")
     add_pipeline_options(p)
-    p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
-    p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
+    add_write_options(p)
     add_read_options(p)
     add_server_option(p)
     p.set_defaults(command="service.cli.frames:cmd_enhance", remote="service.cli.remote:enhance")
@@ -276,7 +276,6 @@ def add_service_commands(sub: Any) -> None:
         help="pinned statistics: reused when the file exists, else measured and written there",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--debug-layers", action="store_true", help="also write intermediate layers")
-    p.add_argument("--output-layer", metavar="NAME", help="write NAME.R/G/B/A instead of R,G,B,A")
+    add_write_options(p)
     add_read_options(p)
     p.set_defaults(command="service.cli.sequence:cmd_batch")

@@ -60,6 +60,7 @@ def enhance(args: argparse.Namespace) -> int:
             colorspace=args.colorspace,
             debug_layers=args.debug_layers,
             output_layer=args.output_layer,
+            layout=args.layout,
         )
     print(f"wrote {args.output}")
     return 0

@@ -20,7 +20,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
     if args.camera and not os.path.isfile(args.camera):
         raise BatchError(f"--camera {args.camera}: no such file")
     read = read_request(args)  # the camera is read here: workers may run in another folder
-    write = WriteRequest(debug_layers=args.debug_layers, output_layer=args.output_layer)
+    write = WriteRequest(
+        debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
+    )
     frames = parse_frames(args.frames) if args.frames else None
     if args.workers is not None and args.workers < 1:
         raise BatchError(f"--workers must be >= 1, got {args.workers}")

@@ -99,6 +99,14 @@ async def enhance(
             max_length=200,
         ),
     ] = None,
+    layout: Annotated[
+        Literal["same", "part", "sidecar"],
+        Form(
+            description="where new layers go: same (the input's part), part (an added part of "
+            "a multi-part file; the input's parts copied as they are), sidecar (an EXR with "
+            "only the new layers)"
+        ),
+    ] = "same",
     preview: Annotated[
         Literal["png"] | None, Query(description="png: answer a tone-mapped PNG preview")
     ] = None,
@@ -123,6 +131,7 @@ async def enhance(
             exposure=exposure,
             input_name=Path(name).name,
             view=shown,
+            layout=layout,
         )
         read = fields.request(server.settings.limits)
         await server.run("enhance", worker.enhance_job, str(src), str(out), steps, read, write)

@@ -1,0 +1,176 @@
+"""Where ``depict enhance --layout`` puts the new layers: the input's part (``same``), an added
+part whose neighbours are the input's parts copied chunk for chunk (``part``), or a file of their
+own (``sidecar``). Real files: the Blender Cycles fixture and a render of examples/spot.obj, through
+the CLI in process; Blender's compositor reads the ``part`` output when ``blender`` is installed."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import OpenEXR
+import pytest
+
+import gbuffer
+from gbuffer import exr
+from gbuffer.io import LAYOUTS
+from service.cli import main
+from service.cli.args import LAYOUTS as CLI_LAYOUTS
+from tests.test_output_layout import blender_passes, write_compressed
+
+ROOT = Path(__file__).resolve().parents[1]
+BLENDER_EXR = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
+SPOT = ROOT / "examples" / "spot.obj"
+RESULT = [f"ViewLayer.Depict.{c}" for c in "RGBA"]
+
+
+def depict(*argv: str | Path | int) -> int:
+    try:
+        return main([str(a) for a in argv])
+    except SystemExit as exc:
+        return int(exc.code or 0)
+
+
+def parts(path: Path) -> list[tuple[dict[str, object], dict[str, np.ndarray]]]:
+    """Every part of ``path``: its header and its channels' pixels."""
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        return [
+            (dict(p.header), {n: np.array(c.pixels) for n, c in p.channels.items()})
+            for p in f.parts
+        ]
+
+
+def chunks(path: Path, index: int) -> list[bytes]:
+    """The compressed chunks of part ``index`` (scanline or tiled), without the multi-part part
+    number."""
+    layout = exr.read_layout(path)
+    part = layout.parts[index]
+    skip = 4 if layout.multipart else 0
+    with open(path, "rb") as f:
+        sizes = [exr._chunk_size(f, off, part, layout.multipart) for off in part.offsets]
+    data = path.read_bytes()
+    return [data[off + skip : off + n] for off, n in zip(part.offsets, sizes, strict=True)]
+
+
+@pytest.fixture(scope="module")
+def outputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    work = tmp_path_factory.mktemp("layouts")
+    out = {}
+    for layout in LAYOUTS:
+        out[layout] = work / f"{layout}.exr"
+        assert depict("enhance", BLENDER_EXR, "-o", out[layout], "--layout", layout) == 0
+    return out
+
+
+def test_the_parser_and_the_http_form_offer_the_writers_layouts() -> None:
+    assert CLI_LAYOUTS == LAYOUTS
+    schema = json.loads((ROOT / "openapi" / "openapi.json").read_text())
+    form = schema["components"]["schemas"]["Body_enhance_v1_enhance_post"]["properties"]
+    assert tuple(form["layout"]["enum"]) == LAYOUTS and form["layout"]["default"] == "same"
+
+
+def test_part_layout_copies_the_input_and_adds_only_the_result(outputs: dict[str, Path]) -> None:
+    [(_, before)] = parts(BLENDER_EXR)
+    (first, kept), (added_header, added) = parts(outputs["part"])
+    assert set(kept) == set(before)
+    assert chunks(outputs["part"], 0) == chunks(BLENDER_EXR, 0)  # not re-encoded
+    assert sorted(added) == sorted(RESULT)
+    assert added_header["name"] == "ViewLayer.Depict"
+    assert added_header["depict/result"] == "ViewLayer.Depict"
+    assert "depict/pipeline" not in first  # the provenance goes with the result
+    [(_, same)] = parts(outputs["same"])
+    for name in RESULT:
+        np.testing.assert_array_equal(added[name], same[name])
+
+
+def test_sidecar_holds_only_the_new_layers(outputs: dict[str, Path]) -> None:
+    [(header, channels)] = parts(outputs["sidecar"])
+    assert sorted(channels) == sorted(RESULT)
+    assert header["depict/result"] == "ViewLayer.Depict"
+    assert header["depict/input"] == BLENDER_EXR.name
+    [(_, same)] = parts(outputs["same"])
+    for name in RESULT:
+        np.testing.assert_array_equal(channels[name], same[name])
+    assert outputs["sidecar"].stat().st_size < outputs["same"].stat().st_size / 2
+
+
+def test_a_part_output_reads_back_and_enhances_again(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    frame = gbuffer.read(outputs["part"])
+    assert "Depict's result" in frame.sources["beauty"]
+    again = tmp_path / "again.exr"
+    assert depict("enhance", outputs["part"], "-o", again, "--layout", "part") == 0
+    after = parts(again)
+    assert [sorted(c) for _, c in after] == [sorted(c) for _, c in parts(outputs["part"])]
+    assert chunks(again, 0) == chunks(BLENDER_EXR, 0)
+
+
+def test_part_layout_of_a_render_keeps_its_rgba(tmp_path: Path) -> None:
+    src, out = tmp_path / "spot.exr", tmp_path / "out.exr"
+    assert depict("render", SPOT, "-o", src, "--width", 64, "--height", 48) == 0
+    assert depict("enhance", src, "-o", out, "--layout", "part") == 0
+    [(_, before)] = parts(src)
+    (_, kept), (header, added) = parts(out)
+    assert sorted(added) == [f"Depict.{c}" for c in "ABGR"]  # not over the render's R,G,B,A
+    assert header["depict/result"] == "Depict"
+    for name in "RGBA":
+        np.testing.assert_array_equal(kept[name], before[name])
+    assert not np.array_equal(added["Depict.R"], before["R"])
+
+
+def test_an_unknown_layout_is_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert depict("enhance", BLENDER_EXR, "-o", tmp_path / "o.exr", "--layout", "beside") == 2
+    assert "--layout" in capsys.readouterr().err
+    with pytest.raises(gbuffer.FrameError, match="layout 'beside'"):
+        gbuffer.write(gbuffer.read(BLENDER_EXR), tmp_path / "o.exr", layout="beside")
+
+
+@pytest.mark.skipif(shutil.which("blender") is None, reason="Debian's blender is not installed")
+def test_blenders_compositor_reads_the_added_part(outputs: dict[str, Path], tmp_path: Path) -> None:
+    passes = blender_passes(outputs["part"], tmp_path)
+    assert "Depict" in passes and "Combined" in passes and "Position" in passes
+
+
+def test_debug_layers_of_a_second_part_enhance_join_the_result_part(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    again = tmp_path / "again.exr"
+    argv = ("enhance", outputs["part"], "-o", again, "--layout", "part", "--debug-layers")
+    assert depict(*argv) == 0
+    _, (header, result) = parts(again)  # no third part: the result's part took them
+    assert set(RESULT) < set(result) and "curvature.H" in result
+    assert len(json.loads(str(header["depict/history"]))) == 2
+    assert chunks(again, 0) == chunks(BLENDER_EXR, 0)
+
+
+def test_part_layout_keeps_a_lossy_part_as_it_was(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    src = write_compressed(BLENDER_EXR, tmp_path / "dwaa.exr", "DWAA", tiled=True)
+    out = tmp_path / "out.exr"
+    assert depict("enhance", src, "-o", out, "--layout", "part") == 0
+    assert "DWAA" not in capsys.readouterr().err  # nothing re-quantised, nothing to warn about
+    assert chunks(out, 0) == chunks(src, 0)
+    layout = exr.read_layout(out)
+    assert [exr.COMPRESSION_NAMES[p.compression] for p in layout.parts] == ["DWAA", "ZIP"]
+
+
+def test_released_pixels_come_back_when_read_and_the_input_is_still_copied(
+    tmp_path: Path,
+) -> None:
+    frame = gbuffer.read(BLENDER_EXR)
+    before = frame.layer("ViewLayer.Combined")
+    exr.release_pixels(frame.passthrough)
+    channels = frame.passthrough.parts[0][1]
+    assert all(isinstance(c, exr.ReleasedChannel) for c in channels.values())
+    again = frame.layer("ViewLayer.Combined")  # decoded again from the file
+    assert sorted(again) == sorted(before)
+    for name, pixels in before.items():
+        np.testing.assert_array_equal(again[name], pixels)
+    frame.outputs["ViewLayer.Extra.X"] = np.ones(frame.shape, np.float32)
+    out = tmp_path / "out.exr"
+    gbuffer.write(frame, out, layout="part")
+    assert chunks(out, 0) == chunks(BLENDER_EXR, 0)
