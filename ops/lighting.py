@@ -23,7 +23,7 @@ from numpy.typing import NDArray
 from ops.color import luminance
 from ops.unsharp import surface_blur
 
-__all__ = ["lighting_gain"]
+__all__ = ["lighting_gain", "luminance_gain"]
 
 F32 = NDArray[np.float32]
 
@@ -50,11 +50,32 @@ def lighting_gain(
     either is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
     ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
     """
+    return luminance_gain(
+        luminance(before),
+        luminance(after),
+        depth,
+        normal,
+        mask,
+        sigma_scene=sigma_scene,
+        pixel_size=pixel_size,
+    )
+
+
+def luminance_gain(
+    y_before: np.ndarray,
+    y_after: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray | None,
+    mask: np.ndarray,
+    *,
+    sigma_scene: float,
+    pixel_size: np.ndarray | float,
+) -> F32:
+    """:func:`lighting_gain` of the luminances ``y_before`` and ``y_after`` ((H, W) each):
+    ``LF(y_before) / LF(y_after)``."""
     lf_in, lf_out = (
-        surface_blur(
-            luminance(x), depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
-        )
-        for x in (before, after)
+        surface_blur(y, depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size)
+        for y in (y_before, y_after)
     )
     ok = (lf_in > _DARK) & (lf_out > _DARK) & (np.asarray(mask) > 0)
     return np.divide(lf_in, lf_out, out=np.ones_like(lf_in), where=ok)

@@ -3,6 +3,7 @@ of §5, on the renderer's lobes or by deferred shading of the G-buffer."""
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -167,10 +168,22 @@ def _kept_lighting(
     low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.lighting_gain`)."""
     if not p.keep_lighting:
         return scaled
-    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else 0.0
-    after = scaled - rest
+    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else None
+    after = scaled - rest if rest is not None else scaled.copy()
     gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "radiance_scaling")
-    return np.asarray(after * gain[..., None] + rest, np.float32)
+    after *= gain[..., None]
+    if rest is not None:
+        after += rest
+    return after
+
+
+def _total(planes: Iterable[np.ndarray]) -> np.ndarray:
+    """The sum of ``planes`` (a new array, added in order)."""
+    first, *others = planes
+    total = np.array(first, np.float32)
+    for plane in others:
+        total += plane
+    return total
 
 
 def _scale_renderer_lobes(
@@ -202,7 +215,7 @@ def _scale_renderer_lobes(
         with_sigmas=ctx.debug_layers,
     )
     if p.keep_lighting:
-        beauty = _kept_lighting(frame, p, beauty, np.sum(list(lobes.values()), axis=0))
+        beauty = _kept_lighting(frame, p, beauty, _total(lobes.values()))
     return beauty, sigmas
 
 
