@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Annotated, Literal
 
 import cv2
@@ -143,6 +143,15 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     if not covered.any():
         return 1.0
     return fraction * frame.image_height * float(np.median(pixel_size[covered]))
+
+
+def total(planes: Iterable[np.ndarray]) -> np.ndarray:
+    """The sum of ``planes`` (at least one), added in order into a new float32 array."""
+    first, *others = planes
+    out = np.array(first, np.float32)
+    for plane in others:
+        out += plane
+    return out
 
 
 def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:

@@ -3,7 +3,6 @@ of §5, on the renderer's lobes or by deferred shading of the G-buffer."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
 from typing import Any, ClassVar, Literal
 
 import numpy as np
@@ -25,6 +24,7 @@ from service.operators.common import (
     frame_albedo,
     kept_lighting_gain,
     statistic,
+    total,
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
@@ -177,15 +177,6 @@ def _kept_lighting(
     return after
 
 
-def _total(planes: Iterable[np.ndarray]) -> np.ndarray:
-    """The sum of ``planes`` (a new array, added in order)."""
-    first, *others = planes
-    total = np.array(first, np.float32)
-    for plane in others:
-        total += plane
-    return total
-
-
 def _scale_renderer_lobes(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -215,7 +206,7 @@ def _scale_renderer_lobes(
         with_sigmas=ctx.debug_layers,
     )
     if p.keep_lighting:
-        beauty = _kept_lighting(frame, p, beauty, _total(lobes.values()))
+        beauty = _kept_lighting(frame, p, beauty, total(lobes.values()))
     return beauty, sigmas
 
 
