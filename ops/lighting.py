@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.color import luminance
-from ops.unsharp import surface_blur
+from ops.unsharp import surface_blurs
 
 __all__ = ["lighting_gain", "luminance_gain"]
 
@@ -73,9 +73,8 @@ def luminance_gain(
 ) -> F32:
     """:func:`lighting_gain` of the luminances ``y_before`` and ``y_after`` ((H, W) each):
     ``LF(y_before) / LF(y_after)``."""
-    lf_in, lf_out = (
-        surface_blur(y, depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size)
-        for y in (y_before, y_after)
+    lf_in, lf_out = surface_blurs(
+        [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
     )
     ok = (lf_in > _DARK) & (lf_out > _DARK) & (np.asarray(mask) > 0)
     return np.divide(lf_in, lf_out, out=np.ones_like(lf_in), where=ok)
