@@ -322,8 +322,8 @@ def _ratio(
         change = after * gain
         change -= after
         out = np.add(change, out, out=change)
-        new = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new.items()}
-        new_light = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new_light.items()}
+        for relit in (*new.values(), *new_light.values()):  # (new arrays of ratio_relight)
+            relit *= gain
     frame.buffers.update(new)
     frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
     frame.buffers["beauty"] = out
