@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from gbuffer.frame import Frame
 from ops import checks
 from ops.color import luminance
-from ops.lighting import luminance_gain
+from ops.lighting import luminance_gain, weighed_gain
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
 from service.images import load_image
@@ -126,14 +126,7 @@ def kept_lighting_gain(
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
     )
-    weight = np.abs(y1 - y0)
-    np.divide(weight, np.float32(KEPT_CHANGE) * np.abs(y0), out=weight, where=y0 != 0)
-    np.minimum(weight, np.float32(1.0), out=weight)
-    weight[y1 == y0] = 0.0
-    gain -= np.float32(1.0)
-    gain *= weight
-    gain += np.float32(1.0)
-    return gain
+    return weighed_gain(gain, y0, y1, KEPT_CHANGE)
 
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
