@@ -11,7 +11,7 @@ export UV_PROJECT_ENVIRONMENT := $(VENV)
 export UV_PYTHON_DOWNLOADS := never
 export PYOPENGL_PLATFORM := osmesa
 
-.PHONY: install osmesa run example test lint typecheck pytest bench gallery corpus quality openapi docs clean
+.PHONY: install osmesa extras run example test lint typecheck pytest bench gallery corpus quality openapi docs clean
 
 install: osmesa $(VENV)/.installed
 
@@ -21,6 +21,13 @@ osmesa:
 		SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
 		$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq libosmesa6 >/dev/null; \
 	fi
+
+# Optional system programs: Blender (the corpus, the add-on and the Blender tests), Chromium (the
+# web viewer's browser tests and screenshots), Xvfb (the add-on screenshot). Tests that need them
+# skip with a reason when they are absent.
+extras:
+	SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	$$SUDO apt-get update -qq && $$SUDO apt-get install -y -qq blender chromium xvfb >/dev/null
 
 $(UV):
 	$(PYTHON) -m venv .uv
