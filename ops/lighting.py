@@ -22,9 +22,11 @@ from numpy.typing import NDArray
 
 from ops.color import luminance
 from ops.colorspace import REC709_Y
-from ops.unsharp import surface_blur
+from ops.jit import kernel
+from ops.parallel import run_strips
+from ops.unsharp import surface_blurs
 
-__all__ = ["lighting_gain"]
+__all__ = ["lighting_gain", "luminance_gain", "weighed_gain"]
 
 F32 = NDArray[np.float32]
 
@@ -50,19 +52,75 @@ def lighting_gain(
     ``before`` and ``after`` are (H, W, 3) radiance (the part an operator changed: e.g. the sum
     of the lobes it scaled); Y is luminance with the working space's ``weights`` (default
     Rec. 709). The gain is 1 on uncovered pixels and where either is darker than 1e-6 at that
-    scale. See :func:`ops.unsharp.surface_blur` for ``depth``, ``normal``, ``mask``,
-    ``pixel_size`` and the scale in scene units.
+    scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
+    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
     """
-    lf_in, lf_out = (
-        surface_blur(
-            luminance(x, weights=weights),
-            depth,
-            normal,
-            mask,
-            sigma_scene=sigma_scene,
-            pixel_size=pixel_size,
-        )
-        for x in (before, after)
+    return luminance_gain(
+        luminance(before, weights),
+        luminance(after, weights),
+        depth,
+        normal,
+        mask,
+        sigma_scene=sigma_scene,
+        pixel_size=pixel_size,
+    )
+
+
+def luminance_gain(
+    y_before: np.ndarray,
+    y_after: np.ndarray,
+    depth: np.ndarray,
+    normal: np.ndarray | None,
+    mask: np.ndarray,
+    *,
+    sigma_scene: float,
+    pixel_size: np.ndarray | float,
+) -> F32:
+    """:func:`lighting_gain` of the luminances ``y_before`` and ``y_after`` ((H, W) each):
+    ``LF(y_before) / LF(y_after)``."""
+    lf_in, lf_out = surface_blurs(
+        [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
     )
     ok = (lf_in > _DARK) & (lf_out > _DARK) & (np.asarray(mask) > 0)
     return np.divide(lf_in, lf_out, out=np.ones_like(lf_in), where=ok)
+
+
+#: Rows per strip of :func:`weighed_gain`.
+_WEIGH_ROWS = 64
+
+
+def weighed_gain(
+    gain: np.ndarray, y_before: np.ndarray, y_after: np.ndarray, full_change: float
+) -> F32:
+    """``gain`` weighed by how much an operator changed each pixel's luminance::
+
+        1 + w (gain − 1),   w = min(1, |y_after − y_before| / (full_change · |y_before|))
+
+    (w = 0 where the luminance is unchanged, so those pixels keep a gain of exactly 1; where
+    ``y_before`` is 0, w = min(1, |y_after|)). All (H, W) float32; one compiled pass.
+    """
+    g, y0, y1 = (np.ascontiguousarray(a, dtype=np.float32) for a in (gain, y_before, y_after))
+    out = np.empty_like(g)
+    k = np.float32(full_change)
+    run_strips(
+        g.shape[0],
+        lambda r0, r1: _weigh_rows(g[r0:r1], y0[r0:r1], y1[r0:r1], k, out[r0:r1]),
+        _WEIGH_ROWS,
+    )
+    return out
+
+
+@kernel
+def _weigh_rows(gain, y0, y1, k, out):  # type: ignore[no-untyped-def]
+    one = np.float32(1.0)
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            a, b = y0[i, j], y1[i, j]
+            w = abs(b - a)
+            if a != 0:
+                w = w / (k * abs(a))
+            if w > one:
+                w = one
+            if b == a:
+                w = np.float32(0.0)
+            out[i, j] = one + w * (gain[i, j] - one)

@@ -10,6 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 
@@ -19,6 +20,7 @@ from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
 from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
+from ops.lighting import weighed_gain
 from ops.pyramid.masked import masked_gaussian
 from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
@@ -444,3 +446,45 @@ def test_missing_buffers_are_named() -> None:
     del bare.buffers["ao"]
     with pytest.raises(FrameError, match=r"'ao'.*scenario 'ao'"):
         rs_run(bare, scenario="ao")
+
+
+def test_weighed_gain_is_its_formula() -> None:
+    # 1 + w (gain − 1), w = min(1, |ΔY| / (0.05 |Y|)): exactly 1 where Y is unchanged, the full
+    # gain from a 5 % change, NaN stays NaN, Y = 0 weighs by |ΔY|
+    rng = np.random.default_rng(5)
+    y0 = rng.uniform(0.1, 1.0, (70, 90)).astype(np.float32)
+    y1 = y0 * rng.uniform(0.9, 1.1, y0.shape).astype(np.float32)
+    y1[::4] = y0[::4]
+    y0[1, :3], y1[1, :3] = 0.0, [0.0, 0.5, 2.0]
+    y1[2, 0] = np.nan
+    gain = rng.uniform(0.5, 2.0, y0.shape).astype(np.float32)
+    w = np.abs(y1 - y0)
+    np.divide(w, np.float32(0.05) * np.abs(y0), out=w, where=y0 != 0)
+    w = np.minimum(w, np.float32(1.0))
+    w[y1 == y0] = 0.0
+    out = weighed_gain(gain, y0, y1, 0.05)
+    np.testing.assert_allclose(out, 1.0 + w * (gain - 1.0), rtol=1e-6)
+    assert (out[::4] == 1.0).all() and np.isnan(out[2, 0])
+    assert out[1, 0] == 1.0 and out[1, 1] == 1.0 + 0.5 * (gain[1, 1] - 1.0)
+    assert out[1, 2] == gain[1, 2]
+
+
+@pytest.mark.parametrize("channels", [(), (3,)])
+def test_masked_gaussian_matches_the_normalised_convolution(channels: tuple[int, ...]) -> None:
+    # G * (v c) / G * c on the covered pixels (non-finite values count as 0), the rest kept;
+    # fully covered: a plain Gaussian (to rounding)
+    rng = np.random.default_rng(6)
+    values = rng.uniform(0.0, 1.0, (60, 80, *channels)).astype(np.float32)
+    values[5, 5] = np.nan
+    values[9, 9] = np.inf
+    mask = np.ones((60, 80), np.float32)
+    mask[:, 50:] = 0.0
+    for m in (mask, np.ones_like(mask)):
+        c = (m > 0).astype(np.float32)
+        c_v = c[..., None] if channels else c
+        num = cv2.GaussianBlur(np.nan_to_num(values, posinf=0.0) * c_v, (0, 0), 3.0)
+        den = cv2.GaussianBlur(c, (0, 0), 3.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            want = np.where(c_v > 0, num / (den[..., None] if channels else den), values)
+        out = masked_gaussian(values, m, 3.0)
+        np.testing.assert_allclose(out, want, rtol=1e-6, atol=1e-7)

@@ -22,6 +22,7 @@ from ops.unsharp import (
     depth_unsharp_masking,
     plain_unsharp_mask,
     surface_blur,
+    surface_blurs,
     unsharp_lightness,
     unsharp_masking,
 )
@@ -412,6 +413,24 @@ def test_surface_blur_sigma_is_in_scene_units_and_follows_surfaces() -> None:
     np.testing.assert_allclose(
         surface_blur(const, depth, normal, mask, sigma_scene=0.1, pixel_size=ps), 7.0, rtol=1e-5
     )
+
+
+@pytest.mark.parametrize("sigma_scene", [0.04, 0.3])
+def test_surface_blurs_is_surface_blur_of_each_signal(sigma_scene: float) -> None:
+    # a square in front of a plane, a band uncovered; σ_px 4 and 8 (0.04: the far plane fades
+    # to the signal itself below level 1) or 30 and 60: two signals on one pyramid come out
+    # bit for bit as each smoothed alone
+    beauty, depth, normal, mask, ps, _ = _square_scene()
+    mask[:, :12] = False
+    first = beauty[..., 0] + np.float32(0.01) * np.arange(160, dtype=np.float32)
+    second = np.random.default_rng(3).uniform(0.1, 1.0, first.shape).astype(np.float32)
+    kw = dict(sigma_scene=sigma_scene, pixel_size=ps)
+    both = surface_blurs([first, second], depth, normal, mask, **kw)
+    for one, sig in zip(both, (first, second), strict=True):
+        alone = surface_blur(sig, depth, normal, mask, **kw)
+        assert np.array_equal(one, alone)
+        assert not np.array_equal(one[mask], sig[mask])  # smoothed
+    assert not np.array_equal(both[0], both[1])
 
 
 def test_orthographic_pixel_size_and_slanted_plane() -> None:

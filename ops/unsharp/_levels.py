@@ -21,10 +21,10 @@ from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
 
-def _finish_first_level(lv: _Level, surf: _Surface, sig: Array) -> None:
+def _finish_first_level(lv: _Level, surf: _Surface, sigs: list[Array]) -> None:
     """Level 1 as ``_surface`` averaged it (with the guide's slopes), the cells on a step
-    holding the front-most surface only (``sig``: the signal at full resolution)."""
-    _front_most_cells(lv, surf, sig)
+    holding the front-most surface only (``sigs``: the signals at full resolution)."""
+    _front_most_cells(lv, surf, sigs)
 
 
 class _Gather:
@@ -42,7 +42,7 @@ class _Gather:
         return a[self.rows, self.cols]
 
 
-def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
+def _front_most_cells(lv: _Level, surf: _Surface, sigs: list[Array]) -> None:
     """Make the level-1 cells that straddle a depth step hold the front-most surface only.
 
     The area average mixes the 2×2 pixels of a cell whatever they show; where a cell sits on a
@@ -83,9 +83,10 @@ def _front_most_cells(lv: _Level, surf: _Surface, sig: Array) -> None:
     n = _sum_taps(keep).astype(np.float32)
     wk = keep / np.maximum(n, np.float32(1e-6))[None, :]
     np.put(lv.cov, cell, n * np.float32(0.25))
-    vals = np.where(ok, at(sig), np.float32(0.0))  # the signal, 0 off the surface
-    np.put(lv.sig[0], cell, _sum_taps(wk * vals))
-    if len(lv.sig) > 1:  # and its square
+    for i, sig in enumerate(sigs):
+        vals = np.where(ok, at(sig), np.float32(0.0))  # the signal, 0 off the surface
+        np.put(lv.sig[i], cell, _sum_taps(wk * vals))
+    if len(lv.sig) > len(sigs):  # and the square of the one signal
         np.put(lv.sig[1], cell, _sum_taps(wk * (vals * vals)))
     iz_c = _sum_taps(wk * iz)
     np.put(lv.iz, cell, iz_c)

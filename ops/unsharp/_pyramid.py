@@ -53,7 +53,7 @@ def _level_span(sigma: float, surf: _Surface, kmax: int) -> tuple[int, int]:
 
 def _surface_pyramid(
     surf: _Surface,
-    lum: Array,
+    lums: list[Array],
     first: _Level | None,
     sigma: float,
     var_sigma: float | None,
@@ -79,7 +79,8 @@ def _surface_pyramid(
     its finest level k (Var of L*, E[L²] − E[L]², upsampled bilinearly by the caller);
     None if the image is too small for one level.
     """
-    h, wd = lum.shape
+    h, wd = lums[0].shape
+    n = len(lums)  # signals smoothed alike (one when the variance is wanted)
     kmax = 0
     while min(h, wd) // 2 ** (kmax + 1) >= _MIN_LEVEL_SIDE:
         kmax += 1
@@ -95,7 +96,8 @@ def _surface_pyramid(
         v_hi = max(v_hi, v_lo)
     k_lo, k_hi = min(m_lo, v_lo), max(m_hi, v_hi)
 
-    assert first is not None and len(first.sig) == (1 if var_sigma is None else 2)
+    assert first is not None and len(first.sig) == (n if var_sigma is None else 2)
+    assert n == 1 or var_sigma is None
     # per level, coarse to fine: the chains it is in, whether they run on from the level above,
     # and the box to smooth: a level below the top of its chains only matters where
     # σ_px < s_{k+1} (elsewhere the coarser level takes over, a_k = 1)
@@ -115,12 +117,12 @@ def _surface_pyramid(
             box = _need_box(lv, used)
         plan[k] = (in_m, in_v, run_m, run_v, box)
         if box is None or (box[0].stop > box[0].start and box[1].stop > box[1].start):
-            smoothed[k] = _smoother().submit(_smooth_level, lv, 2 if in_v else 1, normal_sigma, box)
+            smoothed[k] = _smoother().submit(_smooth_level, lv, 2 if in_v else n, normal_sigma, box)
 
     levels: dict[int, _Level] = {}
     lv = first
     try:
-        _finish_first_level(lv, surf, lum)
+        _finish_first_level(lv, surf, lums)
         while True:
             if lv.k >= k_lo:
                 levels[lv.k] = lv
@@ -132,9 +134,9 @@ def _surface_pyramid(
         for k, (_, _, run_m, run_v, _) in plan.items():
             if run_m or run_v:
                 lv = levels[k]
-                fallback = (lv.sig[:1] if run_m else []) + (lv.sig[:2] if run_v else [])
+                fallback = (lv.sig[:n] if run_m else []) + (lv.sig[:2] if run_v else [])
                 ups_of[k] = _Upsampler(levels[k + 1], lv.iz, lv.valid_u8, k, fallback)
-        full = _Upsampler(levels[m_lo], surf.iz, surf.valid, 0, [lum])
+        full = _Upsampler(levels[m_lo], surf.iz, surf.valid, 0, lums)
     except BaseException:
         for fut in smoothed.values():
             fut.cancel()
@@ -151,7 +153,7 @@ def _surface_pyramid(
             var if run_v and var is not None else []
         )
         ups = ups_of[k].bind(chans).full() if chans else []
-        up_m, up_v = (ups[:1], ups[1:]) if run_m else ([], ups)
+        up_m, up_v = (ups[:n], ups[n:]) if run_m else ([], ups)
         if k not in smoothed:
             # nothing needs this level: the coarser level carries on
             main = up_m if run_m else main
@@ -159,7 +161,7 @@ def _surface_pyramid(
             continue
         sm = smoothed[k].result()
         if in_m:
-            main = _blend(up_m, sm[:1], lv, sigma, box) if run_m else [sm[0]]
+            main = _blend(up_m, sm[:n], lv, sigma, box) if run_m else sm[:n]
         if in_v:
             assert var_sigma is not None
             var = _blend(up_v, sm[:2], lv, var_sigma, box) if run_v else [sm[0].copy(), sm[1]]

@@ -125,6 +125,7 @@ def _surface(
     ps_range: tuple[float, float],
     signal: Callable[[slice, Array], object],
     squares: bool,
+    others: tuple[Array, ...] = (),
 ) -> tuple[_Surface, Array, _Level | None]:
     """Depth guide and footprint of the visible surface (``valid``: uint8 0/1, not all 0).
 
@@ -142,7 +143,8 @@ def _surface(
     In the same pass over strips of rows (each strip's fields are formed and averaged while in
     cache), returns the signal at full resolution (``signal(rows, out)`` writes those rows of
     it into ``out``, e.g. L* of the beauty's rows) and level 1 of the pyramid: 2×2 area
-    averages of the signal, of its square if ``squares``, of I and of the normals, normalised by
+    averages of the signal, of its square if ``squares`` or else of the ``others`` (signals at
+    full resolution, smoothed alike), of I and of the normals, normalised by
     the cell's coverage, and the guide's slopes (``_guide_gradient``); ``_finish_first_level``
     does the rest. Level 1 is None where the image is too small for a level.
     """
@@ -185,7 +187,7 @@ def _surface(
     sig = np.empty((h, w), np.float32)
     first = min(h, w) // 2 >= _MIN_LEVEL_SIDE
     hc, wc = (h + 1) // 2, (w + 1) // 2
-    nsig = 2 if squares else 1
+    nsig = 2 if squares else 1 + len(others)
 
     def cells() -> Array:
         return np.empty((hc, wc), np.float32)
@@ -236,6 +238,8 @@ def _surface(
         _write(_cv.multiply(halve(sw), inv, dst=sig1[0][c]), sig1[0], c)
         if squares:
             _write(_cv.multiply(halve(_cv.multiply(sw, sw)), inv, dst=sig1[1][c]), sig1[1], c)
+        for i, other in enumerate(others, 1):
+            _write(_cv.multiply(halve(_cv.copyTo(other[r], v)), inv, dst=sig1[i][c]), sig1[i], c)
         _write(_cv.multiply(halve(iz_r), inv, dst=iz1[c]), iz1, c)
         if lps is not None and lps1 is not None:
             _write(_cv.multiply(halve(lps[r]), inv, dst=lps1[c]), lps1, c)

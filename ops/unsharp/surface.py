@@ -12,6 +12,7 @@ pyramid (:mod:`ops.unsharp._pyramid`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -31,7 +32,7 @@ from ops.unsharp._upsample import _Upsampler
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
-__all__ = ["surface_blur", "unsharp_lightness", "unsharp_masking"]
+__all__ = ["surface_blur", "surface_blurs", "unsharp_lightness", "unsharp_masking"]
 
 
 def surface_blur(
@@ -93,11 +94,37 @@ def surface_blur(
     -------
     (H, W) float32
     """
-    sig = np.asarray(signal, dtype=np.float32)
-    if sig.ndim != 2:
-        raise ValueError(f"signal must have shape (H, W), got {sig.shape}")
-    shape = (int(sig.shape[0]), int(sig.shape[1]))
-    sig = np.ascontiguousarray(sig)
+    (out,) = surface_blurs(
+        [signal],
+        depth,
+        normal,
+        mask,
+        sigma_scene=sigma_scene,
+        pixel_size=pixel_size,
+        depth_sigma=depth_sigma,
+        normal_sigma=normal_sigma,
+    )
+    return out
+
+
+def surface_blurs(
+    signals: Sequence[Array],
+    depth: Array,
+    normal: Array | None,
+    mask: Array,
+    *,
+    sigma_scene: float,
+    pixel_size: Array | float,
+    depth_sigma: float = 1.0,
+    normal_sigma: float | None = 1.0,
+) -> list[Array]:
+    """:func:`surface_blur` of each of ``signals`` ((H, W) each, at least one), the surface's
+    pyramid built once for all of them."""
+    sigs = [np.ascontiguousarray(s, dtype=np.float32) for s in signals]
+    for sig in sigs:
+        if sig.ndim != 2 or sig.shape != sigs[0].shape:
+            raise ValueError(f"signal must have shape (H, W) (all alike), got {sig.shape}")
+    shape = (int(sigs[0].shape[0]), int(sigs[0].shape[1]))
     sigma = POSITIVE.check(sigma_scene, "sigma_scene")
     ds = UNSHARP_SIGMA.check(depth_sigma, "depth_sigma")
     ns = None if normal_sigma is None else UNSHARP_SIGMA.check(normal_sigma, "normal_sigma")
@@ -105,12 +132,12 @@ def surface_blur(
     ps = _plane("pixel_size", pixel_size, shape)
     nrm = None if normal is None else _normals(normal, shape)
     valid, ps_range, box, _ = _valid(depth_a, ps, _mask(mask, shape))
-    out = sig.copy()
+    outs = [sig.copy() for sig in sigs]
     if box is None:
-        return out
+        return outs
     ys, xs = box
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
-    sig_box = sig[box]
+    first_box = sigs[0][box]
     surf, sub, first = _surface(
         depth_a[box],
         ps[box],
@@ -119,20 +146,22 @@ def surface_blur(
         ds,
         centre,
         ps_range,
-        lambda r, out: np.copyto(out, sig_box[r]),
+        lambda r, out: np.copyto(out, first_box[r]),
         False,
+        tuple(sig[box] for sig in sigs[1:]),
     )
-    res = _surface_pyramid(surf, sub, first, sigma, None, ns)
+    subs = [sub, *(np.ascontiguousarray(sig[box]) for sig in sigs[1:])]
+    res = _surface_pyramid(surf, subs, first, sigma, None, ns)
     if res is None:
-        return out
-    full = res[0].full()[0]
+        return outs
     fade = _fade(sigma, surf, ps[box])
-    if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
-        fb, a0 = fade
-        fs, ss = full[fb], sub[fb]
-        _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
-    np.copyto(out[box], full, where=surf.valid.view(bool))
-    return out
+    for out, full, sub_i in zip(outs, res[0].full(), subs, strict=True):
+        if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
+            fb, a0 = fade
+            fs, ss = full[fb], sub_i[fb]
+            _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
+        np.copyto(out[box], full, where=surf.valid.view(bool))
+    return outs
 
 
 # ---------------------------------------------------------------------------------------------
@@ -371,7 +400,7 @@ def unsharp_masking(
         lambda r, out: light(img_box[r], out),
         adaptive,
     )
-    res = _surface_pyramid(surf, lum, first, sigma, vsig if adaptive else None, ns)
+    res = _surface_pyramid(surf, [lum], first, sigma, vsig if adaptive else None, ns)
     cov_a = None if mask_a.dtype == np.bool_ else mask_a[box]
     gain_a = None if gain is None else gain[box]
     # the box where U fades to L*, in the bounding box of the surface

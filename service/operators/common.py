@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Annotated, Any, Literal
 
 import cv2
@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from gbuffer.frame import Frame
 from ops import checks
 from ops.color import luminance
-from ops.lighting import lighting_gain
+from ops.lighting import luminance_gain, weighed_gain
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
 from service.images import load_image
@@ -117,22 +117,17 @@ def kept_lighting_gain(
     for bit, and the correction fades out continuously where the change does (a cut-off would
     draw a line where the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
-    gain = lighting_gain(
-        before,
-        after,
+    y0, y1 = (luminance(x, frame.colorspace.weights) for x in (before, after))
+    gain = luminance_gain(
+        y0,
+        y1,
         frame.need("depth", why),
         frame.buffers.get("normal"),
         frame.mask,
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
-        weights=frame.colorspace.weights,
     )
-    y0, y1 = (luminance(x, weights=frame.colorspace.weights) for x in (before, after))
-    weight = np.abs(y1 - y0)
-    np.divide(weight, np.float32(KEPT_CHANGE) * np.abs(y0), out=weight, where=y0 != 0)
-    np.minimum(weight, np.float32(1.0), out=weight)
-    weight[y1 == y0] = 0.0
-    return np.asarray(1.0 + weight * (gain - 1.0), np.float32)
+    return weighed_gain(gain, y0, y1, KEPT_CHANGE)
 
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
@@ -142,6 +137,15 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     if not covered.any():
         return 1.0
     return fraction * frame.image_height * float(np.median(pixel_size[covered]))
+
+
+def total(planes: Iterable[np.ndarray]) -> np.ndarray:
+    """The sum of ``planes`` (at least one), added in order into a new float32 array."""
+    first, *others = planes
+    out = np.array(first, np.float32)
+    for plane in others:
+        out += plane
+    return out
 
 
 def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:

@@ -38,7 +38,13 @@ from ops import checks, filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
 from service.operators.base import Context, register
-from service.operators.common import LightsParams, channels, frame_albedo, kept_lighting_gain
+from service.operators.common import (
+    LightsParams,
+    channels,
+    frame_albedo,
+    kept_lighting_gain,
+    total,
+)
 
 Component = Literal["diffuse", "specular", "transmission"]
 COMPONENTS: tuple[Component, ...] = ("diffuse", "specular", "transmission")
@@ -308,14 +314,15 @@ def _ratio(
     given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
     out, new, new_light = ratio_relight(beauty, given, original, aligned, eps, p.ratio_max)
     if p.keep_lighting:
-        before = np.sum([given[lobe][0] for lobe in lobes], axis=0)
-        after = np.sum([new[lobe] for lobe in lobes], axis=0)
-        gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")[
-            ..., None
-        ]
-        out = np.asarray(out + (after * gain - after), np.float32)
-        new = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new.items()}
-        new_light = {lobe: np.asarray(v * gain, np.float32) for lobe, v in new_light.items()}
+        before = total(given[lobe][0] for lobe in lobes)
+        after = total(new[lobe] for lobe in lobes)
+        g = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
+        gain = np.asarray(cv2.merge([g, g, g]))  # (products of one shape: faster than broadcast)
+        change = after * gain
+        change -= after
+        out = np.add(change, out, out=change)
+        for relit in (*new.values(), *new_light.values()):  # (new arrays of ratio_relight)
+            relit *= gain
     frame.buffers.update(new)
     frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
     frame.buffers["beauty"] = out

@@ -25,6 +25,7 @@ from service.operators.common import (
     frame_albedo,
     kept_lighting_gain,
     statistic,
+    total,
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
@@ -173,10 +174,13 @@ def _kept_lighting(
     low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.lighting_gain`)."""
     if not p.keep_lighting:
         return scaled
-    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else 0.0
-    after = scaled - rest
+    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else None
+    after = scaled - rest if rest is not None else scaled.copy()
     gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "radiance_scaling")
-    return np.asarray(after * gain[..., None] + rest, np.float32)
+    after *= gain[..., None]
+    if rest is not None:
+        after += rest
+    return after
 
 
 def _scale_renderer_lobes(
@@ -210,7 +214,7 @@ def _scale_renderer_lobes(
         weights=weights,
     )
     if p.keep_lighting:
-        beauty = _kept_lighting(frame, p, beauty, np.sum(list(lobes.values()), axis=0))
+        beauty = _kept_lighting(frame, p, beauty, total(lobes.values()))
     return beauty, sigmas
 
 
