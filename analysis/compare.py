@@ -105,6 +105,7 @@ def compare(
     mask = geometry.mask > 0.5
     depth, normal = geometry.buffers["depth"], geometry.buffers["normal"]
     height = int(frame.image_height)
+    weights = frame.colorspace.weights
 
     def render(method: str, light: F32) -> F32:
         img = shade(method, geometry, light, resolved[method])
@@ -112,7 +113,7 @@ def compare(
         return img if albedo_rgb is None else np.asarray(albedo_rgb * img[..., None], np.float32)
 
     def score(img: F32, cong: Mapping[str, Any]) -> CongruenceResult:
-        return score_image(img, depth, mask, normal, height, **dict(cong))
+        return score_image(img, depth, mask, normal, height, weights=weights, **dict(cong))
 
     sweep = comparison_directions(N_DIRECTIONS)
     cong, norm = _normalisation(shading_norm, resolved["congruence"], render, score, sweep[0])
@@ -225,7 +226,12 @@ def _geometry(frame: Frame, albedo: str) -> Frame:
         "coverage": mask.astype(np.float32),
         "albedo": white,
     }
-    return Frame(buffers=buffers, display_size=frame.display_size, origin=frame.origin)
+    return Frame(
+        buffers=buffers,
+        display_size=frame.display_size,
+        origin=frame.origin,
+        colorspace=frame.colorspace,
+    )
 
 
 def _albedo(frame: Frame) -> F32:

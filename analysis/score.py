@@ -76,7 +76,15 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     normal = frame.buffers.get("normal")
     if normal is None:
         cong["shape"] = "depth"
-    res = score_image(beauty, depth, frame.mask, normal, int(frame.image_height), **dict(cong))
+    res = score_image(
+        beauty,
+        depth,
+        frame.mask,
+        normal,
+        int(frame.image_height),
+        weights=frame.colorspace.weights,  # the shading: luminance in the frame's space
+        **dict(cong),
+    )
     out: dict[str, Any] = {
         "score": res.score,
         "shading_norm": float(res.shading_norm),

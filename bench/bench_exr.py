@@ -3,12 +3,15 @@
 Run: ``.venv/bin/python -m bench.bench_exr``. The frame holds Depict's canonical channels
 (R G B A, N.XYZ, depth.Z, albedo.RGB, AO.X) of a shaded sphere. Timed: decoding the parts,
 reading into a Frame (decode + preset mapping), a no-op write (unchanged parts are copied
-chunk for chunk), a write with three new float outputs (the part is encoded again), and the
-OpenEXR binding's own write of the same channels for reference.
+chunk for chunk), a write with three new float outputs (the part is encoded again), and for
+reference the OpenEXR binding's own write of the same channels and a copy of the file by
+OpenImageIO's ``oiiotool`` (decode and encode again, in its own process).
 """
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import tempfile
 from pathlib import Path
 
@@ -60,6 +63,12 @@ def main() -> None:
         report.time(
             "OpenEXR.File.write of the 12 channels (reference)",
             lambda: OpenEXR.File(dict(header), dict(channels)).write(str(out)),
+            repeat=5,
+        )
+        oiiotool = str(Path(sys.executable).with_name("oiiotool"))  # from the openimageio wheel
+        report.time(
+            "oiiotool src.exr -o out.exr (reference, with process start)",
+            lambda: subprocess.run([oiiotool, str(src), "-o", str(out)], check=True),
             repeat=5,
         )
 

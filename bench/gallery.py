@@ -47,8 +47,9 @@ import numpy as np
 
 import gbuffer
 from bench.compare_meshes import VIEWS
+from gbuffer.colorspace import View
 from gbuffer.frame import Frame
-from gbuffer.preview import picture, srgb_encode
+from gbuffer.preview import RAW, picture, srgb_encode
 from ops import relief as rl
 from ops.color import luminance
 from ops.curvature import DEFAULT_GAIN
@@ -150,14 +151,19 @@ def is_render(frame: Frame) -> bool:
 
 
 def pic(
-    frame: Frame, layer: str = "beauty", exposure: float = 0.0, *, styled: bool = False
+    frame: Frame,
+    layer: str = "beauty",
+    exposure: float = 0.0,
+    *,
+    styled: bool = False,
+    view: View = RAW,
 ) -> np.ndarray:
-    """A display picture of a layer; mesh renders at :data:`MESH_EXPOSURE` (plus
-    ``exposure``; not for ``styled`` pictures, whose values are display values already, like
-    the Apparent Relief styles), on grey."""
+    """A display picture of a layer through ``view`` (default: exposure and clip); mesh renders
+    at :data:`MESH_EXPOSURE` (plus ``exposure``; not for ``styled`` pictures, whose values are
+    display values already, like the Apparent Relief styles), on grey."""
     if not is_render(frame):
-        return picture(frame, layer, exposure)
-    rgb = picture(frame, layer, exposure + (0.0 if styled else MESH_EXPOSURE))
+        return picture(frame, layer, exposure, view)
+    rgb = picture(frame, layer, exposure + (0.0 if styled else MESH_EXPOSURE), view)
     a = np.clip(frame.mask, 0.0, 1.0)[..., None]
     grey = srgb_encode(np.full(3, BACKGROUND, np.float32))
     return (rgb * a + grey * (1.0 - a)).astype(np.float32)

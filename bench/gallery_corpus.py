@@ -33,6 +33,7 @@ import numpy as np
 
 from bench import corpus, quality
 from bench.gallery import DEFAULT_OUT, Box, Tile, change_pic, pic, save, sheet
+from gbuffer.colorspace import View
 from gbuffer.frame import Frame
 from ops.color import luminance
 
@@ -105,9 +106,9 @@ def figures_label(fig: quality.Figures) -> str:
 
 
 def operator_row(
-    ref: quality.Reference, op: str, out: Frame, windows: list[tuple[str, Box]]
+    ref: quality.Reference, op: str, out: Frame, windows: list[tuple[str, Box]], view: View
 ) -> list[Tile]:
-    before, after = pic(ref.frame), pic(out)
+    before, after = pic(ref.frame, view=view), pic(out, view=view)
     fig = quality.figures(ref, out)
     zoom = zoom_of(ref.frame.shape[0])
     row: list[Tile] = [
@@ -124,12 +125,13 @@ def operator_row(
     return row
 
 
-def frame_sheet(cf: corpus.CorpusFrame, ops: Sequence[str]) -> np.ndarray:
+def frame_sheet(cf: corpus.CorpusFrame, ops: Sequence[str], view: View) -> np.ndarray:
     ref = quality.reference(cf.read())
     windows = crop_windows(ref)
     lights = cf.light_strings()
     rows = [
-        operator_row(ref, op, quality.run_operator(ref.frame, op, lights), windows) for op in ops
+        operator_row(ref, op, quality.run_operator(ref.frame, op, lights), windows, view)
+        for op in ops
     ]
     h, w = ref.frame.shape
     title = (
@@ -172,7 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--frames", nargs="+", default=(), help="only frames whose name has one of")
     ap.add_argument("--op", action="append", help="operator (repeatable)")
     ap.add_argument("--docs", type=Path, default=None, help="also write the README's picture here")
+    ap.add_argument("--display", help="OCIO display of the sheets (default: the config's)")
+    ap.add_argument("--view", help="OCIO view (default: the display's); raw: exposure and clip")
     args = ap.parse_args(argv)
+    view = View(args.display, args.view)
     frames = corpus.gather(args.dir, args.frames)
     if not frames:
         print("gallery: no corpus frames (see python -m bench.corpus --help)", file=sys.stderr)
@@ -180,7 +185,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     t0 = time.perf_counter()
     written: list[Path] = []
     for cf in frames:
-        save(frame_sheet(cf, args.op or quality.DEFAULT_OPS), args.out / f"{cf.name}.png", written)
+        sheet_ = frame_sheet(cf, args.op or quality.DEFAULT_OPS, view)
+        save(sheet_, args.out / f"{cf.name}.png", written)
     if args.docs is not None:
         docs_defaults(args.docs / "defaults_cycles.png", written)
     print(f"gallery: {len(written)} corpus sheets in {time.perf_counter() - t0:.1f} s")

@@ -67,6 +67,7 @@ from numpy.typing import NDArray
 from analysis.score import CONGRUENCE, score_image
 from gbuffer.frame import Frame
 from ops.color import luminance
+from ops.colorspace import LINEAR_REC709, convert
 from ops.congruence import CongruenceResult
 
 F32 = NDArray[np.float32]
@@ -138,10 +139,13 @@ def file_channel(frame: Frame, suffix: str) -> F32 | None:
 
 
 def file_luminance(frame: Frame, layer: str) -> F32 | None:
-    """Rec. 709 luminance of the file's ``layer.R/G/B`` (e.g. ``DiffDir``), or None."""
+    """Luminance (in the frame's working space) of the file's ``layer.R/G/B`` (e.g.
+    ``DiffDir``), or None."""
     rgb = [file_channel(frame, f"{layer}.{c}") for c in "RGB"]
     planes = [c for c in rgb if c is not None]
-    return luminance(np.dstack(planes)) if len(planes) == 3 else None
+    if len(planes) != 3:
+        return None
+    return luminance(np.dstack(planes), weights=frame.colorspace.weights)
 
 
 # -- filters ---------------------------------------------------------------------------------------
@@ -288,6 +292,7 @@ def frame_congruence(frame: Frame, shading_norm: float | None = None) -> Congrue
         frame.mask,
         frame.buffers.get("normal"),
         int(frame.image_height),
+        weights=frame.colorspace.weights,
         **params,
     )
 
@@ -336,6 +341,8 @@ def figures(ref: Reference, after: Frame) -> Figures:
     negatives, nonfinite = bad_pixels(a)
     clean = np.nan_to_num(a, nan=0.0, posinf=0.0, neginf=0.0)  # NaN would poison every mean
     scored = frame_congruence(_with_beauty(after, clean), ref.shading_norm)
+    # the luminance figures are Rec. 709's: a frame in another working space is converted
+    b, a, clean = (convert(x, ref.frame.colorspace, LINEAR_REC709) for x in (b, a, clean))
     return Figures(
         lum_objects=luminance_ratio(b, clean, regs.objects),
         lum_covered=luminance_ratio(b, clean, regs.covered),

@@ -23,6 +23,7 @@ import numpy as np
 
 from gbuffer.camera import Camera
 from gbuffer.errors import MissingBufferError, MissingCameraError
+from ops.colorspace import LINEAR_REC709, ColorSpace
 
 #: Canonical buffers: name -> (components, description).
 BUFFERS: dict[str, tuple[int, str]] = {
@@ -88,6 +89,8 @@ class Frame:
         the renderer's convention (``"ViewLayer.Depict"`` for a Blender multilayer file, the
         layer of the file's earlier Depict result); ``None``: ``R,G,B,A``.
     history : the pipeline steps applied to the frame so far, each with every parameter.
+    colorspace : the linear RGB working space of the radiance, with where it came from
+        (:mod:`gbuffer.colorspace`; linear Rec.709 unless the file or the user says otherwise).
     """
 
     buffers: dict[str, np.ndarray]
@@ -103,6 +106,7 @@ class Frame:
     hole_beauty: np.ndarray | None = None
     result_layer: str | None = None
     history: list[dict[str, Any]] = field(default_factory=list)
+    colorspace: ColorSpace = LINEAR_REC709
 
     def __post_init__(self) -> None:
         shapes = {b.shape[:2] for b in self.buffers.values()}
@@ -227,6 +231,7 @@ class Frame:
             hole_beauty=self.hole_beauty,
             result_layer=self.result_layer,
             history=list(self.history),
+            colorspace=self.colorspace,
         )
 
     def layer(self, name: str) -> dict[str, np.ndarray]:

@@ -44,6 +44,7 @@ import OpenEXR
 
 from gbuffer import cryptomatte, exr
 from gbuffer.camera import Camera
+from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.presets import (
@@ -339,6 +340,9 @@ def inspect(
         name = preset if preset != "auto" else detect(passthrough)[0]
         size = (x1 - x0 + 1, y1 - y0 + 1)
         frame = Frame(buffers={}, display_size=size, preset=name, passthrough=passthrough)
+        frame.colorspace = resolve_colorspace(
+            opts.colorspace, header, name, find_preset(name).colorspace
+        )
         problems = [str(exc)]
     info = describe(frame)
     info["problems"] = problems
@@ -389,8 +393,9 @@ def describe(frame: Frame) -> dict[str, Any]:
     position pass: rms_px, max_px, pixels, outliers; null without one), ``missing`` (what
     operators need and the frame lacks), ``depict`` (what Depict wrote into a file it made:
     version, input, pipeline, result layer, original layer, history; null otherwise),
-    ``cryptomatte`` (each Cryptomatte layer: name, ranks, the pixels each manifest name covers),
-    ``warnings``.
+    ``colorspace`` (the working space of the radiance: name, source, luminance weights, white,
+    RGB-to-XYZ; :mod:`gbuffer.colorspace`), ``cryptomatte`` (each Cryptomatte layer: name, ranks,
+    the pixels each manifest name covers), ``warnings``.
     """
     pt = frame.passthrough
     assert frame.display_size is not None
@@ -438,6 +443,7 @@ def describe(frame: Frame) -> dict[str, Any]:
         "camera": None if frame.camera is None else frame.camera.to_dict(),
         "camera_source": None if frame.camera is None else frame.camera.source or None,
         "camera_fit": None if frame.camera is None else frame.camera.fit,
+        "colorspace": frame.colorspace.describe(),
         "missing": _missing(frame),
         "depict": _provenance(pt.parts[pt.primary][0]) if pt.parts else None,
         "cryptomatte": cryptomatte.describe(frame),

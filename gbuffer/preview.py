@@ -1,6 +1,9 @@
 """8-bit pictures of any layer, for people: the only place Depict tone-maps.
 
-* radiance (beauty, lobes): exposure in stops, then the sRGB transfer function, clipped;
+* radiance (beauty, lobes): exposure in stops, then a display/view of the OpenColorIO config
+  (:class:`gbuffer.colorspace.View`: e.g. the sRGB display's ACES 2.0 SDR view), from the
+  frame's working space; or, with the ``raw`` view (the default of :func:`picture`), the
+  colours in Rec.709 primaries, the sRGB transfer function and a hard clip;
 * normals: ``0.5 * n + 0.5`` as RGB (camera space: +x red, +y green, +z blue);
 * depth: near bright, far dark, normalised over the covered range; background black;
 * one-channel data in [0, 1] (AO, coverage, alpha) as grey; signed data (curvature) on a
@@ -13,11 +16,14 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+import OpenImageIO as oiio
 
 from gbuffer import cryptomatte
 from gbuffer.atomic import atomic_path
+from gbuffer.colorspace import RAW_VIEW, View, display_processor
 from gbuffer.errors import FrameError
 from gbuffer.frame import BUFFERS, Frame
+from ops.colorspace import LINEAR_REC709, ColorSpace, convert
 
 RADIANCE = {
     "beauty",
@@ -37,6 +43,27 @@ def srgb_encode(linear: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(
         np.float32
     )
+
+
+#: Depict's own exposure and clip (:func:`srgb_encode`), the default of :func:`picture`.
+RAW = View(view=RAW_VIEW)
+
+
+def display_encode(
+    linear: np.ndarray, space: ColorSpace, view: View = RAW, exposure: float = 0.0
+) -> np.ndarray:
+    """Scene-linear radiance in ``space`` -> display-encoded float RGB in [0, 1] through
+    ``view`` (the OCIO display/view transform; ``raw``: Rec.709 primaries, then
+    :func:`srgb_encode`), after ``2**exposure``."""
+    if view.raw:
+        return srgb_encode(convert(linear, space, LINEAR_REC709), exposure)
+    proc, pre = display_processor(space, view)
+    x = np.ascontiguousarray(linear * np.float32(2.0**exposure), np.float32)
+    if pre is not None:
+        x = np.ascontiguousarray(cv2.transform(x, pre), np.float32)
+    x = np.nan_to_num(x, nan=0.0, posinf=65504.0, neginf=0.0)
+    proc.applyRGB(x)
+    return np.clip(x, 0.0, 1.0)
 
 
 def _depth_picture(depth: np.ndarray) -> np.ndarray:
@@ -65,8 +92,11 @@ def _grey_or_signed(values: np.ndarray) -> np.ndarray:
     return np.repeat((v / hi)[..., None], 3, axis=2)
 
 
-def picture(frame: Frame, layer: str = "beauty", exposure: float = 0.0) -> np.ndarray:
+def picture(
+    frame: Frame, layer: str = "beauty", exposure: float = 0.0, view: View = RAW
+) -> np.ndarray:
     """An (H, W, 3) float32 RGB picture in [0, 1] of a canonical buffer or a file layer;
+    radiance through ``view`` from the frame's working space (:func:`display_encode`);
     ``cryptomatte`` (or ``cryptomatte/LAYER``): a false-colour view of the Cryptomatte ids."""
     if layer == "cryptomatte" or layer.startswith("cryptomatte/"):
         chosen = cryptomatte.named_layers(frame, layer.partition("/")[2] or None)[0]
@@ -78,7 +108,7 @@ def picture(frame: Frame, layer: str = "beauty", exposure: float = 0.0) -> np.nd
         if layer == "depth":
             return np.repeat(_depth_picture(data)[..., None], 3, axis=2)
         if layer in RADIANCE:
-            return srgb_encode(data, exposure)
+            return display_encode(data, frame.colorspace, view, exposure)
         return _grey_or_signed(data)
     channels = frame.layer(layer)
     if not channels:
@@ -88,13 +118,21 @@ def picture(frame: Frame, layer: str = "beauty", exposure: float = 0.0) -> np.nd
     for trio in (("R", "G", "B"), ("X", "Y", "Z")):
         if all(c in channels for c in trio):
             rgb = np.dstack([channels[c] for c in trio])
-            return srgb_encode(rgb, exposure) if trio[0] == "R" else _grey_or_signed(rgb)
+            if trio[0] == "R":
+                return display_encode(rgb, frame.colorspace, view, exposure)
+            return _grey_or_signed(rgb)
     return _grey_or_signed(channels[names[0]])
 
 
 def write_png(rgb: np.ndarray, path: str | Path) -> None:
-    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG, atomically."""
-    img = (np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG (OpenImageIO), atomically."""
+    img = np.ascontiguousarray((np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
     with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR)):
-            raise FrameError(f"cannot write PNG {path}")
+        out = oiio.ImageOutput.create(str(tmp))
+        spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)
+        if out is None or not out.open(str(tmp), spec):
+            raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")
+        ok = out.write_image(img)
+        out.close()
+        if not ok:
+            raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")

@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from ops.checks import PERCENTILE, WHITE
+from ops.colorspace import REC709_RGB_TO_XYZ, REC709_Y
 from ops.jit import kernel
 from ops.numerics import dot3_row
 from ops.parallel import run_strips, strip_rows
@@ -62,20 +63,9 @@ __all__ = [
     "scale_lab",
 ]
 
-#: Linear Rec.709/sRGB (D65) to CIE XYZ (IEC 61966-2-1), column vectors.
-RGB_TO_XYZ = np.array(
-    [
-        [0.4124564, 0.3575761, 0.1804375],
-        [0.2126729, 0.7151522, 0.0721750],
-        [0.0193339, 0.1191920, 0.9503041],
-    ],
-    dtype=np.float64,
-)
-#: The D65 white of that matrix (its row sums): XYZ of RGB (1, 1, 1).
-_WHITE_XYZ = RGB_TO_XYZ.sum(axis=1)
-#: Rec. 709 / sRGB luminance weights of linear RGB (ITU-R BT.709-6, item 3.3: Y = 0.2126 R +
-#: 0.7152 G + 0.0722 B); RGB_TO_XYZ's Y row is the same to four decimals.
-REC709_Y = (0.2126, 0.7152, 0.0722)
+#: Linear Rec.709/sRGB (D65) to CIE XYZ (IEC 61966-2-1), column vectors: the default space.
+#: Another working space passes its own matrix (``rgb_to_xyz``, :mod:`ops.colorspace`).
+RGB_TO_XYZ = REC709_RGB_TO_XYZ
 _LUMA_ROWS = 64  # rows per strip of luminance()
 
 _DELTA = 6.0 / 29.0
@@ -130,14 +120,17 @@ def _unphi_inplace(u: np.ndarray) -> None:
     _cv.addWeighted(u, 1.0, lo, s, -s * _KNEE_PHI, dst=u)
 
 
-def _to_t(white: float) -> np.ndarray:
-    """linear RGB -> t = (X/Xn, Y/Yn, Z/Zn) of rgb / white (3×3 float32)."""
-    return (RGB_TO_XYZ / (_WHITE_XYZ[:, None] * white)).astype(np.float32)
+def _to_t(white: float, rgb_to_xyz: np.ndarray) -> np.ndarray:
+    """linear RGB -> t = (X/Xn, Y/Yn, Z/Zn) of rgb / white (3×3 float32); (Xn, Yn, Zn) is the
+    space's white, XYZ of RGB (1, 1, 1)."""
+    m = np.asarray(rgb_to_xyz, np.float64)
+    return (m / (m.sum(axis=1)[:, None] * white)).astype(np.float32)
 
 
-def _from_t(white: float) -> np.ndarray:
+def _from_t(white: float, rgb_to_xyz: np.ndarray) -> np.ndarray:
     """t -> linear RGB (3×3 float32), the inverse of :func:`_to_t`."""
-    return (np.linalg.inv(RGB_TO_XYZ) * (_WHITE_XYZ[None, :] * white)).astype(np.float32)
+    m = np.asarray(rgb_to_xyz, np.float64)
+    return (np.linalg.inv(m) * (m.sum(axis=1)[None, :] * white)).astype(np.float32)
 
 
 def _write(res: np.ndarray, out: np.ndarray) -> None:
@@ -191,8 +184,14 @@ def _luma_rows(rgb, w0, w1, w2, out):  # type: ignore[no-untyped-def]
         dot3_row(rgb[i].reshape(3 * wid), w0, w1, w2, out[i])
 
 
-def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: float = 99.0) -> float:
-    """White level for CIELAB: the ``percentile`` of luminance over covered pixels.
+def auto_white(
+    rgb: np.ndarray,
+    mask: np.ndarray | None = None,
+    percentile: float = 99.0,
+    weights: tuple[float, float, float] = REC709_Y,
+) -> float:
+    """White level for CIELAB: the ``percentile`` of luminance (``weights``: the working space's)
+    over covered pixels.
 
     Computed on a strided subsample (every 4th row and column, at least 64k pixels kept where the
     image has them) for speed; a 99th percentile moves by well under 1 % from that. Pixels with
@@ -207,7 +206,7 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     h, w = arr.shape[:2]
     step = 4 if h * w >= 16 * 65536 else 1
     sub = np.ascontiguousarray(arr[::step, ::step])
-    y = luminance(sub)
+    y = luminance(sub, weights)
     ok = np.isfinite(y) & (y > 0.0)
     if mask is not None:
         m = np.asarray(mask)
@@ -221,16 +220,24 @@ def auto_white(rgb: np.ndarray, mask: np.ndarray | None = None, percentile: floa
     return white if white > 0.0 and np.isfinite(white) else 1.0
 
 
-def resolve_white(white: White, rgb: np.ndarray, mask: np.ndarray | None = None) -> float:
-    """``white`` as a number: ``"auto"`` -> :func:`auto_white`, a number -> itself (checked)."""
+def resolve_white(
+    white: White,
+    rgb: np.ndarray,
+    mask: np.ndarray | None = None,
+    weights: tuple[float, float, float] = REC709_Y,
+) -> float:
+    """``white`` as a number: ``"auto"`` -> :func:`auto_white` (luminance with the working
+    space's ``weights``), a number -> itself (checked)."""
     if isinstance(white, str):
         if white != "auto":
             raise ValueError(f"white must be 'auto' or a number > 0, got {white!r}")
-        return auto_white(rgb, mask)
+        return auto_white(rgb, mask, weights=weights)
     return WHITE.check(white, "white")
 
 
-def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
+def rgb_to_lab_phi(
+    rgb: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
     """Linear RGB -> centred CIELAB cube-root coordinates φ = f(t) − 4/29, (H, W, 3) float32.
 
     With t = (X/Xn, Y/Yn, Z/Zn) of ``rgb / white``, φ = (f(t_x), f(t_y), f(t_z)) − 4/29, so that
@@ -242,7 +249,7 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     Computed as φ = cbrt(max(t, δ³)) + min(t, δ³)/(3δ²) − δ (the CIE linear segment below δ³).
     """
     arr = _check_rgb(rgb, "rgb")
-    m = _to_t(WHITE.check(white, "white"))
+    m = _to_t(WHITE.check(white, "white"), rgb_to_xyz)
     h, w = arr.shape[:2]
     out = np.empty_like(arr)
 
@@ -256,7 +263,10 @@ def rgb_to_lab_phi(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
 
 
 def lab_phi_to_rgb(
-    phi: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
+    phi: np.ndarray,
+    white: float = 1.0,
+    out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
 ) -> np.ndarray:
     """Centred cube-root coordinates φ (see :func:`rgb_to_lab_phi`) -> linear RGB, float32.
 
@@ -265,7 +275,7 @@ def lab_phi_to_rgb(
     float32 array (or view) to write the result into; the result is returned either way.
     """
     arr = _check_rgb(phi, "phi")
-    m_inv = _from_t(WHITE.check(white, "white"))
+    m_inv = _from_t(WHITE.check(white, "white"), rgb_to_xyz)
     h, w = arr.shape[:2]
     res = np.empty_like(arr) if out is None else out
 
@@ -278,7 +288,12 @@ def lab_phi_to_rgb(
     return res
 
 
-def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None) -> np.ndarray:
+def lightness(
+    rgb: np.ndarray,
+    white: float = 1.0,
+    out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
+) -> np.ndarray:
     """CIELAB lightness L* = 116 f(Y/Yn) − 16 of linear RGB relative to ``white``, (H, W) float32.
 
     The L* channel of :func:`rgb_to_lab` without a*, b* (one 1×3 transform and one cube root per
@@ -286,7 +301,7 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     (or view) to write into; the result is returned either way.
     """
     arr = _check_rgb(rgb, "rgb")
-    kernel = lightness_rows(white)
+    kernel = lightness_rows(white, rgb_to_xyz)
     h, w = arr.shape[:2]
     if out is None:
         out = np.empty((h, w), np.float32)
@@ -306,12 +321,14 @@ def lightness(rgb: np.ndarray, white: float = 1.0, out: np.ndarray | None = None
     return res
 
 
-def lightness_rows(white: float = 1.0) -> Callable[[np.ndarray, np.ndarray], None]:
+def lightness_rows(
+    white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> Callable[[np.ndarray, np.ndarray], None]:
     """The strip kernel of :func:`lightness` for ``white``: ``fn(rgb, out)`` writes L* of
     ``rgb`` ((n, W, 3) float32 whose rows are contiguous) into ``out`` ((n, W) float32,
     C-contiguous), unchecked, in the calling thread: for a caller's own pass over strips, in
     which the dozen calls of :func:`lightness`'s checks per strip would add up."""
-    m = _to_t(WHITE.check(white, "white"))[1:2]
+    m = _to_t(WHITE.check(white, "white"), rgb_to_xyz)[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
         _write(_cv.transform(rgb, m, dst=out), out)
@@ -328,6 +345,7 @@ def scale_lab(
     *,
     keep: np.ndarray | None = None,
     out: np.ndarray | None = None,
+    rgb_to_xyz: np.ndarray = RGB_TO_XYZ,
 ) -> np.ndarray:
     """Linear RGB whose CIELAB coordinates are those of ``rgb`` times ``k``: (k L*, k a*, k b*).
 
@@ -364,7 +382,7 @@ def scale_lab(
         def k_of(r: slice) -> KRows:
             return kk[r], None if kp_all is None else kp_all[r]
 
-    m, m_inv = _to_t(w), _from_t(w)
+    m, m_inv = _to_t(w, rgb_to_xyz), _from_t(w, rgb_to_xyz)
     res = np.empty_like(arr) if out is None else out
 
     def strip(r: slice) -> None:
@@ -399,7 +417,9 @@ def _rows_of(a: np.ndarray, shape: tuple[int, int], dtype: type, name: str) -> n
     return arr
 
 
-def rgb_to_lab(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
+def rgb_to_lab(
+    rgb: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
     """Linear RGB (Rec.709 primaries, D65) -> CIELAB relative to the white level ``white``.
 
     X, Y, Z = M · rgb / white, each divided by the D65 white (Xn, Yn, Zn);
@@ -418,10 +438,12 @@ def rgb_to_lab(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     -------
     (H, W, 3) float32 ``(L*, a*, b*)``.
     """
-    return _cv.transform(rgb_to_lab_phi(rgb, white), _PHI_TO_LAB)
+    return _cv.transform(rgb_to_lab_phi(rgb, white, rgb_to_xyz), _PHI_TO_LAB)
 
 
-def lab_to_rgb(lab: np.ndarray, white: float = 1.0) -> np.ndarray:
+def lab_to_rgb(
+    lab: np.ndarray, white: float = 1.0, rgb_to_xyz: np.ndarray = RGB_TO_XYZ
+) -> np.ndarray:
     """CIELAB relative to the white level ``white`` -> linear RGB; inverse of :func:`rgb_to_lab`.
 
     f_y = (L* + 16)/116, f_x = f_y + a*/500, f_z = f_y − b*/200;
@@ -438,4 +460,4 @@ def lab_to_rgb(lab: np.ndarray, white: float = 1.0) -> np.ndarray:
     (H, W, 3) float32 linear RGB.
     """
     arr = _check_rgb(lab, "lab")
-    return lab_phi_to_rgb(_cv.transform(arr, _LAB_TO_PHI), white)
+    return lab_phi_to_rgb(_cv.transform(arr, _LAB_TO_PHI), white, rgb_to_xyz=rgb_to_xyz)

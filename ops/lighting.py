@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.color import luminance
+from ops.colorspace import REC709_Y
 from ops.jit import kernel
 from ops.parallel import run_strips
 from ops.unsharp import surface_blurs
@@ -42,19 +43,21 @@ def lighting_gain(
     *,
     sigma_scene: float,
     pixel_size: np.ndarray | float,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> F32:
     """The per-pixel factor that gives ``after`` the low-frequency luminance of ``before``::
 
         gain = LF(Y(before)) / LF(Y(after)),   LF = surface_blur(·, σ = sigma_scene)
 
     ``before`` and ``after`` are (H, W, 3) radiance (the part an operator changed: e.g. the sum
-    of the lobes it scaled); Y is Rec. 709 luminance. The gain is 1 on uncovered pixels and where
-    either is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
+    of the lobes it scaled); Y is luminance with the working space's ``weights`` (default
+    Rec. 709). The gain is 1 on uncovered pixels and where either is darker than 1e-6 at that
+    scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
     ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
     """
     return luminance_gain(
-        luminance(before),
-        luminance(after),
+        luminance(before, weights),
+        luminance(after, weights),
         depth,
         normal,
         mask,

@@ -206,14 +206,19 @@ class Client:
         layout: str | None = None,
         preview: bool = False,
         exposure: float = 0.0,
+        colorspace: str | None = None,
+        display: str | None = None,
+        view: str | None = None,
     ) -> Path:
-        """``POST /v1/enhance``: write the enhanced EXR (or a PNG with ``preview``) to ``output``.
+        """``POST /v1/enhance``: write the enhanced EXR (or a PNG with ``preview``, through the
+        OCIO ``display`` and ``view``, default the server config's) to ``output``.
 
         ``pipeline``: a PipelineSpec, dict, list of steps or JSON text (default: the server's
         default, Radiance Scaling). ``camera``: a dict, a Camera or a camera JSON path.
+        ``colorspace``: the working space (a name of the server's OCIO config).
         ``layout``: where new layers go (same, part, sidecar; default: the server's).
         """
-        data = self._read_fields(preset, camera, mapping, normal_space)
+        data = self._read_fields(preset, camera, mapping, normal_space, colorspace)
         data["debug_layers"] = "true" if debug_layers else "false"
         optional = {
             "pipeline": _pipeline_json(pipeline),
@@ -221,7 +226,10 @@ class Client:
             "layout": layout,
         }
         data.update({k: v for k, v in optional.items() if v is not None})
-        params: dict[str, Any] = {"preview": "png", "exposure": exposure} if preview else {}
+        params: dict[str, Any] = {}
+        if preview:
+            shown = {"preview": "png", "exposure": exposure, "display": display, "view": view}
+            params = {k: v for k, v in shown.items() if v is not None}
         with self._stream(
             "POST", "/v1/enhance", files={"file": Path(input)}, data=data, params=params
         ) as response:
@@ -261,6 +269,7 @@ class Client:
         camera: Any = None,
         mapping: Mapping[str, str] | None = None,
         normal_space: str | None = None,
+        colorspace: str | None = None,
     ) -> dict[str, str]:
         """The form fields that say how the server reads the uploaded frame."""
         fields = {
@@ -268,6 +277,7 @@ class Client:
             "camera": _camera_json(camera),
             "map": json.dumps(dict(mapping)) if mapping else None,
             "normal_space": normal_space,
+            "colorspace": colorspace,
         }
         return {k: v for k, v in fields.items() if v is not None}
 
@@ -284,6 +294,7 @@ class Client:
         camera: Any = None,
         mapping: Mapping[str, str] | None = None,
         normal_space: str | None = None,
+        colorspace: str | None = None,
         **options: float | str,
     ) -> dict[str, Any]:
         """``POST /v1/score``: the congruence score of a frame's beauty (after ``pipeline``).
@@ -291,7 +302,7 @@ class Client:
         ``options``: ``gradient_scale``, ``integration_scale``, ``percentile``, ``depth_jump``,
         ``shading_norm``, ``shape``.
         """
-        data = self._read_fields(preset, camera, mapping, normal_space)
+        data = self._read_fields(preset, camera, mapping, normal_space, colorspace)
         data.update({k: str(v) for k, v in options.items()})
         spec = _pipeline_json(pipeline)
         if spec is not None:

@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
 from gbuffer.camera import Camera
+from gbuffer.colorspace import View
 from gbuffer.exr import release_pixels
 from gbuffer.frame import Frame
 from gbuffer.io import read as read_exr
@@ -62,15 +63,17 @@ class ReadRequest:
 class WriteRequest:
     """What to write: intermediate layers too (``debug_layers``), the result layer
     (``output_layer``, :mod:`service.output`), a tone-mapped PNG instead of the EXR (``preview``,
-    at ``exposure`` stops), and the input's name recorded in the output (``input_name``; default:
-    the name of the file read), and where new layers go (``layout``: :data:`gbuffer.io.LAYOUTS`,
-    same part, an added part, or a sidecar file with only them)."""
+    at ``exposure`` stops, through ``view``: the OCIO config's default display and view unless
+    given), and the input's name recorded in the output (``input_name``; default: the name of
+    the file read), and where new layers go (``layout``: :data:`gbuffer.io.LAYOUTS`, same part,
+    an added part, or a sidecar file with only them)."""
 
     debug_layers: bool = False
     output_layer: str | None = None
     preview: bool = False
     exposure: float = 0.0
     input_name: str | None = None
+    view: View = field(default_factory=View)
     layout: str = "same"
 
 
@@ -114,7 +117,7 @@ def enhance(
     out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)
     warnings: list[str] = []
     if write.preview:
-        write_png(picture(out, "beauty", exposure=write.exposure), out_path)
+        write_png(picture(out, "beauty", write.exposure, write.view), out_path)
     else:
         warnings = write_exr(out, out_path, write.layout)
     h, w = out.shape

@@ -1,9 +1,13 @@
 """Images users hand to operators: matcaps, environment maps, gain maps, Apparent Relief Maps.
 
-PNG/JPEG/TIFF are read with OpenCV; 8- and 16-bit files are scaled to [0, 1] and, where they are
-colour pictures (``srgb=True``: matcaps, environments), decoded from sRGB to linear. EXR files
-are read with the OpenEXR package (``R,G,B`` / ``Y`` / the first channels) and are already
-linear. The result is float32 (H, W, 3), or (H, W) with ``grey=True``.
+Any format OpenImageIO reads (PNG, JPEG, TIFF, HDR, EXR, ...) is read with it, as float32.
+Colour pictures (``srgb=True``: matcaps, environments) are converted into the frame's working
+space (``space``) from the file's: 8- and 16-bit files are sRGB-encoded Rec.709 (decoded to
+linear light); float files (EXR, HDR) are linear, in the space of their ``chromaticities``
+attribute when they carry one, else linear Rec.709. Data maps (``srgb=False``: gain maps,
+ARMs, toon textures) are numbers, not colours: integer files are scaled to [0, 1], nothing is
+converted. An EXR's ``R,G,B`` (else ``X,Y,Z``, ``Y``, the first channels) are used. The result
+is float32 (H, W, 3), or (H, W) with ``grey=True``.
 """
 
 from __future__ import annotations
@@ -12,53 +16,73 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import OpenEXR
+import OpenImageIO as oiio
 
 from gbuffer.errors import FrameError
+from ops.colorspace import LINEAR_REC709, ColorSpace, convert, from_chromaticities
 
 
 def _srgb_to_linear(x: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
-def _read_exr(path: Path) -> np.ndarray:
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            channels = {name: np.asarray(c.pixels, np.float32) for name, c in f.channels().items()}
-    except Exception as exc:  # the binding raises bare exceptions for bad files
-        raise FrameError(f"cannot read image {path}: not a readable EXR ({exc})") from None
+def _pick(pixels: np.ndarray, names: list[str]) -> np.ndarray:
+    """The colour channels of an (H, W, C) image by name: R,G,B, X,Y,Z, Y, else the first."""
+    index = {n: i for i, n in enumerate(names)}
     for trio in (("R", "G", "B"), ("X", "Y", "Z")):
-        if all(c in channels for c in trio):
-            return np.dstack([channels[c] for c in trio])
-    if "Y" in channels:
-        return channels["Y"]
-    first = sorted(channels)[:3]
-    return np.dstack([channels[c] for c in first]) if len(first) == 3 else channels[first[0]]
+        if all(c in index for c in trio):
+            return np.dstack([pixels[..., index[c]] for c in trio])
+    if "Y" in index:
+        return pixels[..., index["Y"]]
+    return pixels[..., :3] if pixels.shape[2] >= 3 else pixels[..., 0]
 
 
-def load_image(path: str | Path, *, srgb: bool = True, grey: bool = False) -> np.ndarray:
-    """Read an image as float32; ``srgb`` decodes 8/16-bit files to linear light."""
+def _read(path: Path) -> tuple[np.ndarray, bool, ColorSpace]:
+    """(pixels as float32 (H, W[, 3]), whether the file stores integers, its linear space)."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        oiio.geterror()
+        raise FrameError(f"cannot read image {path} (PNG, JPEG, TIFF, HDR or EXR expected)")
+    try:
+        spec = inp.spec()
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        chroma = spec.getattribute("chromaticities")
+    finally:
+        inp.close()
+    if pixels is None:
+        raise FrameError(f"cannot read image {path}: {oiio.geterror() or 'no pixels'}")
+    integer = spec.format.basetype in (oiio.UINT8, oiio.UINT16, oiio.INT8, oiio.INT16)
+    space = LINEAR_REC709
+    if chroma is not None and not integer:
+        try:
+            space = from_chromaticities(f"{path.name} chromaticities", chroma, "file")
+        except ValueError as exc:
+            raise FrameError(f"image {path}: unusable chromaticities ({exc})") from None
+    img = _pick(
+        np.asarray(pixels, np.float32).reshape(spec.height, spec.width, -1), list(spec.channelnames)
+    )
+    return np.ascontiguousarray(img, np.float32), integer, space
+
+
+def load_image(
+    path: str | Path,
+    *,
+    srgb: bool = True,
+    grey: bool = False,
+    space: ColorSpace = LINEAR_REC709,
+) -> np.ndarray:
+    """Read an image as float32: a colour picture (``srgb``) in ``space``, else data."""
     p = Path(path)
     if not p.is_file():
         raise FrameError(f"image {path} does not exist")
-    if p.suffix.lower() == ".exr":
-        img = _read_exr(p)
-    else:
-        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED | cv2.IMREAD_ANYDEPTH)
-        if raw is None:
-            raise FrameError(f"cannot read image {path} (PNG, JPEG, TIFF, HDR or EXR expected)")
-        if raw.ndim == 3:
-            raw = cv2.cvtColor(raw[..., :3], cv2.COLOR_BGR2RGB)
-        if raw.dtype == np.uint8:
-            img = raw.astype(np.float32) / 255.0
-        elif raw.dtype == np.uint16:
-            img = raw.astype(np.float32) / 65535.0
-        else:
-            img = raw.astype(np.float32)
-        if srgb and raw.dtype in (np.uint8, np.uint16):
-            img = _srgb_to_linear(img)
+    img, integer, file_space = _read(p)
     if not np.all(np.isfinite(img)):
         raise FrameError(f"image {path} holds NaN or Inf values")
+    if srgb:
+        if integer:
+            img = _srgb_to_linear(img)
+        if img.ndim == 3:
+            img = convert(img, file_space, space)
     if grey:
         return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
     return img if img.ndim == 3 else np.repeat(img[..., None], 3, axis=2)

@@ -20,8 +20,10 @@ feed it back with ``--pipeline``), ``depict/input`` (the input's file name), ``d
 layer, "" for ``R,G,B,A``), ``depict/original`` (the layer holding the renderer's beauty) and the
 camera the pipeline used, when it did not come from the file: ``worldToCamera``, ``worldToNDC``
 (the OpenEXR standard attributes), ``depict/projection``, ``depict/fovYDeg`` /
-``depict/orthoHeight`` and ``depict/cameraSource``. Reading an output back therefore needs no
-flag: ``preview``, ``inspect``, ``score`` and ``enhance`` take the result as the beauty.
+``depict/orthoHeight`` and ``depict/cameraSource``; and the working space when the user named
+it (``--colorspace``): ``chromaticities`` (the OpenEXR standard attribute). Reading an output
+back therefore needs no flag: ``preview``, ``inspect``, ``score`` and ``enhance`` take the
+result as the beauty, in its space.
 """
 
 from __future__ import annotations
@@ -144,6 +146,14 @@ def provenance(frame: Frame, input_name: str | None) -> dict[str, Any]:
     return attrs
 
 
+def colorspace_attributes(frame: Frame) -> dict[str, Any]:
+    """``chromaticities`` of a working space the user named (the file's own stay as they are)."""
+    space = frame.colorspace
+    if space.source != "--colorspace":
+        return {}
+    return {"chromaticities": space.chromaticities}
+
+
 def camera_attributes(frame: Frame) -> dict[str, Any]:
     """The camera's header attributes, unless it came from the file's header itself."""
     cam = frame.camera
@@ -176,6 +186,7 @@ def finish(
     if input_name is None and path:
         input_name = Path(str(path)).name
     out.attributes.update(camera_attributes(out))
+    out.attributes.update(colorspace_attributes(out))
     out.attributes.update(provenance(out, input_name))
     out.attributes[RESULT_ATTRIBUTE] = layer
     if original:

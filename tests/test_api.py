@@ -221,11 +221,24 @@ def test_not_an_exr_400(client: Any) -> None:
         ({"output_layer": "a/b"}, "output_layer"),
         ({"output_layer": "ViewLayer..Depict"}, "output_layer"),
         ({"normal_space": "up"}, "normal_space"),
+        ({"colorspace": "nope"}, "colorspace: colour space 'nope' is not in the OCIO config"),
+        ({"colorspace": "srgb_tx"}, "is not linear"),
         ({"layout": "beside"}, "layout"),
     ],
 )
 def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> None:
     r = client.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
+    problem(r, 422, words)
+
+
+@pytest.mark.parametrize(
+    ("query", "words"),
+    [("view=nope", "view 'nope' is not a view of display"), ("display=nope", "display 'nope'")],
+)
+def test_unknown_preview_view_422(client: Any, query: str, words: str) -> None:
+    r = client.post(
+        f"/v1/enhance?preview=png&{query}", headers=AUTH, files={"file": ("a.exr", exr_bytes())}
+    )
     problem(r, 422, words)
 
 

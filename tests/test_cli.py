@@ -94,6 +94,7 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
         "camera",
         "camera_source",
         "camera_fit",
+        "colorspace",
         "missing",
         "depict",
         "cryptomatte",
@@ -101,6 +102,11 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
         "operators",
         "warnings",
     }
+    assert "colour space: Linear Rec.709 (sRGB) (from default;" in text
+    assert (info["colorspace"]["name"], info["colorspace"]["source"]) == (
+        "Linear Rec.709 (sRGB)",
+        "default",
+    )
     assert info["camera_source"] == "file header (worldToCamera)"
     assert info["missing"] == [] and info["problems"] == [] and info["depict"] is None
     assert info["operators"]["not_runnable"] == {}

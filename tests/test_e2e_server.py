@@ -181,15 +181,20 @@ def test_render_matches_local_cli(
 
 
 def test_preview_png(server: Server, files: dict[str, Path]) -> None:
-    response = httpx.post(
-        f"{server.url}/v1/enhance?preview=png",
-        files={"file": ("a.exr", files["canonical"].read_bytes())},
-        headers=AUTH,
-        timeout=60,
-    )
-    assert response.status_code == 200, response.text
-    assert response.headers["content-type"] == "image/png"
-    assert response.content[:8] == b"\x89PNG\r\n\x1a\n"
+    """The config's default view (ACES 2.0 SDR), or Depict's exposure and clip (``raw``)."""
+    pngs = []
+    for query in ("", "&view=raw"):
+        response = httpx.post(
+            f"{server.url}/v1/enhance?preview=png{query}",
+            files={"file": ("a.exr", files["canonical"].read_bytes())},
+            headers=AUTH,
+            timeout=60,
+        )
+        assert response.status_code == 200, response.text
+        assert response.headers["content-type"] == "image/png"
+        assert response.content[:8] == b"\x89PNG\r\n\x1a\n"
+        pngs.append(response.content)
+    assert pngs[0] != pngs[1]
 
 
 def test_python_client_and_score_match_local(server: Server, files: dict[str, Path]) -> None:
@@ -203,6 +208,13 @@ def test_python_client_and_score_match_local(server: Server, files: dict[str, Pa
     assert 0.0 < remote["score"] <= 1.0
     assert remote["params"] == local["params"]
     assert remote["analysis_shape"] == local["analysis_shape"]
+    with Client(server.url, api_key=KEY) as client:  # the working space named by the client
+        acescg = client.score(files["canonical"], gradient_scale=0.004, colorspace="ACEScg")
+    local = score_frame(
+        read_exr(files["canonical"], options={"colorspace": "ACEScg"}), gradient_scale=0.004
+    )
+    assert acescg["score"] == pytest.approx(local["score"], rel=1e-9, abs=1e-12)
+    assert acescg["score"] != pytest.approx(remote["score"], rel=1e-9, abs=1e-12)
     with Client(server.url, api_key="wrong") as client, pytest.raises(DepictError) as err:
         client.operators()
     assert err.value.status == 401 and err.value.problem["type"].endswith(":unauthorized")

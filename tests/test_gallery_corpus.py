@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from bench import corpus, gallery_corpus, quality
+from gbuffer.colorspace import View
 
 
 def test_best_window_finds_the_densest_square() -> None:
@@ -27,7 +28,7 @@ def test_sheet_of_a_corpus_frame() -> None:
     assert y1 - y0 == side and x1 - x0 == side
     assert ref.regions.objects[y0:y1, x0:x1].mean() > 0.5
     assert ref.regions.flat_floor[f0:f1, g0:g1].mean() > 0.9
-    img = gallery_corpus.frame_sheet(cf, ["unsharp_masking", "light_alignment"])
+    img = gallery_corpus.frame_sheet(cf, ["unsharp_masking", "light_alignment"], View())
     rows = 2 * gallery_corpus.ROW
     assert img.dtype == np.uint8 and rows < img.shape[0] < rows + 60
     # input, result and change at 100 %, then two crops before and after, 4x

@@ -483,11 +483,13 @@ def test_describe_is_json(tmp_path: Path, scene: F.Scene) -> None:
         "camera",
         "camera_source",
         "camera_fit",
+        "colorspace",
         "missing",
         "depict",
         "cryptomatte",
         "warnings",
     ]
+    assert info["colorspace"]["source"] == "default"  # V-Ray writes no chromaticities here
     assert info["camera_source"] == "file header (V-Ray cameraTransform)"
     assert info["camera_fit"] is None and info["missing"] == [] and info["depict"] is None
     assert info["parts"][0]["compression"] == "PIZ"

@@ -18,6 +18,7 @@ import gbuffer
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
+from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
 from ops.lighting import weighed_gain
 from ops.pyramid.masked import masked_gaussian
@@ -385,12 +386,13 @@ def test_deferred_scenarios_pass_their_parameters_to_ops(scenario: str) -> None:
     )
 
 
-def test_beauty_scenario_uses_beauty_over_albedo_as_its_light() -> None:
+def test_beauty_scenario_uses_beauty_over_albedo_luminance_as_its_light() -> None:
+    """δ̄ = Y(beauty) / Y(albedo) / white: a ratio of luminances (the same in any primaries)."""
     frame = analytic_frame()
     frame.buffers["albedo"] = np.broadcast_to(
         np.array([0.5, 0.25, 0.5], np.float32), frame.buffers["beauty"].shape
     ).copy()
-    light = frame.buffers["beauty"] / frame.buffers["albedo"]
+    light = frame.buffers["beauty"] / luminance(frame.buffers["albedo"])[..., None]
     params = {"alpha": 0.4, "gamma": 2.0, "white": 1.5, "gain": 0.2}
     out = rs_run(frame, debug=True, scenario="beauty", preset="paper", **params)
     kappa = out.outputs["curvature.H"]

@@ -14,6 +14,7 @@ import cv2
 import numpy as np
 
 from gbuffer.camera import Camera
+from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
 from gbuffer.exr import ExrPassthrough, window
 from gbuffer.frame import LOBES, Frame, Passthrough
@@ -445,6 +446,12 @@ class _Build:
             sources=self.sources,
             passthrough=self.pt,
             result_layer=self.result_layer,
+            colorspace=resolve_colorspace(
+                self.opts.colorspace,
+                self.pt.parts[self.pt.primary][0],
+                self.preset.name,
+                self.preset.colorspace,
+            ),
         )
         reader = self.reader
         if reader.holes is not None:

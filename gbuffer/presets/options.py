@@ -6,6 +6,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from gbuffer.colorspace import named
 from gbuffer.errors import FrameError, OptionError
 from gbuffer.frame import BUFFERS
 
@@ -33,6 +34,8 @@ class ReadOptions:
     normal_tolerance : |n| within 1 +- this is trusted fully (see the coverage formula).
     require_camera : world-space normals without a camera raise :class:`MissingCameraError`
         when True; when False they are left out with a warning (e.g. for inspection).
+    colorspace : the working space of the radiance, a colour space of the OpenColorIO config
+        (:mod:`gbuffer.colorspace`); ``None``: the file's ``chromaticities``, else the preset's.
     strict : NaN/Inf in a data channel (normals, depth, position, AO, ...) on covered pixels
         raise :class:`FrameError` when True; when False (inspection) those pixels become holes
         with a warning. Radiance (beauty, lobes, albedo) is never refused: see
@@ -49,6 +52,7 @@ class ReadOptions:
     normal_tolerance: float = 0.1
     require_camera: bool = True
     strict: bool = True
+    colorspace: str | None = None
 
     def __post_init__(self) -> None:
         for key in self.mapping:
@@ -70,6 +74,8 @@ class ReadOptions:
             )
         if not 0.0 <= self.normal_tolerance < 1.0:
             raise FrameError(f"normal_tolerance={self.normal_tolerance} must be in [0, 1)")
+        if self.colorspace is not None:
+            named(self.colorspace)  # an unknown or non-linear space is refused before reading
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> ReadOptions:

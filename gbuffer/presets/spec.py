@@ -194,6 +194,8 @@ class Preset:
     view_layer : the passes that carry a view-layer prefix (``ViewLayer.Normal.X``, Blender);
         ``None`` when layers are named as they are.
     detection : how its files are recognised.
+    colorspace : the working space its files are in when the header does not say (a name of
+        the OpenColorIO config); ``None``: Depict's default, linear Rec.709.
     """
 
     name: str
@@ -206,3 +208,4 @@ class Preset:
     depth_background: float = 1e10
     view_layer: PassNames | None = None
     detection: Detection = field(default_factory=Detection)
+    colorspace: str | None = None

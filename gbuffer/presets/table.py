@@ -79,6 +79,7 @@ BLENDER = Preset(
     depth_kind="planar",
     depth_background=1e9,
     view_layer=BLENDER_PASSES,
+    colorspace="Linear Rec.709 (sRGB)",  # Blender's scene-linear default (filmic/AgX config)
     detection=Detection(
         header_keys="BlenderMultiChannel",
         software=("blender",),

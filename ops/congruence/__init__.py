@@ -18,7 +18,8 @@ lowering the score.
 
 Implementation choices (the paper does not fix them):
 
-- Shading = Rec.709 luminance of linear RGB (``cv2.transform``).
+- Shading = luminance of linear RGB in its working space (Rec.709 weights by default,
+  ``cv2.transform``).
 - Shape = the **normals** when they are given: the structure tensor of the gradients of the
   camera-space normal (summed over its three components), i.e. how fast and in which direction
   the surface turns in the image. The paper computes the shape flow "using depth gradients" and

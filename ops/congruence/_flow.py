@@ -40,6 +40,7 @@ def _covered_level(
     f: int,
     size: tuple[int, int],
     normal: F32 | None = None,
+    weights: F32 = _LUMA,
 ) -> list[F32]:
     """Covered luminance, covered depth and coverage (then, with ``normal``, the covered n_x,
     n_y, n_z), area-downsampled by ``f`` to ``size``.
@@ -68,7 +69,7 @@ def _covered_level(
             cv2.multiply(covf, (msk[r0:r1] > 0.5).astype(np.float32), dst=covf)
         cv2.multiply(depc, covf, dst=depc)
         if img.ndim == 3:
-            cv2.transform(img[r0:r1], _LUMA, dst=lum)
+            cv2.transform(img[r0:r1], weights, dst=lum)
             cv2.multiply(lum, covf, dst=lum)
         else:
             cv2.multiply(img[r0:r1], covf, dst=lum)

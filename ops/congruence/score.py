@@ -13,6 +13,7 @@ from ops.checks import (
     PERCENTILE,
     SHADING_NORM,
 )
+from ops.color import REC709_Y
 from ops.congruence._common import _REL_CURVED, _SHAPE_COUNTED, F32
 from ops.congruence._flow import (
     _LOW_MAPS,
@@ -101,6 +102,7 @@ def congruence(
     depth_jump: float = 0.05,
     shading_norm: float | None = None,
     normal: NDArray[np.floating] | None = None,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> CongruenceResult:
     """Congruence score between shading and shape flows (Mestres et al. 2021, §7, Eq. 2).
 
@@ -141,6 +143,9 @@ def congruence(
         Camera-space unit normals: the shape flow is then the structure tensor of the normal's
         gradients, which is 0 on planes (see the module docstring); without them, of the log
         depth's gradients.
+    weights : 3 floats
+        Luminance weights of the image's working space (:attr:`ops.colorspace.ColorSpace.
+        weights`; default Rec. 709): the shading is its luminance.
 
     Returns
     -------
@@ -166,7 +171,8 @@ def congruence(
     nrm = None if normal is None else np.asarray(normal, np.float32)
     if nrm is not None and nrm.shape != (h, w, 3):
         raise ValueError(f"normal must be (H, W, 3) matching depth {dep.shape}, got {nrm.shape}")
-    level = _covered_level(img, dep, mask, f1, size1, nrm)
+    lw = np.asarray(weights, np.float32).reshape(1, 3)
+    level = _covered_level(img, dep, mask, f1, size1, nrm, lw)
     lum0, dep0, cov0 = level[:3]
     # NaN / inf anywhere propagate through the weighted sums (x * 0 = NaN): check the small
     # copies (a sum accumulated in float64 cannot overflow: it is finite iff every value is)

@@ -2,11 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
-
-from ops.color import REC709_Y
-
-_LUMA = np.array(REC709_Y, dtype=np.float32)  # for kernels
 _MAX_EXP = 80.0  # |γκ| is clipped here: e^80 stays finite in float32
 _STRIP_ROWS = 64  # rows per strip in scale_lobes
 _ACC_LOBES, _ACC_REMAINDER, _ACC_BEAUTY = 0, 1, 2  # what _scale_rows adds the lobes to

@@ -8,13 +8,14 @@ import numpy as np
 from ops.jit import inline_kernel, kernel
 from ops.numerics import dot3_row, expf
 from ops.pyramid.upsample import upsample_row
-from ops.radiance_scaling._common import _ACC_BEAUTY, _ACC_LOBES, _LUMA
+from ops.radiance_scaling._common import _ACC_BEAUTY, _ACC_LOBES
 
 
 @kernel
-def _count_rows(rows, m8, wid, step, lo, hi, out):
+def _count_rows(rows, m8, wid, step, lo, hi, lw, out):
     """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
-    uint8 coverage, or no rows): (counted, below ``lo``, packed into ``out``). The counts are
+    uint8 coverage, or no rows; ``lw`` the (3,) float32 luminance weights): (counted, below
+    ``lo``, packed into ``out``). The counts are
     vectorised reductions that also flag the values in the band; only the 8-byte words of flags
     that hold one are looked at to pack them."""
     y = np.empty(wid, np.float32)
@@ -22,7 +23,7 @@ def _count_rows(rows, m8, wid, step, lo, hi, out):
     nw = (wid + 7) // 8
     flags = np.zeros(8 * nw, np.uint8)
     words = flags.view(np.uint64)
-    w0, w1, w2 = _LUMA
+    w0, w1, w2 = lw[0], lw[1], lw[2]
     big = np.float32(np.inf)
     counted = below = k = 0
     for i in range(0, rows.shape[0], step):

@@ -9,14 +9,13 @@ from collections.abc import Mapping
 import numpy as np
 
 from ops.checks import ALPHA, GAMMA, PERCENTILE, WHITE
-from ops.color import luminance
+from ops.color import REC709_Y, luminance
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling._common import (
     _ACC_BEAUTY,
     _ACC_LOBES,
     _ACC_REMAINDER,
-    _LUMA,
     _MAX_EXP,
     _STRIP_ROWS,
 )
@@ -28,12 +27,19 @@ __all__ = ["reflectance_delta", "scale_lobes", "white_level"]
 # -- reflectance mapping for renderer lobes (Eq. 4) ----------------------------------------------
 
 
+Weights = tuple[float, float, float]
+
+
 def white_level(
-    values: np.ndarray, mask: np.ndarray | None = None, percentile: float = 99.0
+    values: np.ndarray,
+    mask: np.ndarray | None = None,
+    percentile: float = 99.0,
+    weights: Weights = REC709_Y,
 ) -> float:
     """'auto' white level: the ``percentile`` of the covered pixels' values.
 
-    ``values`` is (H, W) or (H, W, 3) (its Rec. 709 luminance is used). Only finite values of
+    ``values`` is (H, W) or (H, W, 3) (its luminance with ``weights``, the working space's, is
+    used). Only finite values of
     covered pixels (``mask`` > 0.5 or True; all pixels without a mask) count, so NaN/inf and the
     background do not move it; a high percentile rather than the maximum ignores fireflies. When
     nothing positive remains the level is 1.0 (δ̄ is then the light itself). Batch mode computes it
@@ -46,9 +52,10 @@ def white_level(
     """
     p = PERCENTILE.check(percentile, "percentile")
     vals, m8, wid = _counting(values, mask)
-    level = _banded_percentile(vals, m8, wid, p)
+    lw = np.asarray(weights, np.float32)
+    level = _banded_percentile(vals, m8, wid, p, lw)
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
-        y = _count(vals, m8, wid)[2]
+        y = _count(vals, m8, wid, lw)[2]
         level = float(np.percentile(y, p, overwrite_input=True)) if y.size else 0.0
     return level if level > 0.0 else 1.0
 
@@ -77,7 +84,12 @@ def _counting(values: np.ndarray, mask: np.ndarray | None) -> tuple[np.ndarray, 
 
 
 def _count(
-    vals: np.ndarray, m8: np.ndarray, wid: int, lo: float = -_INF, hi: float = _INF
+    vals: np.ndarray,
+    m8: np.ndarray,
+    wid: int,
+    lw: np.ndarray,
+    lo: float = -_INF,
+    hi: float = _INF,
 ) -> tuple[int, int, np.ndarray]:
     """Over the counted pixels (finite values of covered pixels; RGB: their luminance): how
     many there are, how many are below ``lo``, and those in [lo, hi], in row order (1-D)."""
@@ -90,14 +102,16 @@ def _count(
     def strip(r0: int, r1: int) -> None:
         rows = m8[r0:r1] if m8.shape[0] else m8
         out = buf[r0 * wid : r1 * wid]
-        res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, out)
+        res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, lw, out)
 
     run_strips(hgt, strip, _STRIP_ROWS)
     pieces = [buf[a * wid : a * wid + n] for a, n in zip(starts, res[:, 2], strict=True)]
     return int(res[:, 0].sum()), int(res[:, 1].sum()), np.concatenate(pieces)
 
 
-def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> float | None:
+def _banded_percentile(
+    vals: np.ndarray, m8: np.ndarray, wid: int, p: float, lw: np.ndarray
+) -> float | None:
     """``np.percentile`` (linear) of the counted values, exactly, without gathering them all:
     the counted values of every (H / 128)-th row bracket the two order statistics the
     percentile interpolates; one pass counts the values and those below the bracket and keeps
@@ -108,7 +122,7 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
         return None
     step = max(1, hgt // _SAMPLE_ROWS)
     sample = np.empty(((hgt + step - 1) // step) * wid, np.float32)
-    ns = _count_rows(vals, m8, wid, step, np.float32(-_INF), np.float32(_INF), sample)[2]
+    ns = _count_rows(vals, m8, wid, step, np.float32(-_INF), np.float32(_INF), lw, sample)[2]
     if ns < _SAMPLE_MIN:
         return None
     sample = sample[:ns]
@@ -117,7 +131,7 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
     margin = 8.0 * math.sqrt(ns * q * (1.0 - q)) + 32.0  # order-statistic spread, with room
     lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
     sample.partition([lo_r, hi_r])
-    n, n_below, band = _count(vals, m8, wid, sample[lo_r], sample[hi_r])
+    n, n_below, band = _count(vals, m8, wid, lw, sample[lo_r], sample[hi_r])
     g = (n - 1) * q  # numpy's virtual index for the linear method
     k = math.floor(g)
     if n < _BAND_MIN or k + 1 > n - 1 or not (n_below <= k and n_below + band.size > k + 1):
@@ -128,14 +142,16 @@ def _banded_percentile(vals: np.ndarray, m8: np.ndarray, wid: int, p: float) -> 
     return float(np.quantile(pair, float(g - k)))
 
 
-def reflectance_delta(light: np.ndarray, white: float) -> np.ndarray:
+def reflectance_delta(light: np.ndarray, white: float, weights: Weights = REC709_Y) -> np.ndarray:
     """δ̄ = luminance(light) / white clipped to [0, 1] (RS §5.3: δ̄_d = L̄(n) / L̄*).
 
     ``light`` is a lobe's incoming light without its colour (H, W, 3); ``white`` (> 0) the level
-    mapped to δ̄ = 1 (see :func:`white_level`). NaN gives 0, +inf 1.
+    mapped to δ̄ = 1 (see :func:`white_level`); ``weights`` the working space's luminance
+    weights. NaN gives 0, +inf 1.
     """
     s = np.float32(1.0 / WHITE.check(white, "white"))
-    return _clip01(luminance(light, (_LUMA[0] * s, _LUMA[1] * s, _LUMA[2] * s)))
+    lw = np.asarray(weights, np.float32)
+    return _clip01(luminance(light, (lw[0] * s, lw[1] * s, lw[2] * s)))
 
 
 # -- scaling renderer lobes -----------------------------------------------------------------------
@@ -162,6 +178,7 @@ def scale_lobes(
     mask: np.ndarray | None = None,
     beauty: np.ndarray | None = None,
     with_sigmas: bool = True,
+    weights: Weights = REC709_Y,
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Radiance Scaling as a post-process on renderer lobes (RS §5.3, Eq. 4)::
 
@@ -193,6 +210,7 @@ def scale_lobes(
         ``beauty + Σ_j (σ̄_j - 1) · lobe_j`` (the same sum, without forming the remainder).
     with_sigmas : bool
         Also return the σ of each lobe (else an empty dict, and one pass less to memory).
+    weights : the working space's luminance weights (δ̄ is a luminance).
 
     Returns
     -------
@@ -230,7 +248,7 @@ def scale_lobes(
     lobe_arr = {n: rgb(lobes[n], f"lobes[{n!r}]") for n in names}
     light_arr = {n: rgb(lights[n], f"lights[{n!r}]") if n in lights else lobe_arr[n] for n in names}
     levels = {
-        n: white_level(light_arr[n], mask) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
+        n: white_level(light_arr[n], mask, weights=weights) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
     if remainder is not None and beauty is not None:
@@ -250,8 +268,9 @@ def scale_lobes(
     # Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E): P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of
     # _sigma_from over max(α, 1 - α), so σ is exactly 1 where E = e^{-γκ} is 1; δ̄ = the light's
     # luminance over its white level (as reflectance_delta).
+    luma = np.asarray(weights, np.float32)
     coef = np.array(
-        [[*(_LUMA / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
+        [[*(luma / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
         np.float32,
     ).reshape(nl, 5)
     lobe_t = tuple(lobe_arr[n] for n in names)

@@ -8,7 +8,7 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from ops.color import luminance
+from ops.color import REC709_Y, luminance
 from ops.curvature import Curvature, isotropic
 from ops.radiance_scaling.scenarios import Scaled
 from ops.radiance_scaling.sigma import sigma
@@ -125,6 +125,7 @@ def precomputed_diffuse(
     gamma: float = 1.0,
     gain: float = 1.0,
     white: float | None = None,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> Scaled:
     """Radiance Scaling of precomputed diffuse radiance, §5.3.1 (Eq. 4 with ρ = ρ_d).
 
@@ -133,6 +134,8 @@ def precomputed_diffuse(
     environment map at the world-space normals). L̄* is ``white`` or, by default, the maximum
     of L̄'s luminance. Without ``irradiance`` the environment is uniform (L̄ = 1, δ̄ = 1) and the
     result is the ambient occlusion scaled by σ(κ, 1): mean-curvature shading of AO (Fig. 8b).
+    ``weights``: the luminance weights of the working space (here and in :func:`lit_sphere`,
+    :func:`environment`).
     """
     shape = normal.shape[:2]
     covered = np.linalg.norm(normal, axis=2) > 0.5
@@ -142,7 +145,7 @@ def precomputed_diffuse(
         delta = np.ones(shape, np.float32)
     else:
         irr = irradiance.astype(np.float32)
-        lum = luminance(irr)
+        lum = luminance(irr, weights)
         peak = float(white) if white else float(lum.max()) or 1.0
         delta = np.clip(lum / np.float32(peak), 0.0, 1.0)
     s = sigma(isotropic(curv, gain), delta, alpha, gamma)
@@ -165,9 +168,14 @@ def _rgb(image: np.ndarray) -> np.ndarray:
 
 
 def _scaled_lookup(
-    radiance: np.ndarray, curv: Curvature, alpha: float, gamma: float, gain: float, peak: float
+    radiance: np.ndarray,
+    curv: Curvature,
+    common: tuple[float, float, float],
+    peak: float,
+    weights: tuple[float, float, float],
 ) -> Scaled:
-    delta = np.clip(luminance(radiance) / np.float32(peak or 1.0), 0.0, 1.0)
+    alpha, gamma, gain = common
+    delta = np.clip(luminance(radiance, weights) / np.float32(peak or 1.0), 0.0, 1.0)
     s = sigma(isotropic(curv, gain), delta, alpha, gamma)
     return Scaled({"specular": radiance * s[..., None]}, {"specular": s})
 
@@ -180,6 +188,7 @@ def lit_sphere(
     alpha: float = 0.5,
     gamma: float = 1.0,
     gain: float = 1.0,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> Scaled:
     """Radiance Scaling of a Lit Sphere / matcap, §5.3.1 (Sloan et al. 2001's Lit Sphere).
 
@@ -193,8 +202,8 @@ def lit_sphere(
     src = _rgb(sphere)
     looked = cv2.remap(src, u, v, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     looked[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
-    peak = float(luminance(src).max())
-    return _scaled_lookup(looked, curv, alpha, gamma, gain, peak)
+    peak = float(luminance(src, weights).max())
+    return _scaled_lookup(looked, curv, (alpha, gamma, gain), peak, weights)
 
 
 def environment(
@@ -209,6 +218,7 @@ def environment(
     alpha: float = 0.5,
     gamma: float = 1.0,
     gain: float = 1.0,
+    weights: tuple[float, float, float] = REC709_Y,
 ) -> Scaled:
     """Radiance Scaling of a perfect mirror or refraction, §5.3.2.
 
@@ -225,8 +235,8 @@ def environment(
     env = _rgb(env)
     radiance = latlong_lookup(env, rotate_directions(normalize(r), camera_to_world))
     radiance[np.linalg.norm(normal, axis=2) < 0.5] = 0.0
-    peak = float(luminance(env).max())
-    return _scaled_lookup(radiance, curv, alpha, gamma, gain, peak)
+    peak = float(luminance(env, weights).max())
+    return _scaled_lookup(radiance, curv, (alpha, gamma, gain), peak, weights)
 
 
 # -- default images for the lit-sphere and environment scenarios ---------------------------------

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from ops import color
+from ops.colorspace import ColorSpace
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -69,9 +70,10 @@ def _plane(name: str, a: Array | float, shape: tuple[int, int]) -> Array:
 # colour: lightness in, lightness out
 
 
-def _lightness(beauty: Array, white: float, out: Array | None = None) -> Array:
-    """L* (H, W) of linear RGB relative to ``white`` (a*, b* are never formed)."""
-    return color.lightness(beauty, white, out)
+def _lightness(beauty: Array, white: float, space: ColorSpace) -> Array:
+    """L* (H, W) of linear RGB relative to ``white`` in the working ``space`` (a*, b* are never
+    formed)."""
+    return color.lightness(beauty, white, rgb_to_xyz=space.matrix)
 
 
 def _with_lightness(
@@ -80,6 +82,7 @@ def _with_lightness(
     new_lum: Array,
     white: float,
     keep: Array | None,
+    space: ColorSpace,
     out: Array | None = None,
 ) -> Array:
     """Linear RGB with L* replaced by ``new_lum`` and (a*, b*) scaled by k = new/old (§4).
@@ -90,7 +93,7 @@ def _with_lightness(
     """
     _cv.max(new_lum, 0.0, dst=new_lum)
     k = _cv.divide(new_lum, _cv.max(lum, _L_EPS), dst=new_lum)
-    return color.scale_lab(beauty, k, white, keep=keep, out=out)
+    return color.scale_lab(beauty, k, white, keep=keep, out=out, rgb_to_xyz=space.matrix)
 
 
 def _normals(normal: Array, shape: tuple[int, int]) -> Array:

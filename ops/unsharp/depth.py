@@ -10,6 +10,7 @@ import numpy as np
 
 from ops import color
 from ops.checks import POSITIVE, RELATIVE_SIGMA, UNSHARP_AMOUNT
+from ops.colorspace import LINEAR_REC709, ColorSpace
 from ops.pyramid.reduce import gaussian_blur
 from ops.unsharp._common import Array, _lightness, _mask, _plane, _rgb, _with_lightness
 from ops.unsharp._surface import _crop, _outside
@@ -27,6 +28,7 @@ def plain_unsharp_mask(
     *,
     white: float | Literal["auto"] = "auto",
     image_height: int | None = None,
+    space: ColorSpace = LINEAR_REC709,
 ) -> Array:
     """Plain 2-D unsharp masking of CIELAB lightness, for comparisons.
 
@@ -46,16 +48,17 @@ def plain_unsharp_mask(
     image_height : int or None
         Height the relative σ refers to (default: this image's height; pass the full frame's
         height when processing a crop).
+    space : the working space (as :func:`ops.unsharp.unsharp_masking`).
     """
     img = _rgb("beauty", beauty)
     s = RELATIVE_SIGMA.check(sigma, "sigma")
     lam = UNSHARP_AMOUNT.check(amount, "amount")
     hh = img.shape[0] if image_height is None else int(POSITIVE.check(image_height, "image_height"))
-    wl = color.resolve_white(white, img, None)
-    lum = _lightness(img, wl)
+    wl = color.resolve_white(white, img, None, space.weights)
+    lum = _lightness(img, wl, space)
     smooth = gaussian_blur(lum, s * hh)
     new_lum = _cv.scaleAdd(_cv.subtract(lum, smooth), lam, lum)
-    return _with_lightness(img, lum, new_lum, wl, None)
+    return _with_lightness(img, lum, new_lum, wl, None, space)
 
 
 #: Normalised depth D of the background in :func:`depth_unsharp_masking` (surfaces span [0, 1]).
@@ -72,6 +75,7 @@ def depth_unsharp_masking(
     image_height: int | None = None,
     mode: Literal["darken", "both"] = "darken",
     white: float | Literal["auto"] = "auto",
+    space: ColorSpace = LINEAR_REC709,
 ) -> Array:
     """Unsharp masking of the depth buffer (Luft, Colditz, Deussen, SIGGRAPH 2006).
 
@@ -102,6 +106,7 @@ def depth_unsharp_masking(
         Height σ refers to (default this image's).
     mode : "darken" or "both"
     white : "auto" or float
+    space : the working space (as :func:`ops.unsharp.unsharp_masking`).
     """
     img = _rgb("beauty", beauty)
     shape = (int(img.shape[0]), int(img.shape[1]))
@@ -131,16 +136,16 @@ def depth_unsharp_masking(
     delta = _cv.subtract(gaussian_blur(dn, s * hh), dn)
     if mode == "darken":
         _cv.min(delta, 0.0, dst=delta)
-    wl = color.resolve_white(white, img, valid.view(bool))
+    wl = color.resolve_white(white, img, valid.view(bool), space.weights)
     # colour work on the bounding box of the surface only (the rest is returned as is)
     box = _crop(valid)
     assert box is not None
     ys, xs = box
-    lum = _lightness(img[box], wl)
+    lum = _lightness(img[box], wl, space)
     new_lum = _cv.scaleAdd(delta[box], 100.0 * lam, lum)
     keep = _cv.compare(valid[box], 0, _cv.CMP_EQ)
     if (ys.stop - ys.start, xs.stop - xs.start) == shape:
-        return _with_lightness(img, lum, new_lum, wl, keep)
+        return _with_lightness(img, lum, new_lum, wl, keep, space)
     out = _outside(img, box)
-    _with_lightness(img[box], lum, new_lum, wl, keep, out=out[box])
+    _with_lightness(img[box], lum, new_lum, wl, keep, space, out=out[box])
     return out

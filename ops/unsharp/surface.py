@@ -22,6 +22,7 @@ from numpy.typing import ArrayLike
 
 from ops import color
 from ops.checks import POSITIVE, UNSHARP_AMOUNT, UNSHARP_SIGMA
+from ops.colorspace import LINEAR_REC709, ColorSpace
 from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import _L_EPS, _LEVEL_SIGMA, _ONE, Array, _mask, _normals, _plane, _rgb
 from ops.unsharp._levels import _sub_resize
@@ -297,6 +298,7 @@ def unsharp_masking(
     depth_sigma: float = 1.0,
     normal_sigma: float | None = 1.0,
     fine_px: float = 0.0,
+    space: ColorSpace = LINEAR_REC709,
 ) -> Array:
     """3D unsharp masking of a rendered image along its surfaces (Ritschel et al. 2008).
 
@@ -350,6 +352,9 @@ def unsharp_masking(
     depth_sigma, normal_sigma : see :func:`surface_blur`.
     fine_px : float
         σ of L*_f in pixels (≥ 0; 0: L* itself).
+    space : ColorSpace
+        The frame's working space (:mod:`ops.colorspace`): CIELAB through its XYZ and white,
+        the automatic white level from its luminance.
 
     Returns
     -------
@@ -376,14 +381,14 @@ def unsharp_masking(
     valid, ps_range, box, fade_box = _valid(depth_a, ps, mask_a, c_fade * (1.0 - 1e-5))
     if box is None:
         return img.copy()
-    wl = color.resolve_white(white, img, valid.view(bool))
+    wl = color.resolve_white(white, img, valid.view(bool), space.weights)
     # everything below works on the bounding box of the surface (the rest is returned as is)
     ys, xs = box
     sub_shape = (ys.stop - ys.start, xs.stop - xs.start)
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     ps = ps[box]
     img_box = img[box]
-    light = color.lightness_rows(wl)
+    light = color.lightness_rows(wl, space.matrix)
     surf, lum, first = _surface(
         depth_a[box],
         ps,
@@ -411,10 +416,10 @@ def unsharp_masking(
         surf, lum, fine, up, lam, cov_a, gain_a, fade_box, ps, c_fade, _adapt(res)
     )
     if sub_shape == shape:
-        out = color.scale_lab(img_box, k_rows, wl)
+        out = color.scale_lab(img_box, k_rows, wl, rgb_to_xyz=space.matrix)
     else:
         out = _outside(img, box)
-        color.scale_lab(img_box, k_rows, wl, out=out[box])
+        color.scale_lab(img_box, k_rows, wl, out=out[box], rgb_to_xyz=space.matrix)
     # saturated colours can leave the RGB cube below 0 when their lightness drops: clip the
     # changed values (the pixels kept bit for bit are left as they came)
     np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != img))

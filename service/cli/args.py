@@ -137,6 +137,13 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--normal-space", choices=["world", "camera"], help="override the normals' space"
     )
+    p.add_argument(
+        "--colorspace",
+        metavar="NAME",
+        help="working space of the radiance, a linear colour space of the OpenColorIO config "
+        "($OCIO, else the built-in studio config), e.g. ACEScg or lin_rec709 (default: the "
+        "file's chromaticities, else the preset's, else linear Rec.709)",
+    )
 
 
 #: ``--layout`` choices (:data:`gbuffer.io.LAYOUTS`, named here so the parser stays light).

@@ -33,8 +33,13 @@ def steps(args: argparse.Namespace) -> pipeline.Pipeline | None:
 
 
 def read_request(args: argparse.Namespace) -> ReadRequest:
-    """How ``--preset``, ``--map``, ``--normal-space`` and ``--camera`` say to read a frame."""
-    options = ReadOptions(mapping=dict(mapping(args)), normal_space=args.normal_space)
+    """How ``--preset``, ``--map``, ``--normal-space``, ``--colorspace`` and ``--camera`` say
+    to read a frame."""
+    options = ReadOptions(
+        mapping=dict(mapping(args)),
+        normal_space=args.normal_space,
+        colorspace=getattr(args, "colorspace", None),
+    )
     camera = Camera.from_json_file(args.camera) if args.camera else None
     return ReadRequest(args.preset, camera, options)
 

@@ -8,6 +8,7 @@ import json
 import numpy as np
 
 from gbuffer.atomic import check_outputs
+from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
 from service.cli.common import read_request, steps, warn
 from service.enhance import WriteRequest, enhance
@@ -33,8 +34,11 @@ def cmd_enhance(args: argparse.Namespace) -> int:
 
 def cmd_preview(args: argparse.Namespace) -> int:
     check_outputs([args.output], [args.file, args.camera])
+    view = View(args.display, args.view)
+    if not view.raw:
+        view.resolved()  # an unknown display or view is refused before the frame is read
     frame = read_request(args).read(args.file)
-    write_png(picture(frame, args.layer, exposure=args.exposure), args.output)
+    write_png(picture(frame, args.layer, args.exposure, view), args.output)
     print(f"wrote {args.output} ({args.layer})")
     return 0
 

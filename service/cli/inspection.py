@@ -40,6 +40,13 @@ def _inspection_lines(info: dict[str, Any]) -> list[str]:
             f"  part {part['name'] or '(unnamed)'}: {len(part['channels'])} channels, "
             f"{part['compression']}{', tiled' if part['tiled'] else ''}"
         )
+    space = info.get("colorspace")
+    if space:
+        weights = ", ".join(f"{w:.4f}" for w in space["luminance_weights"])
+        lines.append(
+            f"  colour space: {space['name']} (from {space['source']}; luminance weights "
+            f"{weights}, white xy {space['white_xy'][0]:.4f} {space['white_xy'][1]:.4f})"
+        )
     lines.append("  buffers:")
     for name, buf in info["buffers"].items():
         lines.append(f"    {name:<20s} <- {buf['source']}")

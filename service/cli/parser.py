@@ -80,13 +80,17 @@ def add_frame_commands(sub: Any) -> None:
     add_server_option(p)
     p.set_defaults(command="service.cli.render:cmd_render", remote="service.cli.remote:render")
 
-    p = sub.add_parser("inspect", help="what Depict sees in an EXR: preset, buffers, camera")
+    p = sub.add_parser(
+        "inspect", help="what Depict sees in an EXR: preset, buffers, camera, colour space"
+    )
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="stable JSON for other tools")
     add_read_options(p)
     p.set_defaults(command="service.cli.inspection:cmd_inspect")
 
-    p = sub.add_parser("preview", help="an 8-bit PNG of any layer")
+    p = sub.add_parser(
+        "preview", help="an 8-bit PNG of any layer, through an OCIO display and view"
+    )
     p.add_argument("file")
     p.add_argument("-o", "--output", required=True, help="output PNG")
     p.add_argument(
@@ -99,6 +103,16 @@ def add_frame_commands(sub: Any) -> None:
         type=bounded(float, -20.0, 20.0),
         default=0.0,
         help="exposure in stops (radiance), -20 to 20",
+    )
+    p.add_argument(
+        "--display",
+        help="display of the OpenColorIO config to show radiance on (default: the config's, "
+        "sRGB for the built-in config)",
+    )
+    p.add_argument(
+        "--view",
+        help="view of that display (default: the display's default, ACES 2.0 SDR for the "
+        "built-in config); raw: exposure and a hard clip of the sRGB curve",
     )
     add_read_options(p)
     p.set_defaults(command="service.cli.frames:cmd_preview")

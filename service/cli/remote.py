@@ -57,6 +57,7 @@ def enhance(args: argparse.Namespace) -> int:
             camera=args.camera,
             mapping=buffers,
             normal_space=args.normal_space,
+            colorspace=args.colorspace,
             debug_layers=args.debug_layers,
             output_layer=args.output_layer,
             layout=args.layout,
@@ -76,6 +77,7 @@ def score(args: argparse.Namespace) -> int:
             camera=args.camera,
             mapping=mapping(args),
             normal_space=args.normal_space,
+            colorspace=args.colorspace,
             **options,
         )
     return print_score(args, data)

@@ -10,12 +10,16 @@ parse, and other requests must not wait for it); a 422 problem naming the bad fi
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import anyio
+from fastapi import Form, Query
 from pydantic import ValidationError
 
 from gbuffer.camera import Camera
+from gbuffer.colorspace import View
+from gbuffer.colorspace import named as named_colorspace
+from gbuffer.errors import OptionError
 from gbuffer.limits import Limits
 from gbuffer.presets import PRESETS, ReadOptions
 from service import pipeline
@@ -76,17 +80,24 @@ class ReadFields:
     camera: Camera | None
     mapping: dict[str, str]
     normal_space: str | None
+    colorspace: str | None = None
 
     def request(self, limits: Limits) -> ReadRequest:
         """The read request (the mapping's buffer names checked here, after the upload)."""
         options = ReadOptions(
-            mapping=dict[str, str | list[str]](self.mapping), normal_space=self.normal_space
+            mapping=dict[str, str | list[str]](self.mapping),
+            normal_space=self.normal_space,
+            colorspace=self.colorspace,
         )
         return ReadRequest(self.preset, self.camera, options, limits)
 
 
 def _read_fields(
-    preset: str, camera_text: str | None, map_text: str | None, normal_space: str | None
+    preset: str,
+    camera_text: str | None,
+    map_text: str | None,
+    normal_space: str | None,
+    colorspace: str | None,
 ) -> ReadFields:
     if preset != "auto" and preset not in PRESETS:
         raise Problem(
@@ -97,7 +108,12 @@ def _read_fields(
     mapping = json_field("map", map_text, dict) or {}
     if not all(isinstance(v, str) for v in mapping.values()):
         raise Problem("invalid-request", "form field 'map' must map buffer names to strings")
-    return ReadFields(preset, cam, mapping, normal_space)
+    if colorspace:
+        try:
+            named_colorspace(colorspace)
+        except OptionError as exc:
+            raise Problem("invalid-request", f"colorspace: {exc}") from None
+    return ReadFields(preset, cam, mapping, normal_space, colorspace or None)
 
 
 async def read_fields(
@@ -105,6 +121,45 @@ async def read_fields(
     camera_text: str | None,
     map_text: str | None = None,
     normal_space: str | None = None,
+    colorspace: str | None = None,
 ) -> ReadFields:
     """The read fields checked off the event loop (422 naming the bad one)."""
-    return await anyio.to_thread.run_sync(_read_fields, preset, camera_text, map_text, normal_space)
+    return await anyio.to_thread.run_sync(
+        _read_fields, preset, camera_text, map_text, normal_space, colorspace
+    )
+
+
+#: The ``colorspace`` form field: the working space of the radiance.
+ColorspaceField = Annotated[
+    str | None,
+    Form(
+        max_length=200,
+        description="working space of the radiance, a linear colour space of the OpenColorIO "
+        "config (e.g. ACEScg, lin_rec709); default: the file's chromaticities, else the "
+        "preset's, else linear Rec.709",
+    ),
+]
+#: The ``display`` and ``view`` query parameters of a PNG preview.
+DisplayQuery = Annotated[
+    str | None,
+    Query(max_length=200, description="preview display of the OCIO config (default: its own)"),
+]
+ViewQuery = Annotated[
+    str | None,
+    Query(
+        max_length=200,
+        description="preview view of that display (default: its own, ACES 2.0 SDR for the "
+        "built-in config); raw: exposure and a hard clip",
+    ),
+]
+
+
+def preview_view(display: str | None, view: str | None) -> View:
+    """The display and view of a preview, checked (422 naming the bad one)."""
+    chosen = View(display or None, view or None)
+    if not chosen.raw:
+        try:
+            chosen.resolved()
+        except OptionError as exc:
+            raise Problem("invalid-request", str(exc)) from None
+    return chosen

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
@@ -59,8 +59,9 @@ def statistic(ctx: Context, key: str, value: float | str, compute: Callable[[], 
     return ctx.statistic(key, compute)
 
 
-def user_image(ctx: Context, path: str, what: str, **kwargs: bool) -> np.ndarray:
-    """An image file named by a parameter, where this run may read files (not over HTTP)."""
+def user_image(ctx: Context, path: str, what: str, **kwargs: Any) -> np.ndarray:
+    """An image file named by a parameter, where this run may read files (not over HTTP);
+    ``kwargs``: those of :func:`service.images.load_image` (``space``: the frame's)."""
     if not ctx.files:
         raise PipelineError(
             f"{what}: image files cannot be named here ({path!r}); use a layer of the uploaded "
@@ -116,7 +117,7 @@ def kept_lighting_gain(
     for bit, and the correction fades out continuously where the change does (a cut-off would
     draw a line where the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
-    y0, y1 = luminance(before), luminance(after)
+    y0, y1 = (luminance(x, frame.colorspace.weights) for x in (before, after))
     gain = luminance_gain(
         y0,
         y1,

@@ -13,6 +13,7 @@ from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.color import luminance
+from ops.colorspace import LINEAR_REC709, ColorSpace, convert
 from ops.pyramid.masked import masked_gaussian
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import scale_lobes, white_level
@@ -139,13 +140,18 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
 
 
 def _white(
-    ctx: Context, p: RadianceScalingParams, key: str, light: np.ndarray, mask: np.ndarray
+    ctx: Context,
+    p: RadianceScalingParams,
+    key: str,
+    light: np.ndarray,
+    mask: np.ndarray,
+    weights: tuple[float, float, float],
 ) -> float:
     return statistic(
         ctx,
         f"radiance_scaling.white.{key}",
         p.white,
-        lambda: white_level(light, ctx.counted(mask), percentile=p.white_percentile),
+        lambda: white_level(light, ctx.counted(mask), p.white_percentile, weights),
     )
 
 
@@ -187,7 +193,8 @@ def _scale_renderer_lobes(
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
     lights = {n: _light(frame, p, frame.buffers.get(f"{n}.light", lobes[n])) for n in names}
     mask = frame.mask > 0
-    white = {n: _white(ctx, p, n, lights[n], mask) for n in names}
+    weights = frame.colorspace.weights
+    white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
     remainder = frame.buffers.get("remainder")
     if remainder is not None:  # beauty minus every lobe: add back the lobes left unscaled
         for lobe in LOBES:
@@ -204,6 +211,7 @@ def _scale_renderer_lobes(
         mask=mask,
         beauty=frame.buffers.get("beauty") if remainder is None else None,
         with_sigmas=ctx.debug_layers,
+        weights=weights,
     )
     if p.keep_lighting:
         beauty = _kept_lighting(frame, p, beauty, total(lobes.values()))
@@ -213,19 +221,24 @@ def _scale_renderer_lobes(
 def _scale_beauty(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The beauty as a single lobe; its light is beauty / albedo where the frame has an albedo
-    (glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
+    """The beauty as a single lobe; its light is beauty / Y(albedo) where the frame has an albedo
+    (so δ̄'s luminance is Y(beauty) / Y(albedo): a ratio of luminances, the same in every
+    working space, where a channel-by-channel beauty / albedo would depend on the primaries;
+    glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
     count in the white level)."""
     beauty = frame.need("beauty", "scenario 'beauty'")
     light = beauty
     counted = frame.mask > 0
+    weights = frame.colorspace.weights
     if "albedo" in frame.buffers:
         albedo = frame.buffers["albedo"]
-        has_albedo = luminance(albedo) > MIN_ALBEDO
-        light = np.where(has_albedo[..., None], beauty / np.maximum(albedo, MIN_ALBEDO), beauty)
+        y_albedo = luminance(albedo, weights=weights)
+        has_albedo = y_albedo > MIN_ALBEDO
+        inverse = 1.0 / np.maximum(y_albedo, MIN_ALBEDO)
+        light = np.where(has_albedo[..., None], beauty * inverse[..., None], beauty)
         counted &= has_albedo
     light = _light(frame, p, light)
-    white = _white(ctx, p, "beauty", light, counted)
+    white = _white(ctx, p, "beauty", light, counted, weights)
     scaled, sigmas = scale_lobes(
         {"beauty": beauty},
         {"beauty": light},
@@ -234,6 +247,7 @@ def _scale_beauty(
         p.gamma,
         white,
         with_sigmas=ctx.debug_layers,
+        weights=weights,
     )
     return _kept_lighting(frame, p, scaled, beauty), sigmas
 
@@ -244,10 +258,11 @@ def _camera_to_world(frame: Frame) -> np.ndarray | None:
     return np.linalg.inv(frame.camera.world_to_camera)[:3, :3]
 
 
-def _environment(p: RadianceScalingParams, ctx: Context) -> np.ndarray:
+def _environment(p: RadianceScalingParams, ctx: Context, space: ColorSpace) -> np.ndarray:
+    """The environment map in the frame's space (the built-in sky is linear Rec.709)."""
     if p.environment:
-        return user_image(ctx, p.environment, "environment")
-    return rs.sky_environment()
+        return user_image(ctx, p.environment, "environment", space=space)
+    return convert(rs.sky_environment(), LINEAR_REC709, space)
 
 
 def _deferred(
@@ -259,6 +274,7 @@ def _deferred(
 ) -> rs.Scaled:
     normal = frame.need("normal", f"scenario '{scenario}'")
     albedo = frame_albedo(frame, None)
+    space = frame.colorspace
     common: dict[str, Any] = {"alpha": p.alpha, "gain": p.gain}
     if scenario in ("phong", "sub_lambert", "toon", "ashikhmin_shirley"):
         lit = (normal, frame.positions(), frame.view_vectors(), p.parsed_lights(), curv)
@@ -289,7 +305,7 @@ def _deferred(
         if p.environment:
             to_world = _camera_to_world(frame)
             n_world = normal if to_world is None else rs.rotate_directions(normal, to_world)
-            irradiance = rs.sh_irradiance(_environment(p, ctx), n_world)
+            irradiance = rs.sh_irradiance(_environment(p, ctx, space), n_world)
         return rs.precomputed_diffuse(
             normal,
             curv,
@@ -297,20 +313,27 @@ def _deferred(
             irradiance=irradiance,
             albedo=albedo,
             gamma=p.gamma_of("diffuse"),
+            weights=space.weights,
             **common,
         )
     if scenario == "lit_sphere":
-        sphere = user_image(ctx, p.matcap, "matcap") if p.matcap else rs.studio_matcap()
-        return rs.lit_sphere(normal, curv, sphere, gamma=p.gamma_of("specular"), **common)
+        if p.matcap:
+            sphere = user_image(ctx, p.matcap, "matcap", space=space)
+        else:
+            sphere = convert(rs.studio_matcap(), LINEAR_REC709, space)
+        return rs.lit_sphere(
+            normal, curv, sphere, gamma=p.gamma_of("specular"), weights=space.weights, **common
+        )
     return rs.environment(
         normal,
         frame.view_vectors(),
         curv,
-        _environment(p, ctx),
+        _environment(p, ctx, space),
         mode=scenario,
         ior=p.ior,
         camera_to_world=_camera_to_world(frame),
         gamma=p.gamma_of("specular"),
+        weights=space.weights,
         **common,
     )
 

@@ -184,6 +184,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
     mask = frame.mask
     pixel_size = _pixel_sizes(frame, p)
     covered = (mask > 0) & np.isfinite(pixel_size)
+    space = frame.colorspace
     sigma = statistic(
         ctx,
         "unsharp_masking.sigma",
@@ -194,8 +195,9 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
         unlit = frame.layer(p.unlit or "")
         if not all(c in unlit for c in "RGB"):
             raise PipelineError(f"unsharp_masking: no RGB layer {p.unlit!r} (unlit) in the file")
-        unlit_y = luminance(np.dstack([unlit["R"], unlit["G"], unlit["B"]]))
-        term = np.clip(luminance(beauty) / np.maximum(unlit_y, np.float32(1e-6)), 0.0, 1.0)
+        unlit_y = luminance(np.dstack([unlit["R"], unlit["G"], unlit["B"]]), weights=space.weights)
+        term = luminance(beauty, weights=space.weights) / np.maximum(unlit_y, np.float32(1e-6))
+        term = np.clip(term, 0.0, 1.0)
         signal = np.repeat(term[..., None], 3, axis=2).astype(np.float32, copy=False)
         white: float | Auto = 1.0
     else:
@@ -205,7 +207,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             ctx,
             f"unsharp_masking.white.{p.signal}",
             p.white,
-            lambda: color.auto_white(signal, ctx.counted(covered)),
+            lambda: color.auto_white(signal, ctx.counted(covered), weights=space.weights),
         )
     gain = _gain_map(frame, p, ctx)
     relief = _relief(frame, p, sigma, pixel_size)
@@ -226,6 +228,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
         depth_sigma=p.depth_sigma,
         normal_sigma=p.normal_sigma,
         fine_px=scale_px(frame, p.fine_scale) if p.fine_scale > 0 else 0.0,
+        space=space,
     )
     if p.keep_lighting and p.signal != "shadows":
         typical = float(np.median(pixel_size[covered])) if covered.any() else 1.0
@@ -270,8 +273,12 @@ class DepthUnsharpParams(Params):
 def apply_depth_unsharp_masking(frame: Frame, p: DepthUnsharpParams, ctx: Context) -> None:
     beauty = frame.buffers["beauty"]
     mask = frame.mask
+    space = frame.colorspace
     white = statistic(
-        ctx, "depth_unsharp_masking.white", p.white, lambda: color.auto_white(beauty, mask > 0)
+        ctx,
+        "depth_unsharp_masking.white",
+        p.white,
+        lambda: color.auto_white(beauty, mask > 0, weights=space.weights),
     )
     frame.buffers["beauty"] = depth_unsharp_masking(
         beauty,
@@ -282,4 +289,5 @@ def apply_depth_unsharp_masking(frame: Frame, p: DepthUnsharpParams, ctx: Contex
         image_height=frame.image_height,
         mode=p.mode,
         white=white,
+        space=space,
     )

@@ -136,6 +136,7 @@ async def score(
     camera: CameraField = None,
     map: MapField = None,
     normal_space: NormalSpace = None,
+    colorspace: forms.ColorspaceField = None,
     gradient_scale: Annotated[
         float | None,
         Form(gt=0, le=0.1, description="gradient sigma, relative to the image height"),
@@ -168,7 +169,7 @@ async def score(
         "shape": shape,
     }
     options = {k: v for k, v in given.items() if v is not None}
-    fields = await forms.read_fields(preset, camera, map, normal_space)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
     out = await run_on_upload(
         server,
         work,

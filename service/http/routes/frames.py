@@ -88,6 +88,7 @@ async def enhance(
     normal_space: Annotated[
         Literal["world", "camera"] | None, Form(description="override the normals' space")
     ] = None,
+    colorspace: forms.ColorspaceField = None,
     debug_layers: Annotated[bool, Form(description="also write intermediate layers")] = False,
     output_layer: Annotated[
         str | None,
@@ -112,9 +113,12 @@ async def enhance(
     exposure: Annotated[
         float, Query(ge=-20.0, le=20.0, description="preview exposure, stops")
     ] = 0.0,
+    display: forms.DisplayQuery = None,
+    view: forms.ViewQuery = None,
 ) -> Response:
     steps = await forms.pipeline_field(pipeline) or pipelines.DEFAULT
-    fields = await forms.read_fields(preset, camera, map, normal_space)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
+    shown = forms.preview_view(display, view)
     name = file.filename or "upload.exr"
     src = work.path / "in.exr"
     out = work.path / ("out.png" if preview == "png" else "out.exr")
@@ -126,6 +130,7 @@ async def enhance(
             preview=preview == "png",
             exposure=exposure,
             input_name=Path(name).name,
+            view=shown,
             layout=layout,
         )
         read = fields.request(server.settings.limits)
