@@ -457,7 +457,8 @@ def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
     The library encodes one 16-line chunk of zeros; the file repeats that chunk (with each
     chunk's own first line) down the whole image, so it is valid and decodable.
     """
-    from gbuffer import exr
+    from gbuffer.exr import layout as exr_layout
+    from gbuffer.exr import write as exr_write
 
     assert size % 16 == 0, "whole chunks only"
     names = [f"L{i:03d}.X" for i in range(channels)]
@@ -466,18 +467,18 @@ def write_decode_bomb(path: Path, channels: int = 83, size: int = 2000) -> Path:
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, strip).write(str(probe))
     data = probe.read_bytes()
     probe.unlink()
-    layout = exr._read_layout(io.BytesIO(data), len(data), str(path))
-    exr._read_offsets(io.BytesIO(data), layout, str(path))
-    (chunk,) = exr._extract_chunks(io.BytesIO(data), layout, 0)
+    layout = exr_layout._read_layout(io.BytesIO(data), len(data), str(path))
+    exr_layout._read_offsets(io.BytesIO(data), layout, str(path))
+    (chunk,) = exr_write._extract_chunks(io.BytesIO(data), layout, 0)
     attrs = dict(layout.parts[0].attributes)
     window = struct.pack("<4i", 0, 0, size - 1, size - 1)
-    attrs["dataWindow"] = exr.RawAttribute("box2i", window)
-    attrs["displayWindow"] = exr.RawAttribute("box2i", window)
+    attrs["dataWindow"] = exr_layout.RawAttribute("box2i", window)
+    attrs["displayWindow"] = exr_layout.RawAttribute("box2i", window)
     count = (size + 15) // 16
     chunks = [struct.pack("<i", 16 * k) + bytes(chunk[4:]) for k in range(count)]
     order = list(range(count))
     with open(path, "wb") as f:
-        exr._assemble(f, [attrs], [chunks], [order], ["scanlineimage"], False)
+        exr_write._assemble(f, [attrs], [chunks], [order], ["scanlineimage"], False)
     return path
 
 

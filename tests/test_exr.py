@@ -14,6 +14,7 @@ import pytest
 
 from gbuffer import exr
 from gbuffer.errors import FrameError, LimitError
+from gbuffer.exr import read as exr_read
 from tests.exr_factory import patch_data_window, rich_header, write_corrupt, write_raw_exr
 
 RNG = np.random.default_rng(7)
@@ -26,7 +27,7 @@ def rand(h: int, w: int, dtype: Any) -> np.ndarray:
 
 
 def same_value(a: Any, b: Any) -> bool:
-    return exr._same_value(a, b)
+    return exr_read._same_value(a, b)
 
 
 def assert_identical(a: Path, b: Path) -> None:

@@ -15,6 +15,7 @@ import pytest
 
 import gbuffer
 from gbuffer import exr
+from gbuffer.exr import layout as exr_layout
 from gbuffer.io import LAYOUTS
 from service.cli import main
 from service.cli.args import LAYOUTS as CLI_LAYOUTS
@@ -49,7 +50,7 @@ def chunks(path: Path, index: int) -> list[bytes]:
     part = layout.parts[index]
     skip = 4 if layout.multipart else 0
     with open(path, "rb") as f:
-        sizes = [exr._chunk_size(f, off, part, layout.multipart) for off in part.offsets]
+        sizes = [exr_layout._chunk_size(f, off, part, layout.multipart) for off in part.offsets]
     data = path.read_bytes()
     return [data[off + skip : off + n] for off, n in zip(part.offsets, sizes, strict=True)]
 
