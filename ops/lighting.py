@@ -8,7 +8,7 @@ frames:
   masked_gaussian`), so the reflectance mapping δ̄ of Radiance Scaling follows the lighting
   rather than each pixel's Monte-Carlo noise (the scaling σ(κ, δ̄) then multiplies the noise
   like any other light, it does not amplify it);
-* :func:`lighting_gain` — the factor that divides an enhanced radiance by its low-frequency
+* :func:`luminance_gain` — the factor that divides an enhanced radiance by its low-frequency
   gain, ``out' = out · LF(Y(in)) / LF(Y(out))`` with LF a smoothing along the visible surfaces
   (:func:`ops.unsharp.surface_blur`: depth- and crease-aware, so an object and the floor it stands
   on are normalised apart), so the mean luminance of every surface region at that scale is the
@@ -20,50 +20,16 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.color import luminance
-from ops.colorspace import REC709_Y
 from ops.jit import kernel
 from ops.parallel import run_strips
 from ops.unsharp import surface_blurs
 
-__all__ = ["lighting_gain", "luminance_gain", "weighed_gain"]
+__all__ = ["luminance_gain", "weighed_gain"]
 
 F32 = NDArray[np.float32]
 
 #: Luminance below which a region's gain is not measured (its radiance is kept as it is).
 _DARK = np.float32(1e-6)
-
-
-def lighting_gain(
-    before: np.ndarray,
-    after: np.ndarray,
-    depth: np.ndarray,
-    normal: np.ndarray | None,
-    mask: np.ndarray,
-    *,
-    sigma_scene: float,
-    pixel_size: np.ndarray | float,
-    weights: tuple[float, float, float] = REC709_Y,
-) -> F32:
-    """The per-pixel factor that gives ``after`` the low-frequency luminance of ``before``::
-
-        gain = LF(Y(before)) / LF(Y(after)),   LF = surface_blur(·, σ = sigma_scene)
-
-    ``before`` and ``after`` are (H, W, 3) radiance (the part an operator changed: e.g. the sum
-    of the lobes it scaled); Y is luminance with the working space's ``weights`` (default
-    Rec. 709). The gain is 1 on uncovered pixels and where either is darker than 1e-6 at that
-    scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
-    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
-    """
-    return luminance_gain(
-        luminance(before, weights),
-        luminance(after, weights),
-        depth,
-        normal,
-        mask,
-        sigma_scene=sigma_scene,
-        pixel_size=pixel_size,
-    )
 
 
 def luminance_gain(
@@ -76,8 +42,15 @@ def luminance_gain(
     sigma_scene: float,
     pixel_size: np.ndarray | float,
 ) -> F32:
-    """:func:`lighting_gain` of the luminances ``y_before`` and ``y_after`` ((H, W) each):
-    ``LF(y_before) / LF(y_after)``."""
+    """The per-pixel factor that gives an enhanced luminance ``y_after`` the low-frequency
+    luminance of ``y_before`` ((H, W) each, in the frame's working space)::
+
+        gain = LF(y_before) / LF(y_after),   LF = surface_blur(·, σ = sigma_scene)
+
+    (both smoothed on one surface pyramid). The gain is 1 on uncovered pixels and where either
+    is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
+    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
+    """
     lf_in, lf_out = surface_blurs(
         [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
     )

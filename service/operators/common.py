@@ -110,7 +110,7 @@ KEPT_CHANGE = 0.05
 def kept_lighting_gain(
     frame: Frame, before: np.ndarray, after: np.ndarray, scale: float, why: str
 ) -> np.ndarray:
-    """:func:`ops.lighting.lighting_gain` of an operator's change on ``frame``: the factor per
+    """:func:`ops.lighting.luminance_gain` of an operator's change on ``frame``: the factor per
     pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
     ``scale`` (relative to the image height). The correction is weighed by how much the
     operator changed each pixel, ``min(1, |ΔY| / (KEPT_CHANGE · Y))``: what it left alone stays bit

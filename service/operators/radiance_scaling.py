@@ -171,7 +171,7 @@ def _kept_lighting(
     frame: Frame, p: RadianceScalingParams, scaled: np.ndarray, before: np.ndarray
 ) -> np.ndarray:
     """``scaled`` (a beauty = rest + Σ σ̄_j lobe_j) with Σ σ̄_j lobe_j divided by its
-    low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.lighting_gain`)."""
+    low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.luminance_gain`)."""
     if not p.keep_lighting:
         return scaled
     rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else None
