@@ -235,19 +235,24 @@ class Frame:
         )
 
     def layer(self, name: str) -> dict[str, np.ndarray]:
-        """Channels of layer ``name`` (outputs first, then the primary part of the file).
+        """Channels of layer ``name`` (outputs first, then the primary part of the file, then its
+        other parts on the same grid, e.g. the result part of the ``part`` layout).
 
         ``layer("curvature")`` gives ``{"H": ..., "k1": ..., ...}``; a bare channel name such as
         ``"Z"`` gives ``{"Z": ...}``. Arrays are float32 on the frame grid.
         """
         found: dict[str, np.ndarray] = {}
-        pools: list[dict[str, Any]] = [self.outputs]
-        if self.passthrough.parts:
-            pools.append(self.passthrough.parts[self.passthrough.primary][1])
+        pt = self.passthrough
+        others = [c for i, (_, c) in enumerate(pt.parts) if i != pt.primary]
+        primary = [pt.parts[pt.primary][1]] if pt.parts else []
         prefix = f"{name}."
-        for pool in reversed(pools):  # outputs last, so they win
+        for pool in [*others, *primary, self.outputs]:  # outputs last, so they win
             for channel, value in pool.items():
+                if not (channel == name or channel.startswith(prefix)):
+                    continue
                 pixels = getattr(value, "pixels", value)
+                if any(pool is o for o in others) and np.shape(pixels) != self.shape:
+                    continue
                 if channel == name:
                     found[channel] = np.asarray(pixels, np.float32)
                 elif channel.startswith(prefix):

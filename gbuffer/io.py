@@ -4,8 +4,10 @@
 limit checked on the header) + :func:`gbuffer.presets.to_frame` (the renderer's names mapped to
 canonical buffers).
 
-``write`` gives the file back with the frame's ``outputs`` as channels of the primary part
-(the part whose data window is the frame grid) and ``attributes`` in its header:
+``write`` gives the file back with the frame's ``outputs`` and ``attributes`` in the place
+``layout`` says (below; by default an added part, the input's parts copied as they are). In the
+``same`` layout they become channels of the primary part (the part whose data window is the
+frame grid) and attributes of its header:
 
 * an output named like an existing channel replaces its pixels and keeps its pixel type
   (HALF stays HALF); a new output is a FLOAT channel;
@@ -15,11 +17,13 @@ canonical buffers).
   channels, PXR24 rounds new 32-bit layers to 24 bits; B44 keeps 32-bit layers exact);
 * parts and channels that did not change are copied chunk for chunk (bit-identical).
 
-``layout`` (:data:`LAYOUTS`) chooses where new channels go:
+``layout`` (:data:`LAYOUTS`, default :data:`DEFAULT_LAYOUT`) chooses where new channels go:
 
 * ``"same"``: into the primary part, as above (every channel of that part is encoded again);
-* ``"part"``: into an added part of a multi-part file (named after ``depict/result``), with the
-  header attributes; every part of the input is copied chunk for chunk, nothing is re-encoded
+* ``"part"`` (the default): into an added part of a multi-part file (named after
+  ``depict/result``), with the header attributes (those OpenEXR requires every part to share,
+  e.g. ``chromaticities``, go to every part); every part of the input is copied chunk for chunk,
+  nothing is re-encoded
   but the new layers (when an output replaces a channel of the primary part, e.g. a second
   enhance of a ``part`` output, that part is re-encoded with every new layer, as ``"same"``);
 * ``"sidecar"``: a file with only the outputs and the header attributes (one part, ZIP, the
@@ -66,6 +70,8 @@ _HALF_MAX = 65000.0
 
 #: Where :func:`write` puts new channels (module docstring).
 LAYOUTS = ("same", "part", "sidecar")
+#: The default everywhere (CLI, HTTP, batch, Python): nothing of the input is encoded again.
+DEFAULT_LAYOUT = "part"
 
 
 def _camera_arg(camera: Camera | dict[str, Any] | str | Path | None) -> Camera | None:
@@ -87,6 +93,8 @@ def read(
     options: ReadOptions | dict[str, Any] | None = None,
     max_pixels: int | None = None,
     limits: exr.Limits | None = None,
+    *,
+    release: bool = False,
 ) -> Frame:
     """Read an EXR G-buffer into a :class:`Frame`.
 
@@ -102,6 +110,9 @@ def read(
     max_pixels : refuse (LimitError) a part whose data window is larger, before decoding.
     limits : pixels, decoded bytes and channels the header may claim
         (:class:`gbuffer.limits.Limits`; default: the ``DEPICT_MAX_*`` variables when set).
+    release : let go of the file's decoded channels as the buffers are made, and of the rest
+        after (:func:`gbuffer.exr.release_pixels`): for a frame written with the ``part`` or
+        ``sidecar`` layout, whose input parts are copied, not encoded again.
 
     Raises
     ------
@@ -109,7 +120,10 @@ def read(
     """
     cam = _camera_arg(camera)
     passthrough = exr.read_parts(path, max_pixels, limits=limits)
-    return to_frame(passthrough, preset, cam, options)
+    frame = to_frame(passthrough, preset, cam, options, release=release)
+    if release:
+        exr.release_pixels(passthrough)
+    return frame
 
 
 def _grid_shape(pt: Passthrough) -> tuple[int, int]:
@@ -138,7 +152,7 @@ def _check_attributes(attributes: dict[str, Any]) -> None:
         )
 
 
-def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
+def write(frame: Frame, path: str | Path, layout: str = DEFAULT_LAYOUT) -> list[str]:
     """Write ``frame`` to ``path`` in ``layout`` (see the module docstring for what goes where).
 
     Returns
@@ -190,6 +204,8 @@ def write(frame: Frame, path: str | Path, layout: str = "same") -> list[str]:
         parts.append((header, added))
     for key, value in frame.attributes.items():
         header[key] = value
+    if added:
+        _share_attributes(parts, header)
     new_pt = dataclasses.replace(pt, parts=parts)
     warnings += exr.write_parts(new_pt, path)
     return warnings
@@ -224,6 +240,25 @@ def _added_part(
         name = f"{base}{n}"
     header["name"] = name
     return header
+
+
+#: Attributes every part of a multi-part file must carry with one value (OpenEXR's rule).
+SHARED_ATTRIBUTES = ("displayWindow", "pixelAspectRatio", "timeCode", "chromaticities")
+
+
+def _share_attributes(
+    parts: list[tuple[dict[str, Any], dict[str, Any]]], added: dict[str, Any]
+) -> None:
+    """Give every part the shared attributes of the added part (e.g. the chromaticities of
+    ``--colorspace``), else the first value a part has: readers refuse a multi-part file whose
+    parts disagree. Only headers change; the parts' chunks are still copied."""
+    for key in SHARED_ATTRIBUTES:
+        value = added.get(key)
+        if value is None:
+            value = next((h[key] for h, _ in parts if h.get(key) is not None), None)
+        if value is not None:
+            for h, _ in parts:
+                h[key] = value
 
 
 #: Channel-name suffixes DWAA/DWAB quantise (OpenEXR's DWA rules, case-sensitive, HALF and FLOAT).

@@ -13,7 +13,9 @@ Workers receive paths, not pixels: each task reads its input, runs the pipeline 
 output. Statistics-dependent parameters (white levels, normalisations: what operators record in
 :attr:`service.registry.Context.measured`) are measured once, on the first frame processed, and
 pinned for every other frame, so the sequence does not flicker; ``--pinned FILE`` stores them (or
-reuses them when FILE exists) so several runs (farm chunks) share them.
+reuses them when FILE exists) so several runs (farm chunks) share them. While the first frame
+measures them, each other worker reads the next frame ahead (it stays in that worker's memory and
+is enhanced there once the statistics are known).
 
 Without ``--scheduler`` the frames run on a local Dask cluster with one single-threaded worker
 process per core (``--workers N`` to change); with ``--scheduler tcp://HOST:8786`` on an existing
@@ -48,7 +50,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from distributed import Client, Future, LocalCluster, as_completed
+from distributed import Client, Future, LocalCluster, as_completed, wait
 from rich.progress import (
     BarColumn,
     MofNCompleteColumn,
@@ -60,8 +62,9 @@ from rich.progress import (
 
 from gbuffer.atomic import atomic_path, output_target
 from gbuffer.errors import OutputError
+from gbuffer.frame import Frame
 from service import allocator
-from service.enhance import ReadRequest, WriteRequest, enhance
+from service.enhance import ReadRequest, WriteRequest, enhance_frame, read_for
 from service.pipeline import Pipeline
 from service.problems import from_exception
 
@@ -189,12 +192,18 @@ def process_frame(
     read: ReadRequest,
     write: WriteRequest,
     pinned: dict[str, float],
+    fetched: Frame | dict[str, Any] | None = None,
 ) -> dict[str, Any]:
-    """Enhance one frame (on a Dask worker). Never raises: failures come back as data."""
+    """Enhance one frame (on a Dask worker), read here or already by :func:`prefetch_frame`
+    (``fetched``: the frame, or the failure it read). Never raises: failures come back as
+    data."""
     allocator.tune()
     t0 = time.perf_counter()
+    if isinstance(fetched, dict):
+        return fetched
     try:
-        out = enhance(in_path, out_path, steps, read, write, pinned=pinned)
+        loaded = fetched if fetched is not None else read_for(in_path, read, write)
+        out = enhance_frame(loaded, out_path, steps, write, pinned=pinned)
         return {
             "frame": frame,
             "status": "done",
@@ -203,14 +212,31 @@ def process_frame(
             "seconds": time.perf_counter() - t0,
         }
     except Exception as exc:  # one bad frame must not stop the sequence
-        problem = from_exception(exc)
-        detail = problem.detail if problem.kind != "internal" else f"{type(exc).__name__}: {exc}"
-        return {
-            "frame": frame,
-            "status": "failed",
-            "error": detail,
-            "seconds": time.perf_counter() - t0,
-        }
+        return _failure(frame, exc, t0)
+
+
+def prefetch_frame(
+    frame: int, in_path: str, read: ReadRequest, write: WriteRequest
+) -> Frame | dict[str, Any]:
+    """Read a frame on a worker that would wait while the first frame measures the statistics
+    (the frame stays in that worker's memory for :func:`process_frame`); a failure as data."""
+    allocator.tune()
+    t0 = time.perf_counter()
+    try:
+        return read_for(in_path, read, write)
+    except Exception as exc:
+        return _failure(frame, exc, t0)
+
+
+def _failure(frame: int, exc: Exception, t0: float) -> dict[str, Any]:
+    problem = from_exception(exc)
+    detail = problem.detail if problem.kind != "internal" else f"{type(exc).__name__}: {exc}"
+    return {
+        "frame": frame,
+        "status": "failed",
+        "error": detail,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 # -- the sequence ------------------------------------------------------------------------------
@@ -283,7 +309,12 @@ class _Run:
     write: WriteRequest
     summary: Summary
 
-    def submit(self, f: int, pins: dict[str, float]) -> Future:
+    def submit(self, f: int, pins: dict[str, float], fetched: Future | None = None) -> Future:
+        """Frame ``f`` as a task; on the worker that holds it when it was read ahead."""
+        where = None
+        if fetched is not None:
+            wait([fetched])
+            where = list(self.client.who_has([fetched]).get(fetched.key, ())) or None
         return self.client.submit(
             process_frame,
             f,
@@ -293,7 +324,22 @@ class _Run:
             self.read,
             self.write,
             pins,
+            fetched,
             key=f"depict-frame-{f}-{os.urandom(4).hex()}",
+            pure=False,
+            workers=where,
+            # a lost worker: the frame is read again elsewhere, nobody waits for it
+            allow_other_workers=where is not None,
+        )
+
+    def prefetch(self, f: int) -> Future:
+        return self.client.submit(
+            prefetch_frame,
+            f,
+            expand(self.in_pattern, f),
+            self.read,
+            self.write,
+            key=f"depict-read-{f}-{os.urandom(4).hex()}",
             pure=False,
         )
 
@@ -312,7 +358,8 @@ class _Run:
         bar: Progress,
     ) -> dict[str, float] | None:
         """Run ``todo``: frames one by one until one measures the statistics (unless
-        ``pinned``), then the others at once with them pinned. Returns the pinned statistics."""
+        ``pinned``), the next frames read meanwhile by the other workers, then the others at once
+        with them pinned. Returns the pinned statistics."""
         task = bar.add_task("frames", total=len(todo), failed=0)
 
         def record(result: dict[str, Any]) -> None:
@@ -320,16 +367,20 @@ class _Run:
             bar.update(task, advance=1, failed=len(self.summary.failed))
 
         queue = list(todo)
+        ahead = max(0, len(self.client.scheduler_info()["workers"]) - 1)
+        fetched: dict[int, Future] = {}
         while pinned is None and queue:  # sample frames one by one until one succeeds
             f = queue.pop(0)
-            result = self.gather(self.submit(f, {}), f)
+            for g in queue[:ahead]:  # read by the workers that would wait meanwhile
+                fetched.setdefault(g, self.prefetch(g))
+            result = self.gather(self.submit(f, {}, fetched.pop(f, None)), f)
             record(result)
             if result["status"] == "done":
                 pinned = dict(result.get("measured") or {})
                 if pinned_path is not None:
                     with atomic_path(pinned_path) as tmp:
                         tmp.write_text(json.dumps(pinned, indent=2, sort_keys=True))
-        futures = {self.submit(f, pinned or {}): f for f in queue}
+        futures = {self.submit(f, pinned or {}, fetched.pop(f, None)): f for f in queue}
         for future in as_completed(futures):
             record(self.gather(future, futures[future]))
         return pinned

@@ -29,7 +29,6 @@ from typing import TYPE_CHECKING, TypedDict
 
 from gbuffer.camera import Camera
 from gbuffer.colorspace import View
-from gbuffer.exr import release_pixels
 from gbuffer.frame import Frame
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
@@ -52,10 +51,16 @@ class ReadRequest:
     options: ReadOptions = field(default_factory=ReadOptions)
     limits: Limits | None = None
 
-    def read(self, path: str | Path) -> Frame:
-        """The frame in ``path`` (:func:`gbuffer.read`)."""
+    def read(self, path: str | Path, release: bool = False) -> Frame:
+        """The frame in ``path`` (:func:`gbuffer.read`; ``release``: keep no decoded channel
+        beside the buffers)."""
         return read_exr(
-            path, preset=self.preset, camera=self.camera, options=self.options, limits=self.limits
+            path,
+            preset=self.preset,
+            camera=self.camera,
+            options=self.options,
+            limits=self.limits,
+            release=release,
         )
 
 
@@ -74,7 +79,7 @@ class WriteRequest:
     exposure: float = 0.0
     input_name: str | None = None
     view: View = field(default_factory=View)
-    layout: str = "same"
+    layout: str = "part"
 
 
 class Enhanced(TypedDict):
@@ -105,13 +110,32 @@ def enhance(
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
     whether parameters may name image files on this machine (False for the HTTP service).
     """
+    read, write = read or ReadRequest(), write or WriteRequest()
+    frame = read_for(in_path, read, write)
+    return enhance_frame(frame, out_path, steps, write, pinned=pinned, files=files)
+
+
+def read_for(in_path: str | Path, read: ReadRequest, write: WriteRequest) -> Frame:
+    """The frame in ``in_path`` as :func:`enhance` reads it for ``write``: when the input's parts
+    are copied, not encoded (``part``, ``sidecar``), its decoded channels go as the buffers are
+    made."""
+    return read.read(in_path, release=write.layout != "same" and not write.preview)
+
+
+def enhance_frame(
+    frame: Frame,
+    out_path: str | Path,
+    steps: pipeline.Pipeline,
+    write: WriteRequest,
+    *,
+    pinned: dict[str, float] | None = None,
+    files: bool = True,
+) -> Enhanced:
+    """The second half of :func:`enhance`: run ``steps`` on a frame :func:`read_for` read, write
+    the result to ``out_path``."""
     from service import pipeline
     from service.registry import Context
 
-    read, write = read or ReadRequest(), write or WriteRequest()
-    frame = read.read(in_path)
-    if write.layout != "same" and not write.preview:  # the input's parts are copied, not encoded
-        release_pixels(frame.passthrough)
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
     out, op_s = pipeline.run_timed(frame, steps, context)
     out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)

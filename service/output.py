@@ -169,7 +169,7 @@ def finish(
     frame: Frame,
     output_layer: str | None = None,
     input_name: str | None = None,
-    layout: str = "same",
+    layout: str = "part",
 ) -> Frame:
     """A copy of ``frame`` ready to write in ``layout`` (:data:`gbuffer.io.LAYOUTS`): the result
     in its layer, the header attributes of the module docstring. ``input_name`` defaults to the

@@ -219,7 +219,7 @@ def finish(
     frame: Frame,
     output_layer: str | None = None,
     input_name: str | None = None,
-    layout: str = "same",
+    layout: str = "part",
 ) -> Frame:
     """A copy of ``frame`` ready to write in ``layout``: the enhanced beauty in its result layer
     (``R,G,B,A``, the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own

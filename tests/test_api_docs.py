@@ -74,8 +74,9 @@ def test_dotted_output_layer_and_the_uploads_name(client: Any, tmp_path: Path) -
     out = tmp_path / "out.exr"
     out.write_bytes(r.content)
     with OpenEXR.File(str(out), separate_channels=True) as f:
-        assert "ViewLayer.Depict Look.R" in f.channels()
-        header = f.header()
+        added = f.parts[-1]  # the default layout: the result in a part of its own
+        assert "ViewLayer.Depict Look.R" in added.channels
+        header = {**f.header(), **added.header}
         assert header["depict/input"] == "shot_0042.exr"
         assert header["depict/result"] == "ViewLayer.Depict Look"
         assert "worldToCamera" in header  # the camera solved on the server

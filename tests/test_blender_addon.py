@@ -61,8 +61,9 @@ def check_result(tmp: Path, report: dict[str, Any]) -> Path:
     assert image["name"] == "Depict Result" and image["type"] == "MULTILAYER"
     assert "Depict" in report["node_outputs"] and report["composite_from"] == ["Depict"]
     out = Path(image["filepath"])
-    with OpenEXR.File(str(out), separate_channels=True) as f:
-        header, names = dict(f.header()), set(f.channels())
+    with OpenEXR.File(str(out), separate_channels=True) as f:  # every part (layout "part")
+        header = {k: v for p in f.parts for k, v in p.header.items()}
+        names = {n for p in f.parts for n in p.channels}
     assert {f"ViewLayer.Depict.{c}" for c in "RGBA"} <= names
     steps = json.loads(header["depict/pipeline"])["steps"]
     assert steps[0]["op"] == "radiance_scaling" and steps[0]["params"]["gamma"] == 2
@@ -111,7 +112,7 @@ def test_addon_with_a_depict_server(tmp_path: Path) -> None:
     out = check_result(tmp_path, report)
     assert '"path": "/v1/enhance"' in logs and '"status": 200' in logs
     with OpenEXR.File(str(out), separate_channels=True) as f:
-        assert f.header()["depict/input"] == "render.exr"
+        assert f.parts[-1].header["depict/input"] == "render.exr"
 
 
 def test_addon_without_depict_says_what_to_do(tmp_path: Path) -> None:

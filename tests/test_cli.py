@@ -34,8 +34,13 @@ def depict(*argv: str | Path) -> int:
 
 
 def channels(path: Path) -> dict[str, np.ndarray]:
+    """Every part's channels (the default ``part`` layout adds one), as float32."""
     with OpenEXR.File(str(path), separate_channels=True) as f:
-        return {name: np.asarray(c.pixels, np.float32) for name, c in f.channels().items()}
+        return {
+            name: np.asarray(c.pixels, np.float32)
+            for part in f.parts
+            for name, c in part.channels.items()
+        }
 
 
 @pytest.fixture(scope="module")
@@ -198,7 +203,7 @@ def test_enhance_with_a_pipeline_file(
         json.dumps({"steps": [{"op": "apparent_relief", "params": {"style": "counter"}}]})
     )
     out = tmp_path / "relief.exr"
-    assert depict("enhance", exr, "-o", out, "--pipeline", spec) == 0
+    assert depict("enhance", exr, "-o", out, "--pipeline", spec, "--layout", "same") == 0
     got, src = channels(out), channels(exr)
     assert {"relief.X", "relief.S.X", "relief.S.Y"} <= set(got)
     assert not any(n.startswith("relief.color") for n in got)  # no --debug-layers
@@ -210,10 +215,16 @@ def test_enhance_with_a_pipeline_file(
 
 
 def test_enhance_without_steps_runs_the_default_pipeline(exr: Path, tmp_path: Path) -> None:
+    """The default layout adds a part: the input's channels come back as they were, the
+    result is the ``Depict`` layer that ``depict/result`` names."""
     out = tmp_path / "rs.exr"
     assert depict("enhance", exr, "-o", out) == 0
     got, src = channels(out), channels(exr)
-    assert np.abs(got["R"] - src["R"]).max() > 1e-3
+    for name, pixels in src.items():
+        np.testing.assert_array_equal(got[name], pixels, err_msg=name)
+    with OpenEXR.File(str(out)) as f:
+        assert len(f.parts) == 2 and f.parts[1].header["depict/result"] == "Depict"
+    assert np.abs(got["Depict.R"] - src["R"]).max() > 1e-3
 
 
 # -- score, compare -----------------------------------------------------------------------------

@@ -114,6 +114,10 @@ def test_each_frame_names_its_space_and_where_it_came_from(
 def test_an_output_records_the_space_the_user_named(tmp_path: Path) -> None:
     out = tmp_path / "out.exr"
     assert _cli("enhance", str(FIXTURE), "-o", str(out), "--colorspace", "ACEScg")[0] == 0
+    # the default layout adds a part: every part carries the new chromaticities (OpenEXR's
+    # shared attributes), or no reader opens the file
+    with OpenEXR.File(str(out)) as f:
+        assert len({tuple(p.header["chromaticities"]) for p in f.parts}) == 1 < len(f.parts)
     space = gbuffer.read(out).colorspace
     assert (space.name, space.source) == ("ACEScg", "chromaticities attribute")
     np.testing.assert_allclose(space.matrix, ACESCG.matrix, atol=1e-6)

@@ -5,6 +5,7 @@ the CLI in process; Blender's compositor reads the ``part`` output when ``blende
 
 from __future__ import annotations
 
+import inspect
 import json
 import shutil
 from pathlib import Path
@@ -16,9 +17,12 @@ import pytest
 import gbuffer
 from gbuffer import exr
 from gbuffer.exr import layout as exr_layout
-from gbuffer.io import LAYOUTS
+from gbuffer.io import DEFAULT_LAYOUT, LAYOUTS
+from service import output, pipeline
 from service.cli import main
+from service.cli.args import DEFAULT_LAYOUT as CLI_DEFAULT
 from service.cli.args import LAYOUTS as CLI_LAYOUTS
+from service.enhance import WriteRequest
 from tests.test_output_layout import blender_passes, write_compressed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -66,10 +70,15 @@ def outputs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
 
 
 def test_the_parser_and_the_http_form_offer_the_writers_layouts() -> None:
-    assert CLI_LAYOUTS == LAYOUTS
+    """One default everywhere: ``part`` (the input's parts copied, nothing re-encoded)."""
+    assert CLI_LAYOUTS == LAYOUTS and CLI_DEFAULT == DEFAULT_LAYOUT == "part"
     schema = json.loads((ROOT / "openapi" / "openapi.json").read_text())
     form = schema["components"]["schemas"]["Body_enhance_v1_enhance_post"]["properties"]
-    assert tuple(form["layout"]["enum"]) == LAYOUTS and form["layout"]["default"] == "same"
+    assert tuple(form["layout"]["enum"]) == LAYOUTS
+    assert form["layout"]["default"] == DEFAULT_LAYOUT
+    assert WriteRequest().layout == DEFAULT_LAYOUT
+    for function in (gbuffer.write, pipeline.finish, output.finish):
+        assert inspect.signature(function).parameters["layout"].default == DEFAULT_LAYOUT
 
 
 def test_part_layout_copies_the_input_and_adds_only_the_result(outputs: dict[str, Path]) -> None:
@@ -175,3 +184,26 @@ def test_released_pixels_come_back_when_read_and_the_input_is_still_copied(
     out = tmp_path / "out.exr"
     gbuffer.write(frame, out, layout="part")
     assert chunks(out, 0) == chunks(BLENDER_EXR, 0)
+
+
+@pytest.mark.parametrize("source", ["blender", "depict"])
+def test_a_released_read_lets_each_channel_go_after_its_last_buffer(
+    source: str, tmp_path: Path
+) -> None:
+    """``read(..., release=True)`` (the ``part``/``sidecar`` path) gives the same buffers as a
+    plain read without decoding the file a second time: a channel read by two buffers (Cycles'
+    DiffCol is the albedo and the diffuse colour) goes only after the second."""
+    path = BLENDER_EXR
+    if source == "depict":
+        path = tmp_path / "spot.exr"
+        assert depict("render", SPOT, "-o", path, "--width", 160, "--height", 120) == 0
+    kept = gbuffer.read(path)
+    released = gbuffer.read(path, release=True)
+    assert sorted(released.buffers) == sorted(kept.buffers)
+    for key, arr in kept.buffers.items():
+        np.testing.assert_array_equal(released.buffers[key], arr, err_msg=key)
+    pt = released.passthrough
+    assert isinstance(pt, exr.ExrPassthrough) and pt.redecode is not None
+    assert pt.redecode.parts is None  # nothing was decoded again
+    channels = pt.parts[0][1]
+    assert all(isinstance(c, exr.ReleasedChannel) for c in channels.values())

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -33,6 +34,7 @@ class ExrPassthrough(Passthrough):
     source_stat : (size, mtime_ns) of the file when read (chunks are copied only if it holds).
     warnings : notes for the user (``describe`` lists them).
     preset_reason : why the preset was chosen (set by ``gbuffer.presets``).
+    redecode : where released channels get their pixels back (:func:`release_pixels`).
     """
 
     path: str = ""
@@ -42,6 +44,7 @@ class ExrPassthrough(Passthrough):
     source_stat: tuple[int, int] = (0, 0)
     warnings: list[str] = field(default_factory=list)
     preset_reason: str = ""
+    redecode: _Redecode | None = field(default=None, repr=False, compare=False)
 
 
 def _copy_value(value: Any) -> Any:
@@ -239,23 +242,34 @@ class _Redecode:
         return pixels
 
 
-def release_pixels(pt: Passthrough) -> None:
+def release_pixels(pt: Passthrough, only: Iterable[tuple[int, str]] | None = None) -> None:
     """Let go of the decoded pixels of every channel of ``pt`` (an :class:`ExrPassthrough` read
-    from a file), keeping what writing needs: its parts are still copied chunk for chunk, and a
-    channel's ``pixels`` are decoded again if something reads them. For a write that adds
-    layers beside the input's parts (the ``part`` and ``sidecar`` layouts), once the frame's
-    buffers are made: the file's decoded channels need not stay in memory beside them."""
+    from a file), or of the ``(part, channel name)`` pairs in ``only``, keeping what writing
+    needs: its parts are still copied chunk for chunk, and a channel's ``pixels`` are decoded
+    again if something reads them. For a write that adds layers beside the input's parts (the
+    ``part`` and ``sidecar`` layouts): the file's decoded channels need not stay in memory beside
+    the frame's buffers (:func:`gbuffer.io.read` with ``release=True`` lets each go as soon as
+    its buffer is made)."""
     if not isinstance(pt, ExrPassthrough) or not pt.path or pt.layout is None:
         return
-    source = _Redecode(pt.path)
-    for index, (_, channels) in enumerate(pt.parts):
-        for name, channel in list(channels.items()):
-            if isinstance(channel, ReleasedChannel) or not hasattr(channel, "pixels"):
-                continue
-            released = ReleasedChannel(name, channel, source)
-            released._part = index
-            channels[name] = released
-            pt.channel_ids[index][name] = (id(released), 0)
+    if pt.redecode is None:
+        pt.redecode = _Redecode(pt.path)
+    pairs = (
+        [(i, name) for i, (_, channels) in enumerate(pt.parts) for name in channels]
+        if only is None
+        else list(only)
+    )
+    for index, name in pairs:
+        channels = pt.parts[index][1]
+        channel = channels.get(name)
+        if channel is None or isinstance(channel, ReleasedChannel):
+            continue
+        if not hasattr(channel, "pixels"):
+            continue
+        released = ReleasedChannel(name, channel, pt.redecode)
+        released._part = index
+        channels[name] = released
+        pt.channel_ids[index][name] = (id(released), 0)
 
 
 def _library_words(printed: list[str], where: str) -> str:

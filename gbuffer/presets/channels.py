@@ -9,6 +9,7 @@ by their bare names). A layer ``L`` of three components is found as ``L.R/G/B``,
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -16,7 +17,7 @@ import cv2
 import numpy as np
 
 from gbuffer.errors import FrameError, OptionError
-from gbuffer.exr import window
+from gbuffer.exr import release_pixels, window
 from gbuffer.frame import BUFFERS, Passthrough
 from gbuffer.presets.options import ReadOptions
 
@@ -83,12 +84,21 @@ class ChannelReader:
     """Loads channels of a passthrough as float32 arrays on the primary part's grid."""
 
     def __init__(
-        self, pt: Passthrough, flat: dict[str, tuple[int, str]], where: str, strict: bool = True
+        self,
+        pt: Passthrough,
+        flat: dict[str, tuple[int, str]],
+        where: str,
+        strict: bool = True,
+        release: bool = False,
     ) -> None:
         self.pt = pt
         self.flat = flat
         self.where = where
         self.strict = strict
+        #: let go of a channel's decoded pixels after its last use (``uses`` counts them; not
+        #: the beauty's, which the holes may need again): for writes that copy the input's parts
+        self.release = release
+        self.uses: Counter[str] = Counter()
         self.primary = 0
         self.grid = (0, 0, 0, 0)
         #: pixels with NaN/Inf radiance (or, when not strict, data): holes of the frame
@@ -163,9 +173,16 @@ class ChannelReader:
         """Channels ``names`` as one new float32 (H, W) or (H, W, C) array on the grid (float32
         channels are interleaved straight from the file's pixels, not copied first)."""
         if len(names) == 1:
-            return self.plane(names[0], buffer, fill)
-        planes = [self._float32(name, buffer, fill) for name in names]
-        return np.asarray(cv2.merge(planes), np.float32)
+            arr = self.plane(names[0], buffer, fill)
+        else:
+            planes = [self._float32(name, buffer, fill) for name in names]
+            arr = np.asarray(cv2.merge(planes), np.float32)
+            del planes
+        if self.release and buffer != "beauty":
+            self.uses.subtract(names)
+            done = [self.flat[name] for name in names if self.uses[name] <= 0]
+            release_pixels(self.pt, done)
+        return arr
 
 
 def find_channels(

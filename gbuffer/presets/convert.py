@@ -6,6 +6,7 @@ conventions they apply."""
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -52,6 +53,8 @@ def to_frame(
     preset: str | Preset = "auto",
     camera: Camera | None = None,
     overrides: ReadOptions | Mapping[str, Any] | None = None,
+    *,
+    release: bool = False,
 ) -> Frame:
     """Map a file's channels to canonical buffers (see :mod:`gbuffer.presets`).
 
@@ -61,6 +64,10 @@ def to_frame(
     preset : a preset name, a :class:`Preset`, or ``"auto"`` (:func:`detect`).
     camera : a camera that overrides the file's (``None``: the file's, if any).
     overrides : :class:`ReadOptions` (or its dict form).
+    release : let go of each channel's decoded pixels once its buffer is made
+        (:func:`gbuffer.exr.release_pixels`; they are decoded again if read later), so that a
+        frame written beside its input (``part`` or ``sidecar`` layout) never holds the file's
+        channels and its buffers at once.
 
     Returns
     -------
@@ -77,7 +84,7 @@ def to_frame(
         World-space normals and no camera (unless ``require_camera`` is False).
     """
     opts = read_options(overrides)
-    build = _Build.start(passthrough, _choose_preset(passthrough, preset), opts)
+    build = _Build.start(passthrough, _choose_preset(passthrough, preset), opts, release)
     build.grid(camera)
     build.background_and_depth()
     build.fit_camera()
@@ -119,6 +126,7 @@ class _Build:
     result_layer: str | None = None
     marked: str | None = None
     found: dict[str, list[str]] = field(default_factory=dict)
+    lobe_found: dict[str, list[list[str]]] = field(default_factory=dict)
     spaces: dict[str, str] = field(default_factory=dict)
     buffers: dict[str, np.ndarray] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
@@ -132,13 +140,13 @@ class _Build:
     trust: np.ndarray | None = None
 
     @classmethod
-    def start(cls, pt: Passthrough, preset: Preset, opts: ReadOptions) -> _Build:
+    def start(cls, pt: Passthrough, preset: Preset, opts: ReadOptions, release: bool) -> _Build:
         """Step 1, channels: the view layer, an earlier result of Depict, and the channels of
         every buffer the preset (or the user's mapping) names."""
         where = pt.path if isinstance(pt, ExrPassthrough) else "frame"
         warnings: list[str] = pt.warnings if isinstance(pt, ExrPassthrough) else []
         flat = flat_channels(pt.parts)
-        reader = ChannelReader(pt, flat, where, strict=opts.strict)
+        reader = ChannelReader(pt, flat, where, strict=opts.strict, release=release)
         build = cls(pt, preset, opts, reader, warnings, prefix=opts.layer or "")
         if preset.view_layer is not None:
             build.prefix = _view_layer(flat, preset, opts, warnings)
@@ -150,6 +158,8 @@ class _Build:
                 mapping = {**opts.mapping, "beauty": build.marked or "R,G,B"}
                 build.opts = dataclasses.replace(opts, mapping=mapping)
         build.find_buffers()
+        build.find_lobes()
+        build.count_uses()
         return build
 
     def find(self, buffer: str, layers: Sequence[str], n: int | None = None) -> list[str] | None:
@@ -170,6 +180,37 @@ class _Build:
                 names = self.find(key, ())
                 if names is not None:
                     self.found[key] = names
+
+    def find_lobes(self) -> None:
+        """The layers summed into each lobe's radiance, light and colour: the user's mapping,
+        else the first of the preset's alternatives with any layer present (a colour: its first
+        layer)."""
+        for lobe in LOBES:
+            spec = self.preset.lobes.get(lobe, LobeSpec())
+            colors = tuple((c,) for c in spec.color)
+            for key, alternatives in (
+                (lobe, spec.radiance),
+                (f"{lobe}.light", spec.light),
+                (f"{lobe}.color", colors),
+            ):
+                layers = self.lobe_layers(key, alternatives)
+                self.lobe_found[key] = layers[:1] if key.endswith(".color") else layers
+
+    def lobe_layers(self, key: str, alternatives: Sequence[tuple[str, ...]]) -> list[list[str]]:
+        if key in self.opts.mapping:
+            names = self.find(key, (), n=3)
+            return [] if names is None else [names]
+        for alt in alternatives:
+            layers = [names for layer in alt if (names := self.find(key, (layer,), n=3))]
+            if layers:
+                return layers
+        return []
+
+    def count_uses(self) -> None:
+        """How many buffers each channel goes into, so that the reader can let a channel's
+        pixels go after its last use (``release``)."""
+        lists = [*self.found.values()] + [n for ls in self.lobe_found.values() for n in ls]
+        self.reader.uses = Counter(name for names in lists for name in names)
 
     def find_oriented(self, buffer: str) -> tuple[list[str] | None, str]:
         """The normals' or positions' channels and their space: the user's mapping and space,
@@ -369,7 +410,7 @@ class _Build:
         and the remainder = beauty minus their sum."""
         lobe_sum = None
         for lobe in LOBES:
-            rad = self.lobe(lobe, self.preset.lobes.get(lobe, LobeSpec()))
+            rad = self.lobe(lobe)
             if rad is not None:
                 lobe_sum = rad.copy() if lobe_sum is None else cv2.add(lobe_sum, rad)
         if lobe_sum is not None and "beauty" in self.buffers:
@@ -377,13 +418,12 @@ class _Build:
             present = [lobe for lobe in LOBES if lobe in self.buffers]
             self.sources["remainder"] = "beauty - (" + " + ".join(present) + ")"
 
-    def lobe(self, lobe: str, spec: LobeSpec) -> np.ndarray | None:
+    def lobe(self, lobe: str) -> np.ndarray | None:
         """One lobe's buffers; its radiance, or None."""
         src: dict[str, str] = {}
-        rad = self.lobe_part(lobe, spec.radiance, src)
-        light = self.lobe_part(f"{lobe}.light", spec.light, src)
-        colors = tuple((c,) for c in spec.color)
-        color = self.lobe_part(f"{lobe}.color", colors, src, single=True)
+        rad = self.lobe_part(lobe, src)
+        light = self.lobe_part(f"{lobe}.light", src)
+        color = self.lobe_part(f"{lobe}.color", src, single=True)
         if rad is None and light is not None and color is not None:
             rad = light * color
             src[lobe] = f"({src[lobe + '.light']}) * {src[lobe + '.color']}"
@@ -400,27 +440,16 @@ class _Build:
         return rad
 
     def lobe_part(
-        self,
-        key: str,
-        alternatives: Sequence[tuple[str, ...]],
-        sources: dict[str, str],
-        single: bool = False,
+        self, key: str, sources: dict[str, str], single: bool = False
     ) -> np.ndarray | None:
-        """Sum of the layers of the first alternative with any layer present (3 components)."""
-        if key in self.opts.mapping:
-            names = self.find(key, (), n=3)
-            if names is None:
-                return None
-            sources[key] = describe(names)
-            return self.load_radiance(key, names)
-        for alt in alternatives:
-            layers = [names for layer in alt if (names := self.find(key, (layer,), n=3))]
-            if not layers:
-                continue
-            total = [self.load_radiance(key, names) for names in layers]
-            sources[key] = " + ".join(describe(n) for n in layers)
-            return total[0] if single else sum_into(total)
-        return None
+        """Sum of the layers found for ``key`` (:meth:`find_lobes`; the first alone when
+        ``single``), 3 components."""
+        layers = self.lobe_found.get(key, [])
+        if not layers:
+            return None
+        total = [self.load_radiance(key, names) for names in layers]
+        sources[key] = " + ".join(describe(n) for n in layers)
+        return total[0] if single else sum_into(total)
 
     def load_radiance(self, key: str, names: list[str]) -> np.ndarray:
         arr = self.reader.stack(names, key)

@@ -148,7 +148,7 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
 
 #: ``--layout`` choices (:data:`gbuffer.io.LAYOUTS`, named here so the parser stays light).
 LAYOUTS = ("same", "part", "sidecar")
-DEFAULT_LAYOUT = "same"
+DEFAULT_LAYOUT = "part"
 
 
 def add_write_options(p: argparse.ArgumentParser) -> None:

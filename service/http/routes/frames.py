@@ -106,7 +106,7 @@ async def enhance(
             "a multi-part file; the input's parts copied as they are), sidecar (an EXR with "
             "only the new layers)"
         ),
-    ] = "same",
+    ] = "part",
     preview: Annotated[
         Literal["png"] | None, Query(description="png: answer a tone-mapped PNG preview")
     ] = None,
