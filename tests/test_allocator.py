@@ -29,3 +29,27 @@ def test_tune_applies_on_glibc() -> None:
 
 def test_system_leaves_the_allocator() -> None:
     assert _run({"DEPICT_MALLOC": "system"}) == "False False"
+
+
+HUGE = """
+import os, sys
+if sys.argv[1] == "before":
+    import numpy
+from service import allocator
+allocator.tune()
+import numpy
+print(os.environ.get("NUMPY_MADVISE_HUGEPAGE"), numpy._core.multiarray._set_madvise_hugepage(0))
+"""
+
+
+@pytest.mark.parametrize("numpy_imported", ["before", "after"])
+def test_numpy_gives_no_huge_page_advice_unless_the_user_asks(numpy_imported: str) -> None:
+    """``tune`` turns NumPy's huge-page advice off (the setter returns the setting it replaces),
+    whether NumPy was imported before it or after; a user's own setting wins."""
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    for given, expected in ((None, ["0", "False"]), ("1", ["1", "True"])):
+        if given is not None:
+            env["NUMPY_MADVISE_HUGEPAGE"] = given
+        cmd = [sys.executable, "-c", HUGE, numpy_imported]
+        run = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        assert run.stdout.split() == expected, run.stderr
