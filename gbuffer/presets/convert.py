@@ -412,9 +412,10 @@ class _Build:
         for lobe in LOBES:
             rad = self.lobe(lobe)
             if rad is not None:
-                lobe_sum = rad.copy() if lobe_sum is None else cv2.add(lobe_sum, rad)
-        if lobe_sum is not None and "beauty" in self.buffers:
-            self.buffers["remainder"] = cv2.subtract(self.buffers["beauty"], lobe_sum)
+                lobe_sum = rad.copy() if lobe_sum is None else cv2.add(lobe_sum, rad, dst=lobe_sum)
+        if lobe_sum is not None and "beauty" in self.buffers:  # beauty - sum, in the sum's place
+            remainder = cv2.subtract(self.buffers["beauty"], lobe_sum, dst=lobe_sum)
+            self.buffers["remainder"] = remainder
             present = [lobe for lobe in LOBES if lobe in self.buffers]
             self.sources["remainder"] = "beauty - (" + " + ".join(present) + ")"
 
