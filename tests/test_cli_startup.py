@@ -99,3 +99,21 @@ def test_the_install_compiled_the_bytecode_of_the_enhance_path() -> None:
     )
     missing = json.loads(run.stdout.splitlines()[-1])
     assert not missing, f"{len(missing)} modules without bytecode, e.g. {missing[:5]}"
+
+
+def test_the_executable_ends_without_teardown_but_keeps_output_and_exit_code(
+    tmp_path: Path,
+) -> None:
+    """The ``depict`` executable (:func:`service.cli.run`) ends the process without tearing the
+    interpreter down: what it printed into a pipe still arrives, and the exit code is main's."""
+    depict = str(Path(sys.executable).parent / "depict")
+    listed = subprocess.run([depict, "ops"], capture_output=True, text=True)
+    assert listed.returncode == 0 and "radiance_scaling" in listed.stdout
+    missing = tmp_path / "missing.exr"
+    failed = subprocess.run(
+        [depict, "enhance", str(missing), "-o", str(tmp_path / "out.exr")],
+        capture_output=True,
+        text=True,
+    )
+    assert failed.returncode == 2
+    assert failed.stderr.startswith("depict: error:") and len(failed.stderr.splitlines()) == 1

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import logging
+import os
 import sys
 from collections.abc import Callable, Sequence
 
@@ -25,7 +27,7 @@ from service.cli.args import printable
 from service.cli.parser import EXIT_USAGE, build_parser
 from service.errors import DepictError
 
-__all__ = ["build_parser", "main"]
+__all__ = ["build_parser", "main", "run"]
 
 
 def command(args: argparse.Namespace) -> Callable[[argparse.Namespace], int]:
@@ -53,6 +55,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _fail("input nested too deeply")
     except KeyboardInterrupt:
         return 130
+
+
+def run() -> None:
+    """The ``depict`` executable: :func:`main`, then the process ends without tearing the
+    interpreter down. Every file is written and closed by then; what the teardown would add is
+    freeing a frame's memory object by object and unloading Numba's compiler (0.3 s of a 2 s
+    ``depict enhance`` at 1080p). ``--help``, ``--version`` and usage errors exit as usual."""
+    code = main()
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def _fail(message: str) -> int:

@@ -1,7 +1,5 @@
 """``python -m service.cli``: the ``depict`` command."""
 
-import sys
+from service.cli import run
 
-from service.cli import main
-
-sys.exit(main())
+run()
