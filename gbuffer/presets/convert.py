@@ -17,7 +17,7 @@ import numpy as np
 from gbuffer.camera import Camera
 from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
-from gbuffer.exr import ExrPassthrough, window
+from gbuffer.exr import ExrPassthrough, release_pixels, window
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.holes import hole_warnings, mark_holes
 from gbuffer.presets.channels import (
@@ -208,9 +208,13 @@ class _Build:
 
     def count_uses(self) -> None:
         """How many buffers each channel goes into, so that the reader can let a channel's
-        pixels go after its last use (``release``)."""
+        pixels go after its last use (``release``), and those of no buffer at once."""
         lists = [*self.found.values()] + [n for ls in self.lobe_found.values() for n in ls]
-        self.reader.uses = Counter(name for names in lists for name in names)
+        reader = self.reader
+        reader.uses = Counter(name for names in lists for name in names)
+        if reader.release:
+            used = {reader.flat[name] for name in reader.uses}
+            release_pixels(self.pt, sorted(set(reader.flat.values()) - used))
 
     def find_oriented(self, buffer: str) -> tuple[list[str] | None, str]:
         """The normals' or positions' channels and their space: the user's mapping and space,

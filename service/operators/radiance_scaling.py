@@ -175,7 +175,7 @@ def _kept_lighting(
     if not p.keep_lighting:
         return scaled
     rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else None
-    after = scaled - rest if rest is not None else scaled.copy()
+    after = np.subtract(scaled, rest, out=scaled) if rest is not None else scaled  # ours to reuse
     gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "radiance_scaling")
     after *= gain[..., None]
     if rest is not None:
@@ -213,6 +213,7 @@ def _scale_renderer_lobes(
         with_sigmas=ctx.debug_layers,
         weights=weights,
     )
+    del lights, remainder  # frame-sized, and no longer needed by the kept lighting
     if p.keep_lighting:
         beauty = _kept_lighting(frame, p, beauty, total(lobes.values()))
     return beauty, sigmas
