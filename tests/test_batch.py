@@ -232,6 +232,28 @@ def test_batch_on_the_local_default(sequence: Path) -> None:
         assert alone.read_bytes() != Path(expand(out, 12)).read_bytes()
 
 
+def test_frames_read_ahead_are_enhanced_where_they_were_read_or_reported(sequence: Path) -> None:
+    """While frame 1 measures the statistics the other worker reads the next frame ahead: the
+    corrupt one (reported as failed, the sequence goes on) and a good one (written, the same
+    bytes as a local enhance with the pinned statistics)."""
+    out = str(sequence / "ahead" / "rs.%04d.exr")
+    for order in ([1, BAD, 2], [1, 2, BAD]):
+        summary = run_batch(
+            str(sequence / "in" / "shot.####.exr"),
+            out,
+            steps=compile(DEFAULT_PIPELINE),
+            frames=order,
+            workers=2,
+            progress=False,
+        )
+        assert summary.done == [1, 2] and list(summary.failed) == [BAD]
+        assert "shot.0007.exr" in summary.failed[BAD]
+        mine = sequence / "ahead" / "check.exr"
+        spec = compile(DEFAULT_PIPELINE)
+        enhance(str(sequence / "in" / "shot.0002.exr"), str(mine), spec, pinned=summary.pinned)
+        assert mine.read_bytes() == Path(expand(out, 2)).read_bytes()
+
+
 def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixture[str]) -> None:
     src = str(sequence / "in" / "shot.####.exr")
     assert cli(["batch", src, "-o", src]) == 2
