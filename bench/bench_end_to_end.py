@@ -14,7 +14,8 @@ Rows, each a ratio to its reference measured just before or after it:
 * ``depict enhance IN -o OUT`` (defaults: Radiance Scaling; a new process, start-up included) vs
   ``oiiotool IN -o OUT`` (OpenImageIO's copy: decode every channel, encode every channel), for
   each ``--layout``; also the output's size and the peak memory of ``depict enhance`` against the
-  decoded size of the buffers it reads plus the layers it writes;
+  decoded size of the buffers it reads plus the layers it writes; and ``depict enhance`` of 4
+  files in one process vs 4 oiiotool copies;
 * the HTTP service (``depict serve``, 2 workers, 2 clients) vs 2 ``oiiotool`` copies in parallel
   (throughput);
 * ``depict batch`` of 8 frames (2 workers) vs 8 ``oiiotool`` copies on 2 processes (throughput);
@@ -170,6 +171,29 @@ def enhance_rows(name: str, path: Path, work: Path) -> None:
         )
 
 
+def several_row(path: Path, work: Path, files: int = 4) -> None:
+    """``depict enhance`` of ``files`` copies of a frame in one process vs as many oiiotool
+    copies one after the other."""
+    src, out = work / "several", work / "several_out"
+    src.mkdir(exist_ok=True)
+    out.mkdir(exist_ok=True)
+    names = []
+    for i in range(files):
+        link = src / f"f{i}.exr"
+        if not link.exists():
+            link.symlink_to(path.resolve())
+        names.append(str(link))
+    seconds, _ = timed([DEPICT, "enhance", *names, "-o", str(out)])
+    t0 = time.perf_counter()
+    for i, name in enumerate(names):
+        oiio_copy(Path(name), work / f"oiio_{i % 2}.exr")
+    copies = time.perf_counter() - t0
+    print(
+        f"depict enhance of {files} files in one process {seconds:6.2f} s, {files} oiiotool "
+        f"copies {copies:5.2f} s: {seconds / copies:5.2f}x"
+    )
+
+
 def http_row(path: Path, work: Path, requests: int = 6) -> None:
     """Throughput of ``depict serve`` (2 workers, 2 clients) vs 2 parallel oiiotool copies."""
     from service.client import Client
@@ -259,6 +283,7 @@ def main(argv: Sequence[str] = ()) -> None:
         main_frame = cycles or depict_frame()
         for name, path in frames if "enhance" in sections else ():
             enhance_rows(name, path, work)
+            several_row(path, work)
         if "http" in sections:
             http_row(main_frame, work)
         if "batch" in sections:

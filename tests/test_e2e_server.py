@@ -9,6 +9,7 @@ the server's memory comes back to its baseline afterwards.
 from __future__ import annotations
 
 import json
+import shutil
 import struct
 import threading
 import time
@@ -114,6 +115,37 @@ def test_enhance_canonical_matches_local_cli_bit_for_bit(
     assert cli(["enhance", str(files["canonical"]), "-o", str(remote), "--server", server.url]) == 0
     assert local.read_bytes() == remote.read_bytes()
     assert local.read_bytes() != files["canonical"].read_bytes()  # the operator did something
+
+
+def test_several_files_locally_and_on_the_server_give_the_same_bytes(
+    server: Server, files: dict[str, Path], tmp_path: Path, remote_env: None
+) -> None:
+    """``depict enhance A B C -o FOLDER``: one process (or one client), outputs named as their
+    inputs, each the bytes of a single-file run; a file that fails is said on one line and the
+    others are written (exit code 2)."""
+    inputs = tmp_path / "in"
+    inputs.mkdir()
+    for name in ("a.exr", "b.exr"):
+        shutil.copyfile(files["canonical"], inputs / name)
+    (inputs / "bad.exr").write_bytes(b"not an exr")
+    single = tmp_path / "single"
+    single.mkdir()
+    for name in ("a.exr", "b.exr"):  # the output records its input's name
+        assert cli(["enhance", str(inputs / name), "-o", str(single / name)]) == 0
+    names = [str(inputs / n) for n in ("a.exr", "bad.exr", "b.exr")]
+    for where, extra in (("local", []), ("remote", ["--server", server.url])):
+        out = tmp_path / where
+        out.mkdir()
+        assert cli(["enhance", *names, "-o", str(out), *extra]) == 2
+        assert sorted(p.name for p in out.iterdir()) == ["a.exr", "b.exr"]
+        for name in ("a.exr", "b.exr"):
+            assert (out / name).read_bytes() == (single / name).read_bytes()
+    assert cli(["enhance", *names, "-o", str(tmp_path / "x.exr")]) == 2  # not a folder
+    twin = tmp_path / "twin"
+    twin.mkdir()
+    shutil.copyfile(files["canonical"], twin / "a.exr")
+    clash = ["enhance", str(inputs / "a.exr"), str(twin / "a.exr"), "-o", str(tmp_path / "local")]
+    assert cli(clash) == 2  # two outputs of one name: refused before anything is read
 
 
 def test_enhance_blender_matches_local_cli_bit_for_bit(

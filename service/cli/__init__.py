@@ -23,9 +23,8 @@ import sys
 from collections.abc import Callable, Sequence
 
 from service import allocator
-from service.cli.args import printable
+from service.cli.args import error_line, printable
 from service.cli.parser import EXIT_USAGE, build_parser
-from service.errors import DepictError
 
 __all__ = ["build_parser", "main", "run"]
 
@@ -43,18 +42,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return int(command(args)(args))
-    except (ValueError, DepictError) as exc:  # bad input, or a server that refused or is down
-        # ValueError: FrameError, PipelineError, UsageError, and ops/' bad values
-        return _fail(str(exc))
-    except FileNotFoundError as exc:
-        return _fail(f"no such file: {exc.filename or exc}")
-    except OSError as exc:  # a file that cannot be read or written
-        where = f"{exc.filename}: " if exc.filename else ""
-        return _fail(f"{where}{exc.strerror or exc}")
-    except RecursionError:
-        return _fail("input nested too deeply")
     except KeyboardInterrupt:
         return 130
+    except Exception as exc:  # bad input, a server that refused or is down: one line
+        line = error_line(exc)
+        if line is None:
+            raise
+        return fail(line)
 
 
 def run() -> None:
@@ -69,7 +63,7 @@ def run() -> None:
     os._exit(code)
 
 
-def _fail(message: str) -> int:
+def fail(message: str) -> int:
     """One line on stderr, control characters escaped; the exit code of bad input."""
     print(f"depict: error: {printable(message)}", file=sys.stderr)
     return EXIT_USAGE

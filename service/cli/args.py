@@ -18,6 +18,23 @@ class UsageError(ValueError):
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 
+def error_line(exc: BaseException) -> str | None:
+    """What ``depict: error:`` says of a failure caused by the input, the files or the server
+    (``None``: a bug, which keeps its traceback)."""
+    from service.errors import DepictError
+
+    if isinstance(exc, ValueError | DepictError):  # FrameError, PipelineError, UsageError, ...
+        return str(exc)
+    if isinstance(exc, FileNotFoundError):
+        return f"no such file: {exc.filename or exc}"
+    if isinstance(exc, OSError):  # a file that cannot be read or written
+        where = f"{exc.filename}: " if exc.filename else ""
+        return f"{where}{exc.strerror or exc}"
+    if isinstance(exc, RecursionError):
+        return "input nested too deeply"
+    return None
+
+
 def printable(text: str) -> str:
     """``text`` with control characters (ESC, newlines, ...) escaped as ``\\xNN``, so what a
     file names cannot move the cursor, recolour the terminal or add lines."""

@@ -6,11 +6,14 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
+from pathlib import Path
 from typing import TYPE_CHECKING
 
+from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
 from gbuffer.presets import ReadOptions
-from service.cli.args import UsageError, mapping, printable
+from service.cli.args import UsageError, error_line, mapping, printable
 from service.enhance import ReadRequest
 
 if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline is compiled
@@ -48,3 +51,46 @@ def warn(messages: list[str]) -> None:
     """Notes for the user (e.g. NaN/Inf pixels read as holes), one line each on stderr."""
     for message in messages:
         print(f"depict: warning: {printable(message)}", file=sys.stderr)
+
+
+def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
+    """(input, output) of each file ``depict enhance`` names: ``-o`` is the output of a single
+    input, or an existing folder that receives each input's output under the input's name.
+    Every output is checked before anything is read (none may name an input or another)."""
+    inputs: list[str] = list(args.input)
+    folder = Path(args.output)
+    if folder.is_dir():
+        pairs = [(src, str(folder / Path(src).name)) for src in inputs]
+    elif len(inputs) > 1:
+        raise UsageError(
+            f"-o {args.output}: with {len(inputs)} inputs, -o names an existing folder for "
+            "their outputs"
+        )
+    else:
+        pairs = [(inputs[0], args.output)]
+    check_outputs([out for _, out in pairs], [*inputs, args.camera, args.pipeline])
+    return pairs
+
+
+def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> int:
+    """``one(input, output)`` for every pair, in this process. A single file's failure is the
+    command's (one line, exit 2); with several, a file that fails says so on one line and the
+    others go on; the exit code is 2 if any failed."""
+    from service.cli import fail
+
+    if len(pairs) == 1:
+        one(*pairs[0])
+        return 0
+    failed = 0
+    for src, out in pairs:
+        try:
+            one(src, out)
+        except Exception as exc:
+            line = error_line(exc)
+            if line is None:
+                raise
+            fail(line if src in line else f"{src}: {line}")
+            failed += 1
+    if failed:
+        print(f"{len(pairs) - failed} of {len(pairs)} files enhanced, {failed} failed")
+    return 2 if failed else 0

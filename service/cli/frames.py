@@ -10,7 +10,7 @@ import numpy as np
 from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
-from service.cli.common import read_request, steps, warn
+from service.cli.common import each_file, enhance_targets, read_request, steps, warn
 from service.enhance import WriteRequest, enhance
 from service.masks import matte
 
@@ -21,15 +21,19 @@ from service.masks import matte
 def cmd_enhance(args: argparse.Namespace) -> int:
     from service import pipeline
 
-    check_outputs([args.output], [args.input, args.camera, args.pipeline])
+    pairs = enhance_targets(args)
     compiled = steps(args) or pipeline.DEFAULT
+    read = read_request(args)
     write = WriteRequest(
         debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
     )
-    result = enhance(args.input, args.output, compiled, read_request(args), write)
-    warn(result["read_warnings"] + result["warnings"])
-    print(f"wrote {args.output}")
-    return 0
+
+    def one(src: str, out: str) -> None:
+        result = enhance(src, out, compiled, read, write)
+        warn(result["read_warnings"] + result["warnings"])
+        print(f"wrote {out}")
+
+    return each_file(pairs, one)
 
 
 def cmd_preview(args: argparse.Namespace) -> int:

@@ -135,9 +135,19 @@ def add_frame_commands(sub: Any) -> None:
     p.add_argument("--json", action="store_true", help="JSON schemas of every operator")
     p.set_defaults(command="service.cli.frames:cmd_ops")
 
-    p = sub.add_parser("enhance", help="apply operators to an EXR frame")
-    p.add_argument("input")
-    p.add_argument("-o", "--output", required=True, help="output EXR")
+    p = sub.add_parser(
+        "enhance",
+        help="apply operators to EXR frames",
+        description="Enhance one EXR, or several in one process (each with its own statistics; "
+        "`depict batch` pins them for a sequence).",
+    )
+    p.add_argument("input", nargs="+", help="EXR file(s)")
+    p.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        help="output EXR, or an existing folder for outputs named as their inputs (several inputs)",
+    )
     add_pipeline_options(p)
     add_write_options(p)
     add_read_options(p)

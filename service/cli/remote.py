@@ -16,7 +16,7 @@ from service.cli.analysis import (
     score_options,
 )
 from service.cli.args import UsageError, mapping
-from service.cli.common import steps
+from service.cli.common import each_file, enhance_targets, steps
 from service.client import Client
 
 
@@ -46,24 +46,27 @@ def render(args: argparse.Namespace) -> int:
 
 
 def enhance(args: argparse.Namespace) -> int:
-    check_outputs([args.output], [args.input, args.camera, args.pipeline])
-    buffers = mapping(args)
+    pairs = enhance_targets(args)
+    buffers, spec = mapping(args), _spec(args)
     with Client.from_env(args.server) as client:
-        client.enhance(
-            args.input,
-            args.output,
-            pipeline=_spec(args),
-            preset=args.preset,
-            camera=args.camera,
-            mapping=buffers,
-            normal_space=args.normal_space,
-            colorspace=args.colorspace,
-            debug_layers=args.debug_layers,
-            output_layer=args.output_layer,
-            layout=args.layout,
-        )
-    print(f"wrote {args.output}")
-    return 0
+
+        def one(src: str, out: str) -> None:
+            client.enhance(
+                src,
+                out,
+                pipeline=spec,
+                preset=args.preset,
+                camera=args.camera,
+                mapping=buffers,
+                normal_space=args.normal_space,
+                colorspace=args.colorspace,
+                debug_layers=args.debug_layers,
+                output_layer=args.output_layer,
+                layout=args.layout,
+            )
+            print(f"wrote {out}")
+
+        return each_file(pairs, one)
 
 
 def score(args: argparse.Namespace) -> int:
