@@ -23,8 +23,8 @@ import sys
 from collections.abc import Callable, Sequence
 
 from service import allocator
-from service.cli.args import error_line, printable
-from service.cli.parser import EXIT_USAGE, build_parser
+from service.cli.args import error_line, fail
+from service.cli.parser import build_parser
 
 __all__ = ["build_parser", "main", "run"]
 
@@ -61,9 +61,3 @@ def run() -> None:
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
-
-
-def fail(message: str) -> int:
-    """One line on stderr, control characters escaped; the exit code of bad input."""
-    print(f"depict: error: {printable(message)}", file=sys.stderr)
-    return EXIT_USAGE

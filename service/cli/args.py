@@ -7,6 +7,7 @@ import argparse
 import json
 import os
 import re
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -16,6 +17,16 @@ class UsageError(ValueError):
 
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+#: The exit code of bad input (and of argparse's usage errors).
+EXIT_USAGE = 2
+
+
+def fail(message: str) -> int:
+    """One line on stderr, control characters escaped; the exit code of bad input."""
+    print(f"depict: error: {printable(message)}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def error_line(exc: BaseException) -> str | None:

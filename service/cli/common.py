@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
 from gbuffer.presets import ReadOptions
-from service.cli.args import UsageError, error_line, mapping, printable
+from service.cli.args import UsageError, error_line, fail, mapping, printable
 from service.enhance import ReadRequest
 
 if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline is compiled
@@ -76,8 +76,6 @@ def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> 
     """``one(input, output)`` for every pair, in this process. A single file's failure is the
     command's (one line, exit 2); with several, a file that fails says so on one line and the
     others go on; the exit code is 2 if any failed."""
-    from service.cli import fail
-
     if len(pairs) == 1:
         one(*pairs[0])
         return 0

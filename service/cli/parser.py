@@ -9,6 +9,7 @@ import argparse
 from typing import Any
 
 from service.cli.args import (
+    EXIT_USAGE,
     add_pipeline_options,
     add_read_options,
     add_server_option,
@@ -16,8 +17,6 @@ from service.cli.args import (
     bounded,
 )
 from service.version import version
-
-EXIT_USAGE = 2
 
 
 class _Parser(argparse.ArgumentParser):
