@@ -27,6 +27,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -63,6 +64,22 @@ def describe_exit(code: int | None) -> str:
 
 
 # -- inside a worker ---------------------------------------------------------------------------
+
+
+def worker_process(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
+    """A worker process: :func:`worker_main`, then the process ends without the interpreter's
+    teardown (nothing is left to write; the teardown would print the OpenImageIO binding's
+    "nanobind: leaked ..." lines, some 90 of them per worker, on every server stop)."""
+    try:
+        worker_main(conn, log_level, warm)
+        code = 0
+    except BaseException:  # a fault of the loop itself: logged; the server replaces the worker
+        log.exception("worker failed", extra={"pid": os.getpid()})
+        code = 1
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
 
 
 def worker_main(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
@@ -215,7 +232,7 @@ class WorkerPool:
             return
         here, there = self.context.Pipe(duplex=True)
         process = self.context.Process(
-            target=worker_main,
+            target=worker_process,
             args=(there, self.log_level, self.warm),
             name="depict-worker",
             daemon=True,

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import signal
 import struct
 import threading
 import time
@@ -29,7 +30,14 @@ from gbuffer.render import render
 from service.cli import main as cli
 from service.client import Client, DepictError
 from tests import exr_factory
-from tests.live_server import Server, free_port, live_servers
+from tests.live_server import (
+    Server,
+    free_port,
+    live_servers,
+    start_server,
+    stop_server,
+    wait_ready,
+)
 
 KEY = "e2e-secret"
 AUTH = {"Authorization": f"Bearer {KEY}"}
@@ -551,3 +559,23 @@ def test_health_metrics_and_operators(server: Server) -> None:
     ops = httpx.get(f"{server.url}/v1/operators", headers=AUTH).json()
     assert any(op["name"] == "radiance_scaling" for op in ops)
     assert all({"name", "params", "needs", "writes"} <= set(op) for op in ops)
+
+
+def test_a_stopped_server_and_its_workers_exit_cleanly(files: dict[str, Path]) -> None:
+    """SIGTERM after a job: the server stops gracefully and its workers end without the
+    interpreter's teardown, whose "nanobind: leaked ..." lines (the OpenImageIO binding) filled
+    the log at every stop."""
+    server = start_server({"DEPICT_WORKERS": "2", "DEPICT_API_KEY": ""})
+    try:
+        wait_ready(server)
+        with files["canonical"].open("rb") as f:
+            r = httpx.post(f"{server.url}/v1/enhance", files={"file": f}, timeout=120)
+        assert r.status_code == 200, r.text
+        server.process.send_signal(signal.SIGTERM)
+        # uvicorn stops gracefully, then ends by the signal it was sent (as a shell expects)
+        assert server.process.wait(timeout=30) in (0, -signal.SIGTERM)
+        logs = server.logs()
+        assert "Application shutdown complete" in logs
+        assert "leaked" not in logs and "Traceback" not in logs, logs[-2000:]
+    finally:
+        stop_server(server)
