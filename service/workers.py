@@ -69,7 +69,7 @@ def describe_exit(code: int | None) -> str:
 def worker_process(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
     """A worker process: :func:`worker_main`, then the process ends without the interpreter's
     teardown (nothing is left to write; the teardown would print the OpenImageIO binding's
-    "nanobind: leaked ..." lines, some 90 of them per worker, on every server stop)."""
+    "nanobind: leaked ..." lines, some 40 of them per worker, on every server stop)."""
     try:
         worker_main(conn, log_level, warm)
         code = 0
