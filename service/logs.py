@@ -10,8 +10,10 @@ from __future__ import annotations
 import contextvars
 import json
 import logging
+import os
+import sys
 import time
-from typing import Any
+from typing import Any, NoReturn
 
 REQUEST_ID: contextvars.ContextVar[str] = contextvars.ContextVar("request_id", default="-")
 
@@ -63,3 +65,14 @@ def configure_logging(level: str = "info") -> None:
         logger.setLevel(level.upper() if name else "WARNING")
         logger.propagate = False
     logging.getLogger("uvicorn.access").disabled = True  # one line per request is ours
+
+
+def end_process(code: int) -> NoReturn:
+    """Flush the logs and the standard streams, then end the process without the interpreter's
+    teardown: for a process whose files are all written and closed (the ``depict`` executable, a
+    worker), where the teardown only frees memory object by object, unloads Numba's compiler and
+    has the OpenImageIO binding print "nanobind: leaked ..." lines."""
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)

@@ -27,7 +27,6 @@ import logging
 import multiprocessing
 import os
 import signal
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,6 +35,8 @@ from multiprocessing.process import BaseProcess
 from typing import Any
 
 import anyio
+
+from service.logs import REQUEST_ID, configure_logging, end_process
 
 log = logging.getLogger("depict.workers")
 
@@ -76,16 +77,11 @@ def worker_process(conn: Connection, log_level: str, warm: Callable[[], dict[str
     except BaseException:  # a fault of the loop itself: logged; the server replaces the worker
         log.exception("worker failed", extra={"pid": os.getpid()})
         code = 1
-    logging.shutdown()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(code)
+    end_process(code)
 
 
 def worker_main(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
     """The worker's loop: warm up, say ready, then run jobs until the pipe closes."""
-    from service.logs import REQUEST_ID, configure_logging
-
     configure_logging(log_level)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # ^C is for the server, which stops the pool
     try:
@@ -341,8 +337,6 @@ class WorkerPool:
 
     async def run(self, fn: Callable[..., Any], args: tuple[Any, ...], deadline: float) -> Outcome:
         """Run ``fn(*args)`` on a worker before ``deadline`` (``time.time()``)."""
-        from service.logs import REQUEST_ID
-
         if self._idle is None or self.closed:
             return Outcome("unavailable", detail="the worker pool is not running")
         worker = await self._take(deadline)
