@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, TypedDict
 from gbuffer.camera import Camera
 from gbuffer.colorspace import View
 from gbuffer.frame import Frame
+from gbuffer.io import DEFAULT_LAYOUT
 from gbuffer.io import read as read_exr
 from gbuffer.io import write as write_exr
 from gbuffer.limits import Limits
@@ -79,7 +80,7 @@ class WriteRequest:
     exposure: float = 0.0
     input_name: str | None = None
     view: View = field(default_factory=View)
-    layout: str = "part"
+    layout: str = DEFAULT_LAYOUT
 
 
 class Enhanced(TypedDict):

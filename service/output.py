@@ -37,6 +37,7 @@ import numpy as np
 
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
+from gbuffer.io import DEFAULT_LAYOUT
 from gbuffer.presets import RESULT_ATTRIBUTE
 from service.version import version
 
@@ -169,7 +170,7 @@ def finish(
     frame: Frame,
     output_layer: str | None = None,
     input_name: str | None = None,
-    layout: str = "part",
+    layout: str = DEFAULT_LAYOUT,
 ) -> Frame:
     """A copy of ``frame`` ready to write in ``layout`` (:data:`gbuffer.io.LAYOUTS`): the result
     in its layer, the header attributes of the module docstring. ``input_name`` defaults to the

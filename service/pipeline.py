@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from gbuffer import holes
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
-from service.output import finish as place
+from service.output import finish as finish  # pipeline.finish: the result placed for writing
 from service.registry import Context, Operator, Params, PipelineError, get
 
 #: Most steps in a pipeline.
@@ -209,20 +209,7 @@ def run(
     """Apply the pipeline to a copy of ``frame`` and return it (``frame`` is not changed).
 
     The enhanced image is ``out.buffers["beauty"]``; layers the operators wrote are in
-    ``out.outputs``. Call :func:`finish` to place the beauty into ``R,G,B,A`` for writing.
+    ``out.outputs``. Call :func:`finish` to place the beauty in its result layer for writing.
     """
     out, _ = run_timed(frame, compile(spec), context or Context(debug_layers=debug_layers))
     return out
-
-
-def finish(
-    frame: Frame,
-    output_layer: str | None = None,
-    input_name: str | None = None,
-    layout: str = "part",
-) -> Frame:
-    """A copy of ``frame`` ready to write in ``layout``: the enhanced beauty in its result layer
-    (``R,G,B,A``, the Blender view layer's ``Depict`` pass, or ``output_layer``), the input's own
-    ``R,G,B,A`` kept under ``input.*``, and the camera and provenance in the header
-    (:mod:`service.output` has the rules)."""
-    return place(frame, output_layer, input_name, layout)
