@@ -243,15 +243,19 @@ class Frame:
         """
         found: dict[str, np.ndarray] = {}
         pt = self.passthrough
-        others = [c for i, (_, c) in enumerate(pt.parts) if i != pt.primary]
-        primary = [pt.parts[pt.primary][1]] if pt.parts else []
+        # (channels, whether they may lie off the frame's grid): other parts, the primary part,
+        # the outputs last, so that they win
+        pools = [(c, True) for i, (_, c) in enumerate(pt.parts) if i != pt.primary]
+        if pt.parts:
+            pools.append((pt.parts[pt.primary][1], False))
+        pools.append((self.outputs, False))
         prefix = f"{name}."
-        for pool in [*others, *primary, self.outputs]:  # outputs last, so they win
+        for pool, off_grid in pools:
             for channel, value in pool.items():
                 if not (channel == name or channel.startswith(prefix)):
                     continue
                 pixels = getattr(value, "pixels", value)
-                if any(pool is o for o in others) and np.shape(pixels) != self.shape:
+                if off_grid and np.shape(pixels) != self.shape:
                     continue
                 if channel == name:
                     found[channel] = np.asarray(pixels, np.float32)

@@ -262,10 +262,8 @@ def release_pixels(pt: Passthrough, only: Iterable[tuple[int, str]] | None = Non
     for index, name in pairs:
         channels = pt.parts[index][1]
         channel = channels.get(name)
-        if channel is None or isinstance(channel, ReleasedChannel):
-            continue
-        if not hasattr(channel, "pixels"):
-            continue
+        if isinstance(channel, ReleasedChannel) or not hasattr(channel, "pixels"):
+            continue  # gone already, or never decoded (None has no pixels either)
         released = ReleasedChannel(name, channel, pt.redecode)
         released._part = index
         channels[name] = released

@@ -428,7 +428,7 @@ class _Build:
         src: dict[str, str] = {}
         rad = self.lobe_part(lobe, src)
         light = self.lobe_part(f"{lobe}.light", src)
-        color = self.lobe_part(f"{lobe}.color", src, single=True)
+        color = self.lobe_part(f"{lobe}.color", src)
         if rad is None and light is not None and color is not None:
             rad = light * color
             src[lobe] = f"({src[lobe + '.light']}) * {src[lobe + '.color']}"
@@ -444,17 +444,14 @@ class _Build:
             self.warnings.append(f"{lobe}: light or colour found without the other; no {lobe} lobe")
         return rad
 
-    def lobe_part(
-        self, key: str, sources: dict[str, str], single: bool = False
-    ) -> np.ndarray | None:
-        """Sum of the layers found for ``key`` (:meth:`find_lobes`; the first alone when
-        ``single``), 3 components."""
+    def lobe_part(self, key: str, sources: dict[str, str]) -> np.ndarray | None:
+        """Sum of the layers :meth:`find_lobes` found for ``key`` (3 components)."""
         layers = self.lobe_found.get(key, [])
         if not layers:
             return None
         total = [self.load_radiance(key, names) for names in layers]
         sources[key] = " + ".join(describe(n) for n in layers)
-        return total[0] if single else sum_into(total)
+        return sum_into(total)
 
     def load_radiance(self, key: str, names: list[str]) -> np.ndarray:
         arr = self.reader.stack(names, key)

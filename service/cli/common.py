@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
 from gbuffer.presets import ReadOptions
-from service.cli.args import UsageError, error_line, fail, mapping, printable
+from service.cli.args import EXIT_USAGE, UsageError, error_line, fail, mapping, printable
 from service.enhance import ReadRequest
 
 if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline is compiled
@@ -91,4 +91,4 @@ def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> 
             failed += 1
     if failed:
         print(f"{len(pairs) - failed} of {len(pairs)} files enhanced, {failed} failed")
-    return 2 if failed else 0
+    return EXIT_USAGE if failed else 0
