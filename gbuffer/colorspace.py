@@ -27,7 +27,6 @@ from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
-import PyOpenColorIO as ocio
 
 from gbuffer.errors import OptionError
 from ops.colorspace import (
@@ -69,8 +68,17 @@ def config() -> Any:
     return _load(config_name())
 
 
+def _ocio() -> Any:
+    """The OpenColorIO module, imported where a config is used (not to read or enhance a frame
+    in the standard spaces)."""
+    import PyOpenColorIO
+
+    return PyOpenColorIO
+
+
 @functools.cache
 def _load(name: str) -> Any:
+    ocio = _ocio()
     try:
         return ocio.Config.CreateFromFile(name)
     except ocio.Exception as exc:
@@ -117,7 +125,7 @@ def named(name: str, source: str = "--colorspace") -> ColorSpace:
             f"spaces: {', '.join(_linear_spaces(cfg))}"
         )
     canonical = str(cs.getName())
-    if cs.isData() or cs.getReferenceSpaceType() != ocio.REFERENCE_SPACE_SCENE:
+    if cs.isData() or cs.getReferenceSpaceType() != _ocio().REFERENCE_SPACE_SCENE:
         raise OptionError(f"colour space {name!r} is not a scene-referred colour space")
     if canonical in KNOWN:
         return from_chromaticities(canonical, KNOWN[canonical], source)
@@ -230,5 +238,5 @@ def _processor(
         src = ColorSpace(name, m)
         pre = conversion(src, from_chromaticities("ACES2065-1", ACES_AP0, "")).astype(np.float32)
         name = str(target)
-    transform = ocio.DisplayViewTransform(src=name, display=display, view=view)
+    transform = _ocio().DisplayViewTransform(src=name, display=display, view=view)
     return cfg.getProcessor(transform).getDefaultCPUProcessor(), pre

@@ -16,7 +16,6 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import OpenImageIO as oiio
 
 from gbuffer.errors import FrameError
 from ops.colorspace import LINEAR_REC709, ColorSpace, convert, from_chromaticities
@@ -39,6 +38,8 @@ def _pick(pixels: np.ndarray, names: list[str]) -> np.ndarray:
 
 def _read(path: Path) -> tuple[np.ndarray, bool, ColorSpace]:
     """(pixels as float32 (H, W[, 3]), whether the file stores integers, its linear space)."""
+    import OpenImageIO as oiio  # (loaded where an image is read, not with the operators)
+
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         oiio.geterror()

@@ -63,6 +63,18 @@ def test_preview_loads_no_operator_and_no_numba(tmp_path: Path) -> None:
     assert "numba" not in loaded and "service.registry" not in answer["modules"]
 
 
+def test_enhance_loads_no_image_library_it_does_not_use(tmp_path: Path) -> None:
+    """``depict enhance`` of an EXR in the standard spaces loads neither OpenImageIO (PNG and
+    image parameters) nor OpenColorIO (named spaces, views): 30 MiB and 40 ms of every run."""
+    src = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
+    argv = ["enhance", str(src), "-o", str(tmp_path / "out.exr")]
+    run = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True)
+    answer = json.loads(run.stdout.splitlines()[-1])
+    assert answer["code"] == 0 and (tmp_path / "out.exr").is_file()
+    loaded = {m.split(".")[0] for m in answer["modules"]}
+    assert "numba" in loaded and not loaded & {"OpenImageIO", "PyOpenColorIO"}
+
+
 COMPILED_PROBE = """
 import importlib.util, json, sys
 from pathlib import Path
