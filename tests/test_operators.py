@@ -213,6 +213,22 @@ def test_ratio_form_keeps_emission_and_remainder(spot: Frame) -> None:
     )
 
 
+@pytest.mark.parametrize("keep_lighting", [False, True])
+def test_radiance_scaling_gives_each_renderer_lobe_its_own_gamma(
+    spot: Frame, keep_lighting: bool
+) -> None:
+    """On a renderer's lobes, γ_diffuse = γ_specular = 0 (γ = 3 otherwise) leaves the beauty as
+    it was, with or without the kept lighting; a γ of its own scales the specular lobe alone
+    (the ambient lobe, left out, stays in the beauty as it was)."""
+    base = {"gamma": 3.0, "keep_lighting": keep_lighting, "lobes": ["diffuse", "specular"]}
+    still = run(spot, "radiance_scaling", {**base, "gamma_diffuse": 0.0, "gamma_specular": 0.0})
+    np.testing.assert_allclose(still.buffers["beauty"], spot.buffers["beauty"], atol=1e-5)
+    specular = run(spot, "radiance_scaling", {**base, "gamma_diffuse": 0.0})
+    change = np.abs(specular.buffers["beauty"] - spot.buffers["beauty"]).max(axis=-1)
+    assert change.max() > 0.01
+    assert change[spot.buffers["specular"].max(axis=-1) == 0.0].max() < 1e-5
+
+
 def test_relight_drops_the_lobes_it_does_not_relight(spot: Frame) -> None:
     out = run(spot, "light_alignment", {"form": "relight", "specular": "none"})
     assert "specular" not in out.buffers and "specular.light" not in out.buffers

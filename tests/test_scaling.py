@@ -200,6 +200,25 @@ def _lobes(shape: tuple[int, int], seed: int = 0) -> tuple[dict[str, np.ndarray]
     return lobes, lights
 
 
+def test_scale_lobes_reads_a_light_as_rgb_or_as_its_luminance() -> None:
+    """δ̄ reads only a light's luminance: given as the (H, W) luminance (what the service passes,
+    a third of the memory) a light scales its lobe as the RGB light does, in every working
+    space's weights; a plane of another shape is refused."""
+    shape = (70, 41)
+    lobes, lights = _lobes(shape, seed=8)
+    kappa = np.random.default_rng(9).uniform(-1, 1, shape).astype(np.float32)
+    weights = (0.2627, 0.6780, 0.0593)  # Rec. 2020's
+    args = (kappa, {"diffuse": 0.3, "specular": 0.7}, 4.0, {"diffuse": 1.1, "specular": "auto"})
+    out_rgb, sig_rgb = scale_lobes(lobes, lights, *args, mask=None, weights=weights)
+    planes = {n: luminance(x, weights) for n, x in lights.items()}
+    out_y, sig_y = scale_lobes(lobes, planes, *args, mask=None, weights=weights)
+    for n in lobes:
+        np.testing.assert_allclose(sig_y[n], sig_rgb[n], rtol=1e-5)
+    np.testing.assert_allclose(out_y, out_rgb, rtol=1e-5, atol=1e-6)
+    with pytest.raises(ValueError, match="lights"):
+        scale_lobes(lobes, {"diffuse": planes["diffuse"][:-1]}, *args)
+
+
 def test_scale_lobes_is_identity_without_scaling() -> None:
     shape = (24, 32)
     lobes, lights = _lobes(shape)

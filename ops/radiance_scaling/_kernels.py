@@ -62,6 +62,13 @@ def _exp_row(kappa, gamma, lim, e):
 
 
 @inline_kernel
+def _times_row(x, k, out):
+    """out = k · x."""
+    for j in range(out.shape[0]):
+        out[j] = k * x[j]
+
+
+@inline_kernel
 def _sigma_row(d, e, pf, qf, s):
     """Eq. 2 per pixel: σ = (P'E + Q') / (P' + Q'E), δ̄ = clip(d, 0, 1) (NaN → 0),
     P' = ``pf``(1 − δ̄), Q' = ``qf`` δ̄ (see :func:`scale_lobes`)."""
@@ -113,9 +120,9 @@ def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, si
     ``mode`` _ACC_LOBES | _ACC_REMAINDER, or base + Σ_k (σ_k - 1) · lobe_k with _ACC_BEAUTY.
     κ is the ``grid`` upsampled ``f`` times (:func:`ops.pyramid.upsample_row`; f = 1: κ
     itself); σ_k of lobe k from E = e^{−γκ} of γ = ``gammas[which[k], 0]``, γκ clipped to
-    ± ``gammas[which[k], 1]``, and δ̄ = clip(coef[k, :3] · light_k, 0, 1),
-    P' = coef[k, 3](1 - δ̄), Q' = coef[k, 4] δ̄; σ_k also into row ``r0 + i`` of ``sig[k]`` when
-    it has rows.
+    ± ``gammas[which[k], 1]``, and δ̄ = clip(coef[k, 0] · light_k, 0, 1) (``lights``: the lobes'
+    light luminances, (H, W) each), P' = coef[k, 1](1 - δ̄), Q' = coef[k, 2] δ̄; σ_k also into
+    row ``r0 + i`` of ``sig[k]`` when it has rows.
 
     σ = 1 exactly where κ = 0 (E = 1), so on each row only the span between the first and the
     last pixel of non-zero κ is computed: outside it no light is read, and with _ACC_BEAUTY no
@@ -146,9 +153,8 @@ def _scale_rows(lobes, lights, grid, f, gammas, coef, which, base, mode, out, si
             sk = s[k]
             sk[:j0] = one
             sk[j1:] = one
-            light = lights[k][i].reshape(3 * wid)[3 * j0 : 3 * j1]
-            dot3_row(light, coef[k, 0], coef[k, 1], coef[k, 2], d[j0:j1])
-            _sigma_row(d[j0:j1], e[which[k], j0:j1], coef[k, 3], coef[k, 4], sk[j0:j1])
+            _times_row(lights[k][i, j0:j1], coef[k, 0], d[j0:j1])
+            _sigma_row(d[j0:j1], e[which[k], j0:j1], coef[k, 1], coef[k, 2], sk[j0:j1])
             if keep:
                 sig[k, r0 + i] = sk
         acc = out[i].reshape(3 * wid)

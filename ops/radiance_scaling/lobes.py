@@ -192,8 +192,9 @@ def scale_lobes(
     ----------
     lobes : dict name -> (H, W, 3) float32
         Radiance of each lobe (``diffuse``, ``specular``, ...).
-    lights : dict name -> (H, W, 3) float32
-        Light of each lobe without its colour; a lobe missing here uses its own radiance.
+    lights : dict name -> (H, W, 3) or (H, W) float32
+        Light of each lobe without its colour, or its luminance (with ``weights``; all δ̄ reads
+        of it); a lobe missing here uses its own radiance.
     kappa : (H, W) float32 or Upsampled
         Mapped curvature in [-1, 1] (e.g. :func:`ops.curvature.isotropic`), or the same on a
         coarser grid (:func:`ops.curvature.isotropic_field`), interpolated row by row here.
@@ -246,11 +247,15 @@ def scale_lobes(
         return x
 
     lobe_arr = {n: rgb(lobes[n], f"lobes[{n!r}]") for n in names}
-    light_arr = {n: rgb(lights[n], f"lights[{n!r}]") if n in lights else lobe_arr[n] for n in names}
+    light_in = {n: np.asarray(lights[n]) if n in lights else lobe_arr[n] for n in names}
+    for n, x in light_in.items():
+        if x.shape != (hgt, wid):
+            light_in[n] = rgb(x, f"lights[{n!r}]")
     levels = {
-        n: white_level(light_arr[n], mask, weights=weights) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
+        n: white_level(light_in[n], mask, weights=weights) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()
     }
+    light_arr, per_white = _delta_inputs(light_in, levels, weights)
     if remainder is not None and beauty is not None:
         raise ValueError("give the remainder or the beauty the lobes are part of, not both")
     base = None
@@ -268,11 +273,10 @@ def scale_lobes(
     # Eq. 2 per lobe as σ = (P'E + Q') / (P' + Q'E): P', Q' the P = α(1 - δ̄), Q = (1 - α)δ̄ of
     # _sigma_from over max(α, 1 - α), so σ is exactly 1 where E = e^{-γκ} is 1; δ̄ = the light's
     # luminance over its white level (as reflectance_delta).
-    luma = np.asarray(weights, np.float32)
     coef = np.array(
-        [[*(luma / np.float32(levels[n])), *_pq_factors(alphas[n])] for n in names],
+        [[per_white[n], *_pq_factors(alphas[n])] for n in names],
         np.float32,
-    ).reshape(nl, 5)
+    ).reshape(nl, 3)
     lobe_t = tuple(lobe_arr[n] for n in names)
     light_t = tuple(light_arr[n] for n in names)
     none = np.empty((0, 0, 3), np.float32)
@@ -301,6 +305,23 @@ def scale_lobes(
         return out, sigmas
     run_strips(hgt, strip, _STRIP_ROWS)
     return out, sigmas
+
+
+def _delta_inputs(
+    lights: Mapping[str, np.ndarray], levels: Mapping[str, float], weights: Weights
+) -> tuple[dict[str, np.ndarray], dict[str, np.float32]]:
+    """Per lobe, what :func:`scale_lobes` reads δ̄ from before its clip, as (plane, factor) with
+    δ̄ = factor · plane: a luminance plane and 1 / white, or an RGB light's luminance with the
+    weights over the white level and 1 (one rounding less)."""
+    luma = np.asarray(weights, np.float32)
+    planes, factors = {}, {}
+    for n, light in lights.items():
+        white = np.float32(levels[n])
+        if light.ndim == 2:
+            planes[n], factors[n] = np.ascontiguousarray(light, np.float32), np.float32(1.0) / white
+        else:
+            planes[n], factors[n] = luminance(light, tuple(luma / white)), np.float32(1.0)
+    return planes, factors
 
 
 def _pq_factors(alpha: float) -> tuple[float, float]:

@@ -112,12 +112,13 @@ def kept_lighting_gain(
 ) -> np.ndarray:
     """:func:`ops.lighting.luminance_gain` of an operator's change on ``frame``: the factor per
     pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
-    ``scale`` (relative to the image height). The correction is weighed by how much the
+    ``scale`` (relative to the image height); each of them RGB (H, W, 3) or already a luminance
+    (H, W). The correction is weighed by how much the
     operator changed each pixel, ``min(1, |ΔY| / (KEPT_CHANGE · Y))``: what it left alone stays bit
     for bit, and the correction fades out continuously where the change does (a cut-off would
     draw a line where the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
-    y0, y1 = (luminance(x, frame.colorspace.weights) for x in (before, after))
+    y0, y1 = (x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in (before, after))
     gain = luminance_gain(
         y0,
         y1,
@@ -137,6 +138,12 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     if not covered.any():
         return 1.0
     return fraction * frame.image_height * float(np.median(pixel_size[covered]))
+
+
+def total_luminance(rgbs: Iterable[np.ndarray], weights: tuple[float, float, float]) -> np.ndarray:
+    """The luminance of the sum of ``rgbs`` (at least one), as the sum of their luminances
+    (one (H, W) plane at a time, no RGB sum formed)."""
+    return total(luminance(rgb, weights) for rgb in rgbs)
 
 
 def total(planes: Iterable[np.ndarray]) -> np.ndarray:

@@ -25,7 +25,7 @@ from service.operators.common import (
     frame_albedo,
     kept_lighting_gain,
     statistic,
-    total,
+    total_luminance,
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
@@ -162,9 +162,11 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
 
 
 def _light(frame: Frame, p: RadianceScalingParams, light: np.ndarray) -> np.ndarray:
-    """The light δ̄ is mapped from: averaged at ``light_scale`` (default: the curvature's)."""
+    """The light δ̄ is mapped from, as a luminance (all δ̄ reads of it): averaged at
+    ``light_scale`` (default: the curvature's)."""
     scale = p.scale if p.light_scale is None else p.light_scale
-    return masked_gaussian(light, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
+    y = light if light.ndim == 2 else luminance(light, frame.colorspace.weights)
+    return masked_gaussian(y, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
 
 
 def _kept_lighting(
@@ -174,19 +176,17 @@ def _kept_lighting(
     low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.luminance_gain`)."""
     if not p.keep_lighting:
         return scaled
-    rest = frame.buffers["beauty"] - before if "beauty" in frame.buffers else None
-    after = np.subtract(scaled, rest, out=scaled) if rest is not None else scaled  # ours to reuse
-    gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "radiance_scaling")
-    after *= gain[..., None]
-    if rest is not None:
-        after += rest
-    return after
+    scaled *= kept_lighting_gain(frame, before, scaled, p.lighting_scale, "radiance_scaling")[
+        ..., None
+    ]
+    return scaled
 
 
 def _scale_renderer_lobes(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """Eq. 4 on the renderer's lobes; the beauty is rebuilt as Σ σ̄_j lobe_j + remainder."""
+    """Eq. 4 on the renderer's lobes; the beauty is rebuilt as Σ σ̄_j lobe_j + remainder (with
+    the kept lighting, Σ σ̄_j lobe_j is corrected before the remainder is added)."""
     names = p.lobes or [lobe for lobe in LOBES if lobe in frame.buffers]
     if not names:
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
@@ -200,43 +200,49 @@ def _scale_renderer_lobes(
         for lobe in LOBES:
             if lobe in frame.buffers and lobe not in lobes:
                 remainder = remainder + frame.buffers[lobe]
-    beauty, sigmas = scale_lobes(
+    beauty = frame.buffers.get("beauty") if remainder is None else None
+    scaled, sigmas = scale_lobes(
         lobes,
         lights,
         kappa,
         p.alpha,
         {n: p.gamma_of(n) for n in names},
         white,
-        remainder,
+        None if p.keep_lighting else remainder,
         mask=mask,
-        beauty=frame.buffers.get("beauty") if remainder is None else None,
+        beauty=None if p.keep_lighting else beauty,
         with_sigmas=ctx.debug_layers,
         weights=weights,
     )
-    del lights, remainder  # frame-sized, and no longer needed by the kept lighting
-    if p.keep_lighting:
-        beauty = _kept_lighting(frame, p, beauty, total(lobes.values()))
-    return beauty, sigmas
+    del lights  # frame-sized, and no longer needed by the kept lighting
+    if not p.keep_lighting:
+        return scaled, sigmas
+    scaled = _kept_lighting(frame, p, scaled, total_luminance(lobes.values(), weights))
+    if remainder is not None:
+        scaled += remainder
+    elif beauty is not None:  # + beauty − Σ lobe_j, in place
+        scaled += beauty
+        for radiance in lobes.values():
+            scaled -= radiance
+    return scaled, sigmas
 
 
 def _scale_beauty(
     frame: Frame, p: RadianceScalingParams, kappa: Upsampled, ctx: Context
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The beauty as a single lobe; its light is beauty / Y(albedo) where the frame has an albedo
-    (so δ̄'s luminance is Y(beauty) / Y(albedo): a ratio of luminances, the same in every
-    working space, where a channel-by-channel beauty / albedo would depend on the primaries;
-    glass, emitters and other pixels of albedo ~0 keep the beauty as their light, and do not
-    count in the white level)."""
+    """The beauty as a single lobe; its light's luminance is Y(beauty) / Y(albedo) where the
+    frame has an albedo (a ratio of luminances, the same in every working space, where a
+    channel-by-channel beauty / albedo would depend on the primaries; glass, emitters and other
+    pixels of albedo ~0 keep the beauty's as their light's, and do not count in the white
+    level)."""
     beauty = frame.need("beauty", "scenario 'beauty'")
-    light = beauty
     counted = frame.mask > 0
     weights = frame.colorspace.weights
+    light = luminance(beauty, weights=weights)
     if "albedo" in frame.buffers:
-        albedo = frame.buffers["albedo"]
-        y_albedo = luminance(albedo, weights=weights)
+        y_albedo = luminance(frame.buffers["albedo"], weights=weights)
         has_albedo = y_albedo > MIN_ALBEDO
-        inverse = 1.0 / np.maximum(y_albedo, MIN_ALBEDO)
-        light = np.where(has_albedo[..., None], beauty * inverse[..., None], beauty)
+        np.divide(light, y_albedo, out=light, where=has_albedo)
         counted &= has_albedo
     light = _light(frame, p, light)
     white = _white(ctx, p, "beauty", light, counted, weights)
