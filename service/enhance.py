@@ -36,6 +36,7 @@ from gbuffer.io import write as write_exr
 from gbuffer.limits import Limits
 from gbuffer.presets import ReadOptions
 from gbuffer.preview import picture, write_png
+from service import allocator
 
 if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline runs, not to read a frame
     from service import pipeline
@@ -119,8 +120,12 @@ def enhance(
 def read_for(in_path: str | Path, read: ReadRequest, write: WriteRequest) -> Frame:
     """The frame in ``in_path`` as :func:`enhance` reads it for ``write``: when the input's parts
     are copied, not encoded (``part``, ``sidecar``), its decoded channels go as the buffers are
-    made."""
-    return read.read(in_path, release=write.layout != "same" and not write.preview)
+    made, and their memory goes back to the system (:func:`service.allocator.release_free`)."""
+    release = write.layout != "same" and not write.preview
+    frame = read.read(in_path, release=release)
+    if release:
+        allocator.release_free()
+    return frame
 
 
 def enhance_frame(
@@ -133,19 +138,23 @@ def enhance_frame(
     files: bool = True,
 ) -> Enhanced:
     """The second half of :func:`enhance`: run ``steps`` on a frame :func:`read_for` read, write
-    the result to ``out_path``."""
+    the result to ``out_path``. Where the layout encodes only the new layers (``part``,
+    ``sidecar``), the frame's buffers are let go before it is written (it is used up)."""
     from service import pipeline
     from service.registry import Context
 
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
-    out, op_s = pipeline.run_timed(frame, steps, context)
-    out = pipeline.finish(out, write.output_layer, write.input_name, write.layout)
+    ran, op_s = pipeline.run_timed(frame, steps, context)
+    out = pipeline.finish(ran, write.output_layer, write.input_name, write.layout)
+    h, w = out.shape
     warnings: list[str] = []
     if write.preview:
         write_png(picture(out, "beauty", write.exposure, write.view), out_path)
     else:
+        if write.layout != "same":  # only the new layers are encoded: the buffers can go now
+            for each in (frame, ran, out):
+                each.buffers.clear()
         warnings = write_exr(out, out_path, write.layout)
-    h, w = out.shape
     return {
         "op_s": op_s,
         "size": [w, h],

@@ -53,3 +53,43 @@ def test_numpy_gives_no_huge_page_advice_unless_the_user_asks(numpy_imported: st
         cmd = [sys.executable, "-c", HUGE, numpy_imported]
         run = subprocess.run(cmd, env=env, capture_output=True, text=True)
         assert run.stdout.split() == expected, run.stderr
+
+
+KEPT = """
+import sys, threading
+import numpy as np
+from service import allocator
+print(allocator.tune())
+
+def rss_mib():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / 2**20
+
+def touch_and_free(n=20):  # 20 arrays of 8 MiB (below the mmap threshold: from a heap)
+    arrays = [np.ones(2 << 20, np.float32) for _ in range(n)]
+    del arrays
+
+base = rss_mib()
+worker = threading.Thread(target=touch_and_free)
+worker.start()
+worker.join()
+after_thread = rss_mib()
+touch_and_free()
+after_main = rss_mib()
+allocator.release_free()
+print(round(after_thread - base), round(after_main - base), round(rss_mib() - base))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+def test_freed_memory_is_kept_once_for_every_thread_and_given_back_on_request() -> None:
+    """Tuned, 160 MiB freed by a worker thread stay in the process (no page faults to reuse
+    them) and the main thread's next 160 MiB reuse them (one arena for every thread: with an
+    arena per thread the process would hold 320 MiB); ``release_free`` gives them back."""
+    run = subprocess.run([sys.executable, "-c", KEPT], capture_output=True, text=True)
+    lines = run.stdout.split("\n")
+    assert lines[0] == "True", run.stderr
+    after_thread, after_main, released = (int(x) for x in lines[1].split())
+    assert after_thread >= 150
+    assert after_main < after_thread + 40
+    assert released < 40
