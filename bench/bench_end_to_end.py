@@ -174,7 +174,7 @@ def enhance_rows(name: str, path: Path, work: Path) -> None:
 def several_row(path: Path, work: Path, files: int = 4) -> None:
     """``depict enhance`` of ``files`` copies of a frame in one process vs as many oiiotool
     copies one after the other."""
-    src, out = work / "several", work / "several_out"
+    src, out = work / f"several_{path.stem}", work / f"several_out_{path.stem}"
     src.mkdir(exist_ok=True)
     out.mkdir(exist_ok=True)
     names = []
