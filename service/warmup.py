@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from gbuffer.render import auto_camera, load_mesh, render
-from ops.curvature import isotropic, principal_curvatures
+from ops.curvature import isotropic, mean_curvature_layers, principal_curvatures
 from service import pipeline
 from service.registry import operators
 
@@ -49,5 +49,6 @@ def warm(mesh: Path = EXAMPLE, size: tuple[int, int] = (96, 72)) -> dict[str, fl
         isotropic(principal_curvatures(normal[odd], depth[odd], mask))
     for part in (odd, (slice(None), slice(None))):  # a working grid: exact and rounded sizes
         isotropic(principal_curvatures(normal[part], depth[part], scale=0.1))
+    mean_curvature_layers(principal_curvatures(normal, depth, scale=0.1))  # their one pass
     times["curvature variants"] = time.perf_counter() - t0
     return times

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -144,6 +146,37 @@ def test_warmup_runs_every_operator(capsys: pytest.CaptureFixture[str]) -> None:
         operators()
     )
     assert "kernels ready" in text
+
+
+WARM_COVERS = """
+import gc
+import numba
+from gbuffer.render import auto_camera, load_mesh, render
+from service import pipeline
+from service.warmup import EXAMPLE, warm
+
+def loaded():
+    kernels = [d for d in gc.get_objects() if isinstance(d, numba.core.dispatcher.Dispatcher)]
+    return {d.py_func.__qualname__: len(d.overloads) for d in kernels}
+
+warm()
+before = loaded()
+mesh = load_mesh(EXAMPLE)
+frame = render(mesh, 480, 1080, camera=auto_camera(mesh, width=480, height=1080))
+for op in ("curvature", "radiance_scaling"):
+    pipeline.run(frame, [{"op": op}])
+after = loaded()
+print(sorted(name for name, n in after.items() if n > before.get(name, 0)))
+"""
+
+
+def test_warmup_loads_every_kernel_a_full_height_frame_needs() -> None:
+    """After ``depict warmup``, curvature and Radiance Scaling on a 1080-row frame (whose
+    curvature runs on a coarser working grid) need no kernel compiled or loaded for new types:
+    the first real frame does not pay a compilation."""
+    run = subprocess.run([sys.executable, "-c", WARM_COVERS], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.strip().splitlines()[-1] == "[]"
 
 
 def test_ops_lists_every_registered_operator(capsys: pytest.CaptureFixture[str]) -> None:

@@ -588,6 +588,29 @@ def test_mean_curvature_layers() -> None:
     np.testing.assert_allclose(layers["k1"][inner], 4.0, rtol=0.02)
 
 
+@pytest.mark.parametrize("scale", [0.02, 0.05])  # working grids 2x and 4x coarser
+def test_mean_curvature_layers_from_the_working_grid_are_the_fields_read_one_by_one(
+    scale: float,
+) -> None:
+    """The one-pass layers of a result still on its working grid hold what reading its fields
+    one by one gives (H and the direction exactly, k·weight to an ulp), and no -0.0."""
+    s = analytic.two_spheres(256)
+    fused = mean_curvature_layers(_curv(s, scale=scale), 0.2)
+    c = _curv(s, scale=scale)
+    assert c.__dict__["_coarse"].qx.shape[0] < s.shape[0]  # the one-pass path is the one tested
+    h = isotropic(c, 0.2)
+    c.weight  # noqa: B018 (read: the fields are materialised, the layers take the other path)
+    fields = mean_curvature_layers(c, 0.2)
+    assert fields.keys() == fused.keys()
+    np.testing.assert_array_equal(fused["H"], h)
+    for name in ("dir.X", "dir.Y"):
+        np.testing.assert_array_equal(fused[name], fields[name])
+    for name in ("k1", "k2"):
+        np.testing.assert_allclose(fused[name], fields[name], rtol=1e-6, atol=1e-7)
+        assert not (np.signbit(fused[name]) & (fused[name] == 0)).any()
+    assert np.abs(fused["k1"]).max() > 1.0
+
+
 # -- validation ---------------------------------------------------------------------------------
 
 

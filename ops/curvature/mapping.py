@@ -12,11 +12,11 @@ import numpy as np
 from ops.checks import ANISOTROPY, CURVATURE_GAIN
 from ops.curvature import _common
 from ops.curvature._common import DEFAULT_GAIN
-from ops.curvature.result import _FIELDS, Curvature
+from ops.curvature.result import _FIELDS, Curvature, half_angle_row
 from ops.jit import kernel
 from ops.numerics import expf
 from ops.parallel import run_strips
-from ops.pyramid.upsample import Upsampled
+from ops.pyramid.upsample import Upsampled, upsample_row
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -155,9 +155,23 @@ def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[s
     Returns ``{"H": isotropic(curv, gain), "k1": k1·weight, "k2": k2·weight, "dir.X": dir_x,
     "dir.Y": dir_y}`` (float32, (H, W)); H is the mapped curvature tanh(s·(κ1 + κ2)) in [-1, 1]
     (Radiance Scaling §4), k1/k2 are per unit image height and 0 where the weight is 0.
+
+    From a result still on its working grid (none of its fields read), the five planes are
+    written in one compiled pass that upsamples each row of the grid's fields as it goes
+    (:func:`_layer_rows`: the same interpolation and arithmetic as reading the fields one by
+    one, without their full-resolution copies).
     """
-    # + 0.0 turns the -0.0 of a negative k times a zero weight into 0.0: the values under a zero
-    # weight are left over from the working grid, and their sign must not reach the file
+    s = CURVATURE_GAIN.check(gain, "gain")
+    coarse = curv._coarse_for(*_FIELDS)
+    if coarse is not None:
+        (h, w), (gh, gw) = coarse.size, coarse.trace.shape
+        f = h // gh
+        if f > 1 and (h, w) == (f * gh, f * gw):
+            field = _tanh_weighted(coarse.trace, s, coarse.weight)
+            grids = (field, coarse.k1, coarse.k2, coarse.weight, coarse.d, coarse.b)
+            return _layers_on_grid(tuple(np.ascontiguousarray(g) for g in grids), f)
+    # -0.0 (a negative k times a zero weight) is written as 0.0: the values under a zero weight
+    # are left over from the working grid, and their sign must not reach the file
     return {
         "H": isotropic(curv, gain),
         "k1": _cv.add(cv2.multiply(curv.k1, curv.weight), 0.0),
@@ -165,3 +179,44 @@ def mean_curvature_layers(curv: Curvature, gain: float = DEFAULT_GAIN) -> dict[s
         "dir.X": curv.dir_x.copy(),
         "dir.Y": curv.dir_y.copy(),
     }
+
+
+LAYERS = ("H", "k1", "k2", "dir.X", "dir.Y")
+
+
+def _layers_on_grid(grids: tuple[np.ndarray, ...], f: int) -> dict[str, np.ndarray]:
+    """:data:`LAYERS` from the working grid's (H, k1, k2, weight, d, b), upsampled ``f`` times."""
+    h, w = f * grids[0].shape[0], f * grids[0].shape[1]
+    outs = tuple(np.empty((h, w), np.float32) for _ in LAYERS)
+    run_strips(
+        h,
+        lambda r0, r1: _layer_rows(grids, f, r0, tuple(o[r0:r1] for o in outs)),
+        _common._STRIP_ROWS,
+    )
+    return dict(zip(LAYERS, outs, strict=True))
+
+
+@kernel
+def _layer_rows(grids, f, r0, outs):  # type: ignore[no-untyped-def]
+    """Rows ``r0 ..`` of the layers: each grid's row upsampled (:func:`upsample_row`), then
+    H as it is, k·weight (0 where the weight is 0) and the direction from (d, b)
+    (:func:`ops.curvature.result.half_angle_row`)."""
+    zero = np.float32(0.0)
+    wide = outs[0].shape[1]
+    v = np.empty(grids[0].shape[1], np.float32)
+    k1, k2, wt = np.empty(wide, np.float32), np.empty(wide, np.float32), np.empty(wide, np.float32)
+    d, b = np.empty(wide, np.float32), np.empty(wide, np.float32)
+    for i in range(outs[0].shape[0]):
+        y = r0 + i
+        upsample_row(grids[0], f, y, v, outs[0][i])
+        upsample_row(grids[1], f, y, v, k1)
+        upsample_row(grids[2], f, y, v, k2)
+        upsample_row(grids[3], f, y, v, wt)
+        upsample_row(grids[4], f, y, v, d)
+        upsample_row(grids[5], f, y, v, b)
+        o1, o2 = outs[1][i], outs[2][i]
+        for j in range(wide):
+            weight = wt[j]
+            o1[j] = k1[j] * weight if weight != zero else zero
+            o2[j] = k2[j] * weight if weight != zero else zero
+        half_angle_row(d, b, outs[3][i], outs[4][i])

@@ -12,7 +12,7 @@ import numpy as np
 
 from ops.curvature import _common
 from ops.curvature._hessian import _deriv_x, _deriv_y
-from ops.jit import kernel
+from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled
 
@@ -153,20 +153,26 @@ class _Coarse:
 
 @kernel
 def _half_angle_rows(d, b, dx, dy):  # type: ignore[no-untyped-def]
-    """(cos θ, sin θ) of θ = ½·atan2(b, d) taken in [0, π), without trigonometry: with
-    c = cos 2θ = d / r and s = sin 2θ = b / r (r = |(d, b)|; c = 1 where r = 0), the larger of
-    cos θ, sin θ from the half-angle formula (√((1 ± c)/2)) and the other from s = 2 sin θ cos θ,
-    which keeps both accurate; θ < 0 is turned by π (the direction of a line)."""
-    zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    """Rows of :func:`half_angle_row`."""
     for i in range(d.shape[0]):
-        dr, br, xr, yr = d[i], b[i], dx[i], dy[i]
-        for j in range(dr.shape[0]):
-            r = np.sqrt(dr[j] * dr[j] + br[j] * br[j])
-            inv = one / r if r > zero else zero
-            c = dr[j] * inv if r > zero else one
-            s = br[j] * inv
-            big = np.sqrt(max((one + abs(c)) * half, half))  # cos θ (c >= 0) or sin θ (c < 0)
-            small = abs(s) / (big + big)
-            neg = s < zero
-            xr[j] = (-big if neg else big) if c >= zero else (-small if neg else small)
-            yr[j] = small if c >= zero else big
+        half_angle_row(d[i], b[i], dx[i], dy[i])
+
+
+@inline_kernel
+def half_angle_row(dr, br, xr, yr):  # type: ignore[no-untyped-def]
+    """(cos θ, sin θ) of θ = ½·atan2(b, d) taken in [0, π), on a row, without trigonometry:
+    with c = cos 2θ = d / r and s = sin 2θ = b / r (r = |(d, b)|; c = 1 where r = 0), the larger
+    of cos θ, sin θ from the half-angle formula (√((1 ± c)/2)) and the other from
+    s = 2 sin θ cos θ, which keeps both accurate; θ < 0 is turned by π (the direction of a
+    line)."""
+    zero, one, half = np.float32(0.0), np.float32(1.0), np.float32(0.5)
+    for j in range(dr.shape[0]):
+        r = np.sqrt(dr[j] * dr[j] + br[j] * br[j])
+        inv = one / r if r > zero else zero
+        c = dr[j] * inv if r > zero else one
+        s = br[j] * inv
+        big = np.sqrt(max((one + abs(c)) * half, half))  # cos θ (c >= 0) or sin θ (c < 0)
+        small = abs(s) / (big + big)
+        neg = s < zero
+        xr[j] = (-big if neg else big) if c >= zero else (-small if neg else small)
+        yr[j] = small if c >= zero else big
