@@ -13,19 +13,19 @@ fault (``defrag`` = ``madvise``, Debian's default), a 2 MiB page is found and ze
 in the kernel. On a 2-core machine ``depict enhance`` of a 1080p render spent 1.6–2.1 s of system
 time with them and 0.9–1.0 s without (wall 3.58 s -> 2.89–3.01 s).
 
-So that it is kept once, every thread allocates from one heap (``M_ARENA_MAX`` 1): glibc
-otherwise gives each thread that allocates its own arena, and each keeps its own free memory
-(the row strips of an operator run on two threads). Its lock costs nothing measurable at
-frame-sized allocations: ``depict enhance`` of a 1080p Cycles frame peaked at 760–765 MiB
-instead of 800–810 MiB, in the same time.
-
 Memory kept that way stays the process's: after a frame is read, the decoded channels its buffers
 were made from (a 1080p Cycles frame: ~380 MiB) sit freed in the heap, and an operator's arrays
 would be laid beside them rather than in them. :func:`release_free` gives the free pages back
-(``malloc_trim``, ~15 ms): ``depict enhance`` of a 1080p Cycles frame peaked at 790 MiB instead
-of 835–860 MiB.
+(``malloc_trim``, ~15 ms; :func:`service.enhance.read_for` calls it after reading).
 
-The CLI, the HTTP service's workers, batch workers and the benchmarks call it at start; a
+So that freed memory is kept once, every thread allocates from one heap (``M_ARENA_MAX`` 1):
+glibc otherwise gives each thread that allocates its own arena, and each keeps its own free
+memory (an operator's row strips run on every core). Its lock costs nothing measurable at
+frame-sized allocations. ``depict enhance`` of a 1080p Cycles frame peaked at 855–880 MiB
+before both, 805–830 MiB with the memory given back after the read (and the buffers let go
+before the result is written), 760–765 MiB with one arena too, in the same time.
+
+The CLI, the HTTP service's workers, batch workers and the benchmarks call :func:`tune` at start; a
 program that uses the Python API may call it too. ``DEPICT_MALLOC=system`` leaves the process's
 allocator as it is. Elsewhere than on glibc it does nothing.
 """

@@ -52,26 +52,29 @@ def test_a_deferred_command_still_has_its_arguments() -> None:
     assert answer["code"] == 0 and "--albedo {white,frame}" in answer["out"]
 
 
-def test_preview_loads_no_operator_and_no_numba(tmp_path: Path) -> None:
-    """Reading and showing a frame needs neither the operators nor their compiled kernels."""
-    src = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
-    argv = ["preview", str(src), "-o", str(tmp_path / "p.png")]
+FRAME = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
+
+
+def _modules_of(*argv: str) -> tuple[set[str], list[str]]:
+    """The top-level packages and the modules a successful ``depict *argv`` loaded."""
     run = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True)
     answer = json.loads(run.stdout.splitlines()[-1])
-    assert answer["code"] == 0 and (tmp_path / "p.png").is_file()
-    loaded = {m.split(".")[0] for m in answer["modules"]}
-    assert "numba" not in loaded and "service.registry" not in answer["modules"]
+    assert answer["code"] == 0, run.stderr[-2000:]
+    return {m.split(".")[0] for m in answer["modules"]}, answer["modules"]
+
+
+def test_preview_loads_no_operator_and_no_numba(tmp_path: Path) -> None:
+    """Reading and showing a frame needs neither the operators nor their compiled kernels."""
+    loaded, modules = _modules_of("preview", str(FRAME), "-o", str(tmp_path / "p.png"))
+    assert (tmp_path / "p.png").is_file()
+    assert "numba" not in loaded and "service.registry" not in modules
 
 
 def test_enhance_loads_no_image_library_it_does_not_use(tmp_path: Path) -> None:
     """``depict enhance`` of an EXR in the standard spaces loads neither OpenImageIO (PNG and
     image parameters) nor OpenColorIO (named spaces, views): 30 MiB and 40 ms of every run."""
-    src = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
-    argv = ["enhance", str(src), "-o", str(tmp_path / "out.exr")]
-    run = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True)
-    answer = json.loads(run.stdout.splitlines()[-1])
-    assert answer["code"] == 0 and (tmp_path / "out.exr").is_file()
-    loaded = {m.split(".")[0] for m in answer["modules"]}
+    loaded, _ = _modules_of("enhance", str(FRAME), "-o", str(tmp_path / "out.exr"))
+    assert (tmp_path / "out.exr").is_file()
     assert "numba" in loaded and not loaded & {"OpenImageIO", "PyOpenColorIO"}
 
 
