@@ -20,10 +20,13 @@ would be laid beside them rather than in them. :func:`release_free` gives the fr
 
 So that freed memory is kept once, every thread allocates from one heap (``M_ARENA_MAX`` 1):
 glibc otherwise gives each thread that allocates its own arena, and each keeps its own free
-memory (an operator's row strips run on every core). Its lock costs nothing measurable at
-frame-sized allocations. ``depict enhance`` of a 1080p Cycles frame peaked at 855–880 MiB
-before both, 805–830 MiB with the memory given back after the read (and the buffers let go
-before the result is written), 760–765 MiB with one arena too, in the same time.
+memory (an operator's row strips run on every core). ``depict enhance`` of a 1080p Cycles frame
+peaked at 855–880 MiB before both, 805–830 MiB with the memory given back after the read (and
+the buffers let go before the result is written), 760–765 MiB with one arena too, in the same
+time.
+The shared lock is within a 2-core machine's noise: Light Alignment through ``pipeline.run`` (the
+operator whose threads allocate the most) took 280–356 ms with one arena and 271–319 ms with
+eight (five alternated runs each).
 
 The CLI, the HTTP service's workers, batch workers and the benchmarks call :func:`tune` at start; a
 program that uses the Python API may call it too. ``DEPICT_MALLOC=system`` leaves the process's
