@@ -95,6 +95,29 @@ def test_part_layout_copies_the_input_and_adds_only_the_result(outputs: dict[str
         np.testing.assert_array_equal(added[name], same[name])
 
 
+SHM = Path("/dev/shm")
+
+
+@pytest.mark.skipif(not SHM.is_dir(), reason="no /dev/shm: no second file system at hand")
+def test_part_layout_copies_chunks_across_file_systems(
+    outputs: dict[str, Path], tmp_path: Path
+) -> None:
+    """The input's chunks are copied by the kernel within a file system; from another one (where
+    the kernel refuses, as Linux does between tmpfs and a disk) they are read and written: the
+    same file either way."""
+    if SHM.stat().st_dev == tmp_path.stat().st_dev:
+        pytest.skip("/dev/shm is on the same file system as the test's folder")
+    other = SHM / f"depict-test-{tmp_path.name}.exr"
+    shutil.copyfile(BLENDER_EXR, other)
+    try:
+        out = tmp_path / "across.exr"
+        assert depict("enhance", other, "-o", out) == 0
+    finally:
+        other.unlink()
+    assert chunks(out, 0) == chunks(outputs["part"], 0) == chunks(BLENDER_EXR, 0)
+    assert chunks(out, 1) == chunks(outputs["part"], 1)  # (the headers name other inputs)
+
+
 def test_sidecar_holds_only_the_new_layers(outputs: dict[str, Path]) -> None:
     [(header, channels)] = parts(outputs["sidecar"])
     assert sorted(channels) == sorted(RESULT)
