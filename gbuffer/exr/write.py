@@ -404,7 +404,8 @@ def _copy_chunks(out: BinaryIO, chunks: _FileChunks, order: list[int], prefix: b
             _write_all(fd, prefix)
             copied = _kernel_copy(src.fileno(), fd, start, size)
             if copied < size:  # the system cannot: the rest of this chunk and the next by hand
-                _write_all(fd, os.pread(src.fileno(), size - copied, start + copied))
+                src.seek(start + copied)
+                _write_all(fd, src.read(size - copied))
                 out.seek(0, io.SEEK_END)  # (the buffered writer goes on after what fd wrote)
                 fd = None
     if fd is not None:
