@@ -138,8 +138,9 @@ def enhance_frame(
     files: bool = True,
 ) -> Enhanced:
     """The second half of :func:`enhance`: run ``steps`` on a frame :func:`read_for` read, write
-    the result to ``out_path``. Where the layout encodes only the new layers (``part``,
-    ``sidecar``), the frame's buffers are let go before it is written (it is used up)."""
+    the result to ``out_path``. Where the input's parts are copied and only the new layers
+    encoded (a frame read from a file, ``part`` or ``sidecar``), the frame's buffers are let go
+    before it is written (it is used up)."""
     from service import pipeline
     from service.registry import Context
 
@@ -151,8 +152,8 @@ def enhance_frame(
     if write.preview:
         write_png(picture(out, "beauty", write.exposure, write.view), out_path)
     else:
-        if write.layout != "same":  # only the new layers are encoded: the buffers can go now
-            for each in (frame, ran, out):
+        if write.layout != "same" and frame.passthrough.parts:  # the input's parts are copied
+            for each in (frame, ran, out):  # and only the new layers encoded: the buffers go
                 each.buffers.clear()
         warnings = write_exr(out, out_path, write.layout)
     return {

@@ -5,8 +5,10 @@ the CLI in process; Blender's compositor reads the ``part`` output when ``blende
 
 from __future__ import annotations
 
+import errno
 import inspect
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -18,11 +20,12 @@ import gbuffer
 from gbuffer import exr
 from gbuffer.exr import layout as exr_layout
 from gbuffer.io import DEFAULT_LAYOUT, LAYOUTS
+from gbuffer.render import auto_camera, load_mesh, render
 from service import output, pipeline
 from service.cli import main
 from service.cli.args import DEFAULT_LAYOUT as CLI_DEFAULT
 from service.cli.args import LAYOUTS as CLI_LAYOUTS
-from service.enhance import WriteRequest
+from service.enhance import WriteRequest, enhance_frame
 from tests.test_output_layout import blender_passes, write_compressed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -116,6 +119,44 @@ def test_part_layout_copies_chunks_across_file_systems(
         other.unlink()
     assert chunks(out, 0) == chunks(outputs["part"], 0) == chunks(BLENDER_EXR, 0)
     assert chunks(out, 1) == chunks(outputs["part"], 1)  # (the headers name other inputs)
+
+
+@pytest.mark.parametrize("layout", ["part", "sidecar"])
+def test_a_frame_made_in_memory_keeps_its_buffers_in_every_layout(
+    tmp_path: Path, layout: str
+) -> None:
+    """A frame with no file behind it (a render, the Python API) is written whole: its buffers
+    are not let go as a read frame's are, whose parts are copied instead."""
+    mesh = load_mesh(SPOT)
+    frame = render(mesh, 64, 48, camera=auto_camera(mesh, width=64, height=48))
+    plain = tmp_path / "plain.exr"
+    gbuffer.write(frame, plain)
+    out = tmp_path / f"{layout}.exr"
+    enhance_frame(frame, out, pipeline.DEFAULT, WriteRequest(layout=layout))
+    assert "normal" in frame.buffers
+    written = {n for _, channels in parts(out) for n in channels}
+    assert {n for _, channels in parts(plain) for n in channels} <= written
+
+
+def test_a_kernel_copy_that_stops_half_way_is_finished_by_hand(
+    outputs: dict[str, Path], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where the system copies part of a chunk and then refuses (as a file system may), the rest
+    of it and the chunks after it are read and written: the same file."""
+    real = os.copy_file_range
+    calls = []
+
+    def half_then_refuse(src: int, dst: int, count: int, offset_src: int | None = None) -> int:
+        calls.append(count)
+        if len(calls) > 1:
+            raise OSError(errno.EXDEV, "Invalid cross-device link")
+        return real(src, dst, count // 2, offset_src)
+
+    monkeypatch.setattr(os, "copy_file_range", half_then_refuse)
+    out = tmp_path / "half.exr"
+    assert depict("enhance", BLENDER_EXR, "-o", out) == 0
+    assert len(calls) == 2
+    assert out.read_bytes() == outputs["part"].read_bytes()
 
 
 def test_sidecar_holds_only_the_new_layers(outputs: dict[str, Path]) -> None:

@@ -398,14 +398,12 @@ def _copy_chunks(out: BinaryIO, chunks: _FileChunks, order: list[int], prefix: b
         for k in order:
             start, size = chunks.ranges[k]
             if fd is None:
-                src.seek(start)
-                out.write(prefix + src.read(size))
+                out.write(prefix + _read_exactly(src, start, size))
                 continue
             _write_all(fd, prefix)
             copied = _kernel_copy(src.fileno(), fd, start, size)
             if copied < size:  # the system cannot: the rest of this chunk and the next by hand
-                src.seek(start + copied)
-                _write_all(fd, src.read(size - copied))
+                _write_all(fd, _read_exactly(src, start + copied, size - copied))
                 out.seek(0, io.SEEK_END)  # (the buffered writer goes on after what fd wrote)
                 fd = None
     if fd is not None:
@@ -435,6 +433,16 @@ def _kernel_copy(src: int, dst: int, start: int, size: int) -> int:
             return copied
         copied += n
     return copied
+
+
+def _read_exactly(src: BinaryIO, start: int, size: int) -> bytes:
+    """``size`` bytes of ``src`` from ``start``; OSError when the file ends before (it changed
+    since it was read: the offsets written would not fit its chunks)."""
+    src.seek(start)
+    data = src.read(size)
+    if len(data) != size:
+        raise OSError(f"{getattr(src, 'name', 'the input')} changed while it was copied")
+    return data
 
 
 def _write_all(fd: int, data: bytes) -> None:
