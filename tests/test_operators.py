@@ -229,6 +229,19 @@ def test_radiance_scaling_gives_each_renderer_lobe_its_own_gamma(
     assert change[spot.buffers["specular"].max(axis=-1) == 0.0].max() < 1e-5
 
 
+def test_radiance_scaling_leaves_what_it_does_not_scale_bit_for_bit(spot: Frame) -> None:
+    """The pixels Eq. 4 leaves as they were (σ̄ = 1 for every lobe) come out bit for bit with
+    the kept lighting too: its gain is exactly 1 there, and the beauty is not rebuilt as a sum
+    that only rounds back to it."""
+    frame = spot.copy()
+    del frame.buffers["ambient"]  # (beauty = Σ lobes + a remainder, as in a path-traced frame)
+    plain = run(frame, "radiance_scaling", {"keep_lighting": False})
+    kept = run(frame, "radiance_scaling")
+    left = (plain.buffers["beauty"] == frame.buffers["beauty"]).all(axis=-1) & covered(frame)
+    assert left.sum() > 500 and (~left & covered(frame)).sum() > 500
+    np.testing.assert_array_equal(kept.buffers["beauty"][left], frame.buffers["beauty"][left])
+
+
 def test_relight_drops_the_lobes_it_does_not_relight(spot: Frame) -> None:
     out = run(spot, "light_alignment", {"form": "relight", "specular": "none"})
     assert "specular" not in out.buffers and "specular.light" not in out.buffers

@@ -250,7 +250,7 @@ def scale_lobes(
     light_in = {n: np.asarray(lights[n]) if n in lights else lobe_arr[n] for n in names}
     for n, x in light_in.items():
         if x.shape != (hgt, wid):
-            light_in[n] = rgb(x, f"lights[{n!r}]")
+            light_in[n] = rgb(x, f"lights[{n!r}] (or its luminance, {(hgt, wid)})")
     levels = {
         n: white_level(light_in[n], mask, weights=weights) if isinstance(w, str) else float(w)  # type: ignore[arg-type]
         for n, w in whites.items()

@@ -140,12 +140,6 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     return fraction * frame.image_height * float(np.median(pixel_size[covered]))
 
 
-def total_luminance(rgbs: Iterable[np.ndarray], weights: tuple[float, float, float]) -> np.ndarray:
-    """The luminance of the sum of ``rgbs`` (at least one), as the sum of their luminances
-    (one (H, W) plane at a time, no RGB sum formed)."""
-    return total(luminance(rgb, weights) for rgb in rgbs)
-
-
 def total(planes: Iterable[np.ndarray]) -> np.ndarray:
     """The sum of ``planes`` (at least one), added in order into a new float32 array."""
     first, *others = planes

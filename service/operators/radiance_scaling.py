@@ -25,7 +25,7 @@ from service.operators.common import (
     frame_albedo,
     kept_lighting_gain,
     statistic,
-    total_luminance,
+    total,
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
@@ -169,17 +169,13 @@ def _light(frame: Frame, p: RadianceScalingParams, light: np.ndarray) -> np.ndar
     return masked_gaussian(y, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
 
 
-def _kept_lighting(
+def _lighting_gain(
     frame: Frame, p: RadianceScalingParams, scaled: np.ndarray, before: np.ndarray
 ) -> np.ndarray:
-    """``scaled`` (a beauty = rest + Σ σ̄_j lobe_j) with Σ σ̄_j lobe_j divided by its
-    low-frequency gain over ``before`` = Σ lobe_j (:func:`ops.lighting.luminance_gain`)."""
-    if not p.keep_lighting:
-        return scaled
-    scaled *= kept_lighting_gain(frame, before, scaled, p.lighting_scale, "radiance_scaling")[
-        ..., None
-    ]
-    return scaled
+    """The factor per pixel (H, W) that gives ``scaled`` = Σ σ̄_j lobe_j the low-frequency
+    luminance of ``before`` = Σ lobe_j along the surfaces, at ``lighting_scale``
+    (:func:`service.operators.common.kept_lighting_gain`): exactly 1 where they are equal."""
+    return kept_lighting_gain(frame, before, scaled, p.lighting_scale, "radiance_scaling")
 
 
 def _scale_renderer_lobes(
@@ -217,14 +213,28 @@ def _scale_renderer_lobes(
     del lights  # frame-sized, and no longer needed by the kept lighting
     if not p.keep_lighting:
         return scaled, sigmas
-    scaled = _kept_lighting(frame, p, scaled, total_luminance(lobes.values(), weights))
+    before = luminance(total(lobes.values()), weights)  # (Σ lobe_j summed as the kernel does)
+    gain = _lighting_gain(frame, p, scaled, before)
+    del before
+    scaled *= gain[..., None]
     if remainder is not None:
         scaled += remainder
     elif beauty is not None:  # + beauty − Σ lobe_j, in place
         scaled += beauty
         for radiance in lobes.values():
             scaled -= radiance
+    _keep_untouched(scaled, frame.buffers.get("beauty"), gain, kappa)
     return scaled, sigmas
+
+
+def _keep_untouched(
+    out: np.ndarray, beauty: np.ndarray | None, gain: np.ndarray, kappa: Upsampled
+) -> None:
+    """Where the operator changed nothing (κ = 0, so σ̄ = 1 for every lobe, and a lighting gain
+    of exactly 1), ``beauty`` as it was, bit for bit: Σ lobe_j + rest only rounds back to it."""
+    if beauty is not None:
+        alone = (gain == np.float32(1.0)) & (np.asarray(kappa) == np.float32(0.0))
+        np.copyto(out, beauty, where=alone[..., None])
 
 
 def _scale_beauty(
@@ -256,7 +266,9 @@ def _scale_beauty(
         with_sigmas=ctx.debug_layers,
         weights=weights,
     )
-    return _kept_lighting(frame, p, scaled, beauty), sigmas
+    if p.keep_lighting:
+        scaled *= _lighting_gain(frame, p, scaled, beauty)[..., None]
+    return scaled, sigmas
 
 
 def _camera_to_world(frame: Frame) -> np.ndarray | None:
