@@ -41,7 +41,7 @@ import dataclasses
 import json
 import struct
 from pathlib import Path
-from typing import Any
+from typing import Any, Final
 
 import numpy as np
 import OpenEXR
@@ -71,7 +71,7 @@ _HALF_MAX = 65000.0
 #: Where :func:`write` puts new channels (module docstring).
 LAYOUTS = ("same", "part", "sidecar")
 #: The default everywhere (CLI, HTTP, batch, Python): nothing of the input is encoded again.
-DEFAULT_LAYOUT = "part"
+DEFAULT_LAYOUT: Final = "part"
 
 
 def _camera_arg(camera: Camera | dict[str, Any] | str | Path | None) -> Camera | None:

@@ -11,6 +11,7 @@ from fastapi import APIRouter, File, Form, Query, UploadFile
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from starlette.responses import FileResponse, Response
 
+from gbuffer.io import DEFAULT_LAYOUT
 from gbuffer.presets import preset_help
 from service import pipeline as pipelines
 from service.enhance import WriteRequest
@@ -106,7 +107,7 @@ async def enhance(
             "a multi-part file; the input's parts copied as they are), sidecar (an EXR with "
             "only the new layers)"
         ),
-    ] = "part",
+    ] = DEFAULT_LAYOUT,
     preview: Annotated[
         Literal["png"] | None, Query(description="png: answer a tone-mapped PNG preview")
     ] = None,
