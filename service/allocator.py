@@ -23,10 +23,9 @@ glibc otherwise gives each thread that allocates its own arena, and each keeps i
 memory (an operator's row strips run on every core). ``depict enhance`` of a 1080p Cycles frame
 peaked at 855–880 MiB before both, 805–830 MiB with the memory given back after the read (and
 the buffers let go before the result is written), 760–765 MiB with one arena too, in the same
-time.
-The shared lock is within a 2-core machine's noise: Light Alignment through ``pipeline.run`` (the
-operator whose threads allocate the most) took 280–356 ms with one arena and 271–319 ms with
-eight (five alternated runs each).
+time. The shared lock is within a 2-core machine's noise: Light Alignment through
+``pipeline.run`` (the operator whose threads allocate the most) took 280–356 ms with one arena
+and 271–319 ms with eight (five alternated runs each).
 
 The CLI, the HTTP service's workers, batch workers and the benchmarks call :func:`tune` at start; a
 program that uses the Python API may call it too. ``DEPICT_MALLOC=system`` leaves the process's

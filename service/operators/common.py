@@ -113,10 +113,10 @@ def kept_lighting_gain(
     """:func:`ops.lighting.luminance_gain` of an operator's change on ``frame``: the factor per
     pixel that gives ``after`` the low-frequency luminance of ``before`` along the surfaces, at
     ``scale`` (relative to the image height); each of them RGB (H, W, 3) or already a luminance
-    (H, W). The correction is weighed by how much the
-    operator changed each pixel, ``min(1, |ΔY| / (KEPT_CHANGE · Y))``: what it left alone stays bit
-    for bit, and the correction fades out continuously where the change does (a cut-off would
-    draw a line where the curvature ends, e.g. beside a CAD part's creases)."""
+    (H, W). The correction is weighed by how much the operator changed each pixel,
+    ``min(1, |ΔY| / (KEPT_CHANGE · Y))``: what it left alone stays bit for bit, and the
+    correction fades out continuously where the change does (a cut-off would draw a line where
+    the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
     y0, y1 = (x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in (before, after))
     gain = luminance_gain(
