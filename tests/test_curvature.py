@@ -597,7 +597,7 @@ def test_mean_curvature_layers_from_the_working_grid_are_the_fields_read_one_by_
     s = analytic.two_spheres(256)
     fused = mean_curvature_layers(_curv(s, scale=scale), 0.2)
     c = _curv(s, scale=scale)
-    assert c.__dict__["_coarse"].qx.shape[0] < s.shape[0]  # the one-pass path is the one tested
+    assert c.__dict__["_coarse"].d.shape[0] < s.shape[0]  # the one-pass path is the one tested
     h = isotropic(c, 0.2)
     c.weight  # noqa: B018 (read: the fields are materialised, the layers take the other path)
     fields = mean_curvature_layers(c, 0.2)

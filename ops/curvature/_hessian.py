@@ -166,7 +166,7 @@ def _hessian_rows(
     o1: int,
     out: list[np.ndarray],
 ) -> None:
-    """(trace, q_x, q_y, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
+    """(trace, d, b, weight) of rows o0..o1 of a block of working-grid rows into ``out`` (RS §4,
     see :func:`principal_curvatures`); the block (``cov``, ``depth_l``) holds the neighbourhoods
     those rows need; ``weigh(covp, nch)`` gives the weighted normals of its rows b0..b1 (below)
     for their reliable coverage ``covp``: n_x·w, n_y·w[, n_z·w], w.
@@ -283,14 +283,17 @@ def _gaussian_rows(src, kern, a, dst):  # type: ignore[no-untyped-def]
 
 
 @kernel
-def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wgt):  # type: ignore[no-untyped-def]
+def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, d_out, b_out, wgt):  # type: ignore[no-untyped-def]
     """The end of :func:`_hessian_rows` in one pass. From the smoothed planes N_x, N_y[, N_z] and
     W = ``smooth[nch]`` (the rows of q): q = (N_x, N_y) / W, times (N_z / W)^-f with N_z / W
-    clamped to >= _NZ_MIN when ``nch`` is 3; on q's rows ``rows[0]..rows[1]``, the trace of H = ∇q,
-    ``coef[2]``·∂q_x/∂col - ``coef[3]``·∂q_y/∂row (central differences, one-sided and doubled on
-    the first and last column and on the first and last row of q), q itself, and the weight
-    t²(3 - 2t)·[3x3 of ``covp`` all covered], t = clip((``wsw`` - coef[0])·coef[1], 0, 1)."""
+    clamped to >= _NZ_MIN when ``nch`` is 3; on q's rows ``rows[0]..rows[1]``, of the symmetrised
+    H = ∇q = [[a, b], [b, c]] with a = ``coef[2]``·∂q_x/∂col and c = -``coef[3]``·∂q_y/∂row
+    (central differences, one-sided and doubled on the first and last column and on the first and
+    last row of q): the trace a + c, d = (a - c)/2 and b = (∂q_x/∂y + ∂q_y/∂x)/2 in the same
+    units; and the weight t²(3 - 2t)·[3x3 of ``covp`` all covered],
+    t = clip((``wsw`` - coef[0])·coef[1], 0, 1)."""
     zero, one, two, three = np.float32(0.0), np.float32(1.0), np.float32(2.0), np.float32(3.0)
+    half = np.float32(0.5)
     oa, ob = rows
     w0, wscale, sx, sy = coef[0], coef[1], coef[2], coef[3]
     nq, wid = smooth.shape[1], smooth.shape[2]
@@ -314,22 +317,22 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wg
                 oy[j] = ny[j] * inv
     for i in range(ob - oa):
         r = oa + i  # the row in q
-        tr, px, py, wg = trace[i], qx_out[i], qy_out[i], wgt[i]
-        cx = qx[r]
-        up = qy[r - 1] if r > 0 else qy[r]
-        dn = qy[r + 1] if r + 1 < nq else qy[r]
+        tr, dd, bb, wg = trace[i], d_out[i], b_out[i], wgt[i]
+        cx, cy = qx[r], qy[r]
+        r_up, r_dn = max(r - 1, 0), min(r + 1, nq - 1)
         ys = sy if 0 < r < nq - 1 else two * sy
         if nq < 2:
             ys = zero
-        for j in range(1, wid - 1):
-            tr[j] = sx * (cx[j + 1] - cx[j - 1]) - ys * (dn[j] - up[j])
-        if wid >= 2:
-            tr[0] = two * sx * (cx[1] - cx[0]) - ys * (dn[0] - up[0])
-            tr[wid - 1] = two * sx * (cx[wid - 1] - cx[wid - 2]) - ys * (dn[wid - 1] - up[wid - 1])
-        else:
-            tr[0] = zero
-        px[:] = cx
-        py[:] = qy[r]
+        for j in range(wid):
+            jl, jr = max(j - 1, 0), min(j + 1, wid - 1)
+            xs = sx if 0 < j < wid - 1 else two * sx
+            a = xs * (cx[jr] - cx[jl])
+            c = -(ys * (qy[r_dn, j] - qy[r_up, j]))
+            tr[j] = a + c
+            dd[j] = (a - c) * half
+            bb[j] = (xs * (cy[jr] - cy[jl]) - ys * (qx[r_dn, j] - qx[r_up, j])) * half
+        if wid < 2:
+            tr[0], dd[0], bb[0] = zero, zero, zero
         # 3x3 erosion of the coverage (replicated at the edges of q's rows and of the image).
         ca = covp[max(r - 1, 0)]
         cb = covp[r]
@@ -350,39 +353,3 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, qx_out, qy_out, wg
 def _phi(x: float) -> float:
     """Standard normal CDF."""
     return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
-
-
-def _deriv_x(q: np.ndarray, scale: float) -> np.ndarray:
-    """``scale`` · (q[:, x+1] - q[:, x-1]); one-sided (doubled) on the first and last column."""
-    out = np.empty_like(q)
-    w = q.shape[1]
-    if w >= 3:
-        cv2.addWeighted(q[:, 2:], scale, q[:, :-2], -scale, 0.0, dst=out[:, 1:-1])
-    if w >= 2:
-        s2 = np.float32(2.0 * scale)
-        np.multiply(np.subtract(q[:, 1], q[:, 0]), s2, out=out[:, 0])
-        np.multiply(np.subtract(q[:, -1], q[:, -2]), s2, out=out[:, -1])
-    else:
-        out[...] = 0.0
-    return out
-
-
-def _deriv_y(q: np.ndarray, r0: int, r1: int, scale: float) -> np.ndarray:
-    """``scale`` · (q[y+1] - q[y-1]) for rows r0..r1 of ``q``; one-sided (doubled) on the first and
-    last row of ``q`` (the image's: inner strips always have a neighbour row)."""
-    n = q.shape[0]
-    out = np.empty((r1 - r0, q.shape[1]), np.float32)
-    lo, hi = max(r0, 1), min(r1, n - 1)
-    if hi > lo:
-        cv2.addWeighted(
-            q[lo + 1 : hi + 1], scale, q[lo - 1 : hi - 1], -scale, 0.0, dst=out[lo - r0 : hi - r0]
-        )
-    if n >= 2:
-        s2 = np.float32(2.0 * scale)
-        if r0 == 0:
-            np.multiply(np.subtract(q[1], q[0]), s2, out=out[0])
-        if r1 == n:
-            np.multiply(np.subtract(q[n - 1], q[n - 2]), s2, out=out[-1])
-    else:
-        out[...] = 0.0
-    return out

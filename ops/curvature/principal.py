@@ -175,6 +175,6 @@ def principal_curvatures(
         _hessian_rows(weigh, cov, depth_l, prm, r0 - a0, r1 - a0, [o[:, c0:c1] for o in rows])
 
     run_strips(h_l, strip, _common._STRIP_ROWS)
-    trace, qx, qy, wgt = outs
-    coarse = _Coarse(qx=qx, qy=qy, weight=wgt, trace=trace, size=(hgt, wid), sx=prm.sx, sy=prm.sy)
+    trace, d, b, wgt = outs
+    coarse = _Coarse(trace=trace, d=d, b=b, weight=wgt, size=(hgt, wid))
     return Curvature._lazy(coarse)

@@ -11,7 +11,6 @@ import cv2
 import numpy as np
 
 from ops.curvature import _common
-from ops.curvature._hessian import _deriv_x, _deriv_y
 from ops.jit import inline_kernel, kernel
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled
@@ -94,34 +93,17 @@ _FIELDS = ("k1", "k2", "dir_x", "dir_y", "weight")
 class _Coarse:
     """Working-grid results and the full size (H, W) they are interpolated to.
 
-    The Hessian H = ∇q = [[a, b], [b, c]] is kept as the field q it differentiates and its
-    trace a + c (all :func:`isotropic` needs); d = (a - c)/2, b and the principal curvatures
-    κ1,2 = trace/2 ± sqrt(d² + b²) are derived on first access (the same arithmetic as in
-    :func:`_hessian_rows`).
+    The symmetrised Hessian H = ∇q = [[a, b], [b, c]] is kept as its trace a + c (all
+    :func:`isotropic` needs), d = (a - c)/2 and b, as
+    :func:`ops.curvature._hessian._trace_rows` computes them; the principal curvatures
+    κ1,2 = trace/2 ± sqrt(d² + b²) are derived on first access.
     """
 
-    qx: np.ndarray
-    qy: np.ndarray
-    weight: np.ndarray
     trace: np.ndarray
+    d: np.ndarray
+    b: np.ndarray
+    weight: np.ndarray
     size: tuple[int, int]
-    sx: float  # derivative scales of q (see _Params)
-    sy: float
-
-    @functools.cached_property
-    def d(self) -> np.ndarray:
-        """(a - c) / 2 of the Hessian."""
-        n = self.qx.shape[0]
-        a = _deriv_x(self.qx, self.sx)
-        c = _deriv_y(self.qy, 0, n, -self.sy)
-        return np.asarray(cv2.addWeighted(a, 0.5, c, -0.5, 0.0), np.float32)
-
-    @functools.cached_property
-    def b(self) -> np.ndarray:
-        """The off-diagonal term of the (symmetrised) Hessian."""
-        n = self.qx.shape[0]
-        by = _deriv_y(self.qx, 0, n, -0.5 * self.sy)
-        return np.asarray(cv2.add(by, _deriv_x(self.qy, 0.5 * self.sx)), np.float32)
 
     @functools.cached_property
     def _radius(self) -> np.ndarray:

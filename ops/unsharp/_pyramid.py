@@ -8,8 +8,8 @@ surface is processed, and a level only where some pixel needs it. The full-resol
 (depth guide, L*, the averages that make level 1) are formed in one pass over strips of rows.
 The domain transforms (OpenCV, without the GIL) run on a thread of their own, each as soon as
 its level is made, while the next levels are made and the upsamplings' re-weighted pixels are
-found (NumPy, which holds the GIL): the two kinds of work share the cores instead of taking
-turns.
+found (NumPy, and compiled kernels on strips): the two kinds of work share the cores instead of
+taking turns.
 """
 
 from __future__ import annotations

@@ -8,9 +8,11 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ops.parallel import run_strips, strip_rows
 from ops.unsharp._common import _JUMP, Array
-from ops.unsharp._levels import _block_flags, _Gather, _sub_resize, _sum_taps, _touching
+from ops.unsharp._levels import _block_flags, _Gather, _sub_resize, _touching
 from ops.unsharp._surface import _Level
+from ops.unsharp._taps import MAX_TAPS, apply_taps, fine_fixups, fixup_taps
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -28,11 +30,11 @@ class _Upsampler:
     pixel's own, less smoothed value) where no nearby cell lies on its surface. Nothing from
     another surface is interpolated in. ``fine_valid`` is uint8 0/1.
 
-    Construction finds the re-weighted pixels and their taps and weights (``_FixupTaps``): that
-    depends on the levels' geometry only, not on the channels, so it can run while the channels
-    are being smoothed. :meth:`bind` then gives the channels (level ``lv``) and computes the
-    re-weighted values, in one vectorised pass each (many small NumPy calls: in threads they
-    would only contend for the GIL); :meth:`rows` interpolates its rows and writes them in.
+    Construction finds the re-weighted pixels and their taps and weights (``_FixupTaps``; at
+    f >= 4, the pixels by a compiled scan of the fine rows): that depends on the levels'
+    geometry only, not on the channels, so it can run while the channels are being smoothed.
+    :meth:`bind` then gives the channels (level ``lv``) and computes the re-weighted values, one
+    compiled pass over the points each; :meth:`rows` interpolates its rows and writes them in.
     """
 
     def __init__(
@@ -43,7 +45,6 @@ class _Upsampler:
         fine_k: int,
         fallback: list[Array],
     ) -> None:
-        hc, wc = lv.cov.shape
         hf, wf = self.shape = fine_iz.shape[:2]
         f = self.f = 2 ** (lv.k - fine_k)  # fine pixels per coarse cell, per axis
         self.fallback = fallback
@@ -73,25 +74,12 @@ class _Upsampler:
             on = _Gather(yy, xx, wf)(fine_valid).view(bool)
             xx, yy, idx = xx[on], yy[on], idx[on]
         else:
-            half = f // 2
-            flag = _cv.resize(blocks, ((wc + 1) * f, (hc + 1) * f), interpolation=_cv.INTER_NEAREST)
-            need = _cv.bitwise_and(flag[half : half + hf, half : half + wf], fine_valid)
-            # a fine pixel whose own guide departs from the interpolated one: a small object
-            # inside a cell (at f = 2 any such cell already differs from its neighbours)
-            izn = _cv.resize(lv.iz, (wc * f, hc * f), interpolation=_cv.INTER_LINEAR)[:hf, :wf]
-            far = _cv.compare(_cv.absdiff(fine_iz, izn), float(thr), _cv.CMP_GT)
-            _cv.bitwise_and(far, fine_valid, dst=far)
-            _cv.bitwise_or(need, far, dst=need)
-            pts = _cv.findNonZero(need)
-            if pts is None:
-                return
-            pts = pts.reshape(-1, 2)
-            xx, yy = pts[:, 0], pts[:, 1]
-            idx = yy.astype(np.int64) * wf + xx
+            idx = _fine_fixups(blocks, fine_valid, fine_iz, lv.iz, f, thr)
+            yy, xx = np.divmod(idx, wf)
         if idx.size == 0:
             return
         self.in_order = fine_k == 0
-        if self.in_order:  # read by strips of rows (:meth:`rows`): sorted
+        if self.in_order and f == 2:  # read by strips of rows (:meth:`rows`): sorted
             order = np.argsort(idx, kind="stable")
             idx, xx, yy = idx[order], xx[order], yy[order]
         self.idx = idx
@@ -135,6 +123,27 @@ class _Upsampler:
         return self.rows(slice(0, self.shape[0]))
 
 
+def _fine_fixups(
+    blocks: Array, fine_valid: Array, fine_iz: Array, iz_c: Array, f: int, thr: np.float32
+) -> Array:
+    """:func:`ops.unsharp._taps.fine_fixups` of every fine row, by strips over the shared pool:
+    the re-weighted pixels' flat indices, ascending."""
+    hf, wf = fine_iz.shape
+    found: dict[int, Array] = {}
+    iz_c = np.ascontiguousarray(iz_c)
+
+    def strip(r0: int, r1: int) -> None:
+        out = np.empty((r1 - r0) * wf, np.int64)
+        found[r0] = out[: fine_fixups(blocks, fine_valid, fine_iz, iz_c, f, thr, r0, r1, out)]
+
+    run_strips(hf, strip, strip_rows(wf))
+    return np.concatenate([found[r0] for r0 in sorted(found)])
+
+
+#: Re-weighted pixels per strip of :class:`_FixupTaps` (a few milliseconds of work each).
+_FIXUP_POINTS = 1 << 15
+
+
 class _FixupTaps:
     """Surface-compatible interpolation at fine pixels (xx, yy) of level ``lv``'s cells: the
     taps and weights, to be applied to any channel of that level (:meth:`apply`); ``none``: the
@@ -143,98 +152,47 @@ class _FixupTaps:
     Taps: the 2×2 bilinear ones, then (where none of those is compatible) a 4×4 tent of radius 2
     cells. A tap is compatible when its plane (``lv.grad``), extrapolated to the pixel, meets the
     pixel's depth guide ``iz_p`` within ``thr``; weight tent × (1 − (miss/thr)²), normalised.
-    All in float32 (the offsets from the taps are multiples of 1/(2f), exact).
+    Both in one compiled pass over the points (:mod:`ops.unsharp._taps`).
     """
 
     def __init__(
         self, xx: Array, yy: Array, f: int, lv: _Level, iz_p: Array, thr: np.float32
     ) -> None:
-        hc, wc = lv.cov.shape
-        valid_c = lv.valid.ravel()
-        izc = lv.iz.ravel()
-        d = np.float32(2**lv.k)
-        grad = None if lv.grad is None else (lv.grad[0].ravel(), lv.grad[1].ravel())
+        n = xx.size
+        self.taps = np.empty((n, MAX_TAPS), np.int32)
+        self.wts = np.empty((n, MAX_TAPS), np.float32)
+        self.count = np.empty(n, np.int8)
+        no_grad = np.empty(0, np.float32)
+        gx, gy = (no_grad, no_grad) if lv.grad is None else (g.ravel() for g in lv.grad)
+        level = (
+            np.ascontiguousarray(lv.iz).ravel(),
+            gx,
+            gy,
+            lv.valid_u8.ravel(),
+            lv.cov.shape[1],
+            np.float32(2**lv.k),
+            np.float32(1.0 / thr),
+        )
+        xx, yy = np.ascontiguousarray(xx), np.ascontiguousarray(yy)
+        iz_p = np.ascontiguousarray(iz_p, np.float32)
         inv_f = np.float32(1.0 / f)
-        u = (xx.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
-        v = (yy.astype(np.float32) + np.float32(0.5)) * inv_f - np.float32(0.5)
-        x0 = np.floor(u).astype(np.intp)
-        y0 = np.floor(v).astype(np.intp)
-        inv_thr = np.float32(1.0 / thr)
-        self.n = xx.size
-        # per pass: (points it gives, (taps, points) flat cell indices, normalised weights)
-        self.passes: list[tuple[Array | slice, Array, Array]] = []
-        todo: Array | None = None  # None: all
-        zero, one = np.float32(0.0), np.float32(1.0)
-        # arrays are (taps, points): each tap's values are contiguous, sums over taps add rows
-        for radius, offs in ((1.0, (0, 1)), (2.0, (-1, 0, 1, 2))):
-            if todo is None:
-                ut, vt, it, xt, yt = u, v, iz_p, x0, y0
-            else:
-                ut, vt, it, xt, yt = u[todo], v[todo], iz_p[todo], x0[todo], y0[todo]
-            npt = ut.size
-            m = len(offs)
-            o = np.array(offs, np.intp)[:, None]
-            cx = xt[None, :] + o  # (m, N)
-            cy = yt[None, :] + o
-            dx = ut[None, :] - cx.astype(np.float32)
-            dy = vt[None, :] - cy.astype(np.float32)
-            if radius == 1.0:  # |dx| < 1 at the two taps: the tent 1 − |dx| is positive
-                tx = one - np.abs(dx)
-                ty = one - np.abs(dy)
-            else:
-                inv_r = np.float32(1.0 / radius)
-                tx = np.maximum(zero, one - np.abs(dx) * inv_r)
-                ty = np.maximum(zero, one - np.abs(dy) * inv_r)
-            tx[(cx < 0) | (cx >= wc)] = 0.0
-            ty[(cy < 0) | (cy >= hc)] = 0.0
-            # (m, m, N): rows of taps, columns of taps (np.clip is slow on small arrays)
-            rowi = np.minimum(np.maximum(cy, 0), hc - 1)
-            rowi *= wc
-            coli = np.minimum(np.maximum(cx, 0), wc - 1)
-            flat = rowi[:, None, :] + coli[None, :, :]
-            pred = izc[flat]
-            if grad is not None:  # the tap's plane extrapolated to the pixel
-                ddx, ddy = dx * d, dy * d  # (exact: d is a power of 2)
-                pred += grad[0][flat] * ddx[None, :, :] + grad[1][flat] * ddy[:, None, :]
-            # weight 1 − (miss / thr)², miss = |pred − I| (the sign goes with the square)
-            pred -= it[None, None, :]
-            pred *= inv_thr
-            np.square(pred, out=pred)
-            wts = np.subtract(one, pred, out=pred)
-            np.maximum(wts, zero, out=wts)
-            wts *= ty[:, None, :] * tx[None, :, :]
-            wts *= valid_c[flat]
-            wts = wts.reshape(m * m, npt)
-            flat = flat.reshape(m * m, npt)
-            sw = _sum_taps(wts)
-            found = sw > 1e-4
-            nfound = int(np.count_nonzero(found))
-            if nfound:
-                rows: Array | slice
-                if todo is None:  # all points (those not found get another pass, or none)
-                    rows = slice(None)
-                    with np.errstate(divide="ignore", invalid="ignore"):
-                        wts /= sw[None, :]
-                else:
-                    if nfound < npt:
-                        wts, flat, sw = wts[:, found], flat[:, found], sw[found]
-                    wts /= sw[None, :]
-                    rows = todo if nfound == npt else todo[found]
-                self.passes.append((rows, flat, wts))
-            todo = (
-                None
-                if nfound == npt
-                else (np.flatnonzero(~found) if todo is None else todo[~found])
-            )
-            if todo is None:
-                break
-        self.none = todo  # (None: every point has a compatible tap)
+
+        def points(i0: int, i1: int) -> None:
+            at = slice(i0, i1)
+            fixup_taps(xx[at], yy[at], inv_f, iz_p[at], *level, *self._of(at))
+
+        run_strips(n, points, _FIXUP_POINTS)
+        none = np.flatnonzero(self.count == 0)
+        self.none = none if none.size else None
+
+    def _of(self, at: slice) -> tuple[Array, Array, Array]:
+        return self.taps[at], self.wts[at], self.count[at]
 
     def apply(self, arr: Array) -> Array:
-        """The interpolated values of ``arr`` (a channel of the level) at the points (garbage
-        where no compatible tap is found: see ``none``)."""
-        out = np.full(self.n, np.nan, dtype=np.float32)
-        a = arr.ravel()
-        for rows, flat, wts in self.passes:
-            out[rows] = _sum_taps(wts * np.take(a, flat))
+        """The interpolated values of ``arr`` (a channel of the level) at the points (NaN where
+        no compatible tap is found: see ``none``)."""
+        out = np.empty(self.count.size, np.float32)
+        apply_taps(
+            np.ascontiguousarray(arr, np.float32).ravel(), self.taps, self.wts, self.count, out
+        )
         return out
