@@ -33,7 +33,7 @@ CIE 15:2004 Colorimetry, §8.2.1 (CIELAB); IEC 61966-2-1 (sRGB primaries, D65).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Literal
 
 import cv2
@@ -56,6 +56,7 @@ __all__ = [
     "lightness",
     "lightness_rows",
     "luminance",
+    "luminance_of_sum",
     "resolve_white",
     "rgb_to_lab",
     "rgb_to_lab_phi",
@@ -175,6 +176,26 @@ def luminance(rgb: np.ndarray, weights: tuple[float, float, float] = REC709_Y) -
         _LUMA_ROWS,
     )
     return out.reshape(arr.shape[:-1])
+
+
+def luminance_of_sum(
+    rgbs: Sequence[np.ndarray], weights: tuple[float, float, float] = REC709_Y
+) -> np.ndarray:
+    """``luminance(total(rgbs))`` of (H, W, 3) arrays, bit for bit (the sum taken in order in
+    float32), by strips of rows: the RGB sum is never formed at full size."""
+    first, *others = (_check_rgb(x, "rgbs[i]") for x in rgbs)
+    h, w = first.shape[:2]
+    w0, w1, w2 = (np.float32(x) for x in weights)
+    out = np.empty((h, w), np.float32)
+
+    def rows(r: slice) -> None:
+        acc = first[r].copy()
+        for x in others:
+            acc += x[r]
+        _luma_rows(acc, w0, w1, w2, out[r])
+
+    row_strips(h, w, rows)
+    return out
 
 
 @kernel

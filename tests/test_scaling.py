@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ops.color import luminance
+from ops.color import luminance, luminance_of_sum
 from ops.curvature import isotropic, principal_curvatures
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import (
@@ -130,6 +130,23 @@ def test_luminance_and_reflectance_delta() -> None:
     for white in (0.0, -1.0, float("inf")):
         with pytest.raises(ValueError, match="white"):
             reflectance_delta(rgb, white)
+
+
+@pytest.mark.parametrize("count", [1, 3])
+def test_luminance_of_sum_is_the_luminance_of_the_total_bit_for_bit(count: int) -> None:
+    """Summed strip by strip, never at full size, yet the same float32 values as summing whole
+    frames in order and taking their luminance (the kept lighting's gain is 1 on that)."""
+    rng = np.random.default_rng(count)
+    rgbs = [
+        rng.random((301, 257, 3), dtype=np.float32) * 10 ** rng.uniform(-3, 3) for _ in range(count)
+    ]
+    weights = (0.2627, 0.678, 0.0593)
+    whole = rgbs[0].copy()
+    for x in rgbs[1:]:
+        whole += x
+    got = luminance_of_sum(rgbs, weights)
+    assert got.shape == (301, 257) and got.dtype == np.float32
+    assert np.array_equal(got, luminance(whole, weights))
 
 
 def test_white_level_is_a_robust_percentile_of_covered_pixels() -> None:

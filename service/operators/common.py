@@ -149,7 +149,13 @@ def total(planes: Iterable[np.ndarray]) -> np.ndarray:
     return out
 
 
-def channels(field: np.ndarray, names: str = "XYZ") -> dict[str, np.ndarray]:
-    """An (H, W, C) field as output channels ``{"X": ..., "Y": ..., "Z": ...}``."""
-    planes = cv2.split(np.ascontiguousarray(field, np.float32))
+def channels(field: np.ndarray, names: str = "XYZ", *, copy: bool = True) -> dict[str, np.ndarray]:
+    """An (H, W, C) field as output channels ``{"X": ..., "Y": ..., "Z": ...}``: new planes, or
+    with ``copy=False`` views of a float32 ``field`` nothing changes afterwards (the EXR
+    writer makes each plane contiguous as it encodes it, so a layer nobody writes costs
+    nothing)."""
+    field = np.asarray(field, np.float32)
+    if not copy:
+        return {n: field[..., i] for i, n in enumerate(names)}
+    planes = cv2.split(np.ascontiguousarray(field))
     return {n: np.asarray(planes[i]) for i, n in enumerate(names)}

@@ -35,6 +35,7 @@ from pydantic import Field, model_validator
 
 from gbuffer.frame import LOBES, Frame
 from ops import checks, filtering
+from ops.color import luminance_of_sum, row_strips
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
 from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
 from service.operators.base import Context, register
@@ -252,10 +253,29 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
     for k in range(len(lights)):
         for c, fields in aligned.items():
-            frame.set_layer(_light_layer(k, c), channels(fields[k]))
+            frame.set_layer(_light_layer(k, c), channels(fields[k], copy=False))
     if ctx.debug_layers:
         for i, n_i in enumerate(pyramid.full_list(), start=1):
             frame.set_layer(f"lla_n{i}", channels(n_i))
+
+
+def _keep_lighting(
+    out: np.ndarray, gain: np.ndarray, relit: list[np.ndarray], lights: list[np.ndarray]
+) -> None:
+    """The kept lighting's ``gain`` applied in place, by strips of rows: ``out`` (the beauty)
+    + (gain − 1) Σ ``relit``, and every relit lobe and its light × gain (new arrays of
+    :func:`ratio_relight`)."""
+
+    def rows(r: slice) -> None:
+        g = gain[r][..., None]
+        after = total(x[r] for x in relit)
+        change = after * g
+        change -= after
+        out[r] += change
+        for x in (*relit, *lights):
+            x[r] *= g
+
+    row_strips(*out.shape[:2], rows)
 
 
 def lights_power(lights: list[Light]) -> float:
@@ -314,15 +334,11 @@ def _ratio(
     given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
     out, new, new_light = ratio_relight(beauty, given, original, aligned, eps, p.ratio_max)
     if p.keep_lighting:
-        before = total(given[lobe][0] for lobe in lobes)
-        after = total(new[lobe] for lobe in lobes)
-        g = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
-        gain = np.asarray(cv2.merge([g, g, g]))  # (products of one shape: faster than broadcast)
-        change = after * gain
-        change -= after
-        out = np.add(change, out, out=change)
-        for relit in (*new.values(), *new_light.values()):  # (new arrays of ratio_relight)
-            relit *= gain
+        weights = frame.colorspace.weights
+        before = luminance_of_sum([given[lobe][0] for lobe in lobes], weights)
+        after = luminance_of_sum([new[lobe] for lobe in lobes], weights)
+        gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
+        _keep_lighting(out, gain, [new[lobe] for lobe in lobes], list(new_light.values()))
     frame.buffers.update(new)
     frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
     frame.buffers["beauty"] = out

@@ -13,7 +13,7 @@ from gbuffer.frame import LOBES, Frame
 from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
-from ops.color import luminance
+from ops.color import luminance, luminance_of_sum, row_strips
 from ops.colorspace import LINEAR_REC709, ColorSpace, convert
 from ops.pyramid.masked import masked_gaussian
 from ops.pyramid.upsample import Upsampled
@@ -26,7 +26,6 @@ from service.operators.common import (
     frame_albedo,
     kept_lighting_gain,
     statistic,
-    total,
     user_image,
 )
 from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
@@ -214,18 +213,33 @@ def _scale_renderer_lobes(
     del lights  # frame-sized, and no longer needed by the kept lighting
     if not p.keep_lighting:
         return scaled, sigmas
-    before = luminance(total(lobes.values()), weights)  # (Σ lobe_j summed as the kernel does)
+    # (Σ lobe_j summed as the kernel does)
+    before = luminance_of_sum(list(lobes.values()), weights)
     gain = _lighting_gain(frame, p, scaled, before)
     del before
-    scaled *= gain[..., None]
     if remainder is not None:
-        scaled += remainder
-    elif beauty is not None:  # + beauty − Σ lobe_j, in place
-        scaled += beauty
-        for radiance in lobes.values():
-            scaled -= radiance
+        _with_gain(scaled, gain, remainder, [])
+    else:  # + beauty − Σ lobe_j
+        _with_gain(scaled, gain, beauty, [] if beauty is None else list(lobes.values()))
     _keep_untouched(scaled, frame.buffers.get("beauty"), gain, kappa)
     return scaled, sigmas
+
+
+def _with_gain(
+    scaled: np.ndarray, gain: np.ndarray, plus: np.ndarray | None, minus: list[np.ndarray]
+) -> None:
+    """``scaled`` · gain + ``plus`` − Σ ``minus``, in place, by strips of rows (each strip's
+    operations while it is in cache, in the order written)."""
+
+    def rows(r: slice) -> None:
+        out = scaled[r]
+        out *= gain[r][..., None]
+        if plus is not None:
+            out += plus[r]
+        for x in minus:
+            out -= x[r]
+
+    row_strips(*scaled.shape[:2], rows)
 
 
 def _keep_untouched(
