@@ -293,7 +293,6 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, d_out, b_out, wgt)
     units; and the weight t²(3 - 2t)·[3x3 of ``covp`` all covered],
     t = clip((``wsw`` - coef[0])·coef[1], 0, 1)."""
     zero, one, two, three = np.float32(0.0), np.float32(1.0), np.float32(2.0), np.float32(3.0)
-    half = np.float32(0.5)
     oa, ob = rows
     w0, wscale, sx, sy = coef[0], coef[1], coef[2], coef[3]
     nq, wid = smooth.shape[1], smooth.shape[2]
@@ -317,22 +316,20 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, d_out, b_out, wgt)
                 oy[j] = ny[j] * inv
     for i in range(ob - oa):
         r = oa + i  # the row in q
-        tr, dd, bb, wg = trace[i], d_out[i], b_out[i], wgt[i]
-        cx, cy = qx[r], qy[r]
-        r_up, r_dn = max(r - 1, 0), min(r + 1, nq - 1)
+        wg = wgt[i]
+        up, dn = max(r - 1, 0), min(r + 1, nq - 1)
+        rows_q = (qx[r], qy[r], qx[up], qy[up], qx[dn], qy[dn])
         ys = sy if 0 < r < nq - 1 else two * sy
         if nq < 2:
             ys = zero
-        for j in range(wid):
-            jl, jr = max(j - 1, 0), min(j + 1, wid - 1)
-            xs = sx if 0 < j < wid - 1 else two * sx
-            a = xs * (cx[jr] - cx[jl])
-            c = -(ys * (qy[r_dn, j] - qy[r_up, j]))
-            tr[j] = a + c
-            dd[j] = (a - c) * half
-            bb[j] = (xs * (cy[jr] - cy[jl]) - ys * (qx[r_dn, j] - qx[r_up, j])) * half
-        if wid < 2:
-            tr[0], dd[0], bb[0] = zero, zero, zero
+        outs = (trace[i], d_out[i], b_out[i])
+        for j in range(1, wid - 1):  # (vectorised)
+            _hessian_at(rows_q, j, j - 1, j + 1, sx, ys, outs)
+        if wid >= 2:  # one-sided, doubled, on the first and last column
+            _hessian_at(rows_q, 0, 0, 1, two * sx, ys, outs)
+            _hessian_at(rows_q, wid - 1, wid - 2, wid - 1, two * sx, ys, outs)
+        else:
+            outs[0][0], outs[1][0], outs[2][0] = zero, zero, zero
         # 3x3 erosion of the coverage (replicated at the edges of q's rows and of the image).
         ca = covp[max(r - 1, 0)]
         cb = covp[r]
@@ -348,6 +345,20 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, d_out, b_out, wgt)
             t = (ww[j] - w0) * wscale
             t = min(max(t, zero), one)
             wg[j] = t * t * (three - two * t) if hmin[j] != 0 else zero
+
+
+@inline_kernel
+def _hessian_at(rows_q, j, jl, jr, xs, ys, outs):  # type: ignore[no-untyped-def]
+    """Column ``j`` of the trace a + c, d = (a - c)/2 and b into ``outs``, with
+    a = ``xs``·(q_x[jr] - q_x[jl]) and c = -``ys``·(q_y below - q_y above); ``rows_q``: q_x and
+    q_y of the row, of the row above and of the row below."""
+    qx, qy, qx_up, qy_up, qx_dn, qy_dn = rows_q
+    half = np.float32(0.5)
+    a = xs * (qx[jr] - qx[jl])
+    c = -(ys * (qy_dn[j] - qy_up[j]))
+    outs[0][j] = a + c
+    outs[1][j] = (a - c) * half
+    outs[2][j] = (xs * (qy[jr] - qy[jl]) - ys * (qx_dn[j] - qx_up[j])) * half
 
 
 def _phi(x: float) -> float:

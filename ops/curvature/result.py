@@ -106,16 +106,24 @@ class _Coarse:
     size: tuple[int, int]
 
     @functools.cached_property
-    def _radius(self) -> np.ndarray:
-        return np.asarray(cv2.magnitude(self.d, self.b), np.float32)
+    def _principal(self) -> tuple[np.ndarray, np.ndarray]:
+        """(κ1, κ2) in one compiled pass (:func:`_principal_rows`)."""
+        k1, k2 = np.empty_like(self.trace), np.empty_like(self.trace)
+        args = (self.trace, self.d, self.b, k1, k2)
+        run_strips(
+            k1.shape[0],
+            lambda r0, r1: _principal_rows(*(a[r0:r1] for a in args)),
+            _common._STRIP_ROWS,
+        )
+        return k1, k2
 
-    @functools.cached_property
+    @property
     def k1(self) -> np.ndarray:
-        return np.asarray(cv2.scaleAdd(self.trace, 0.5, self._radius), np.float32)
+        return self._principal[0]
 
-    @functools.cached_property
+    @property
     def k2(self) -> np.ndarray:
-        return np.asarray(cv2.scaleAdd(self._radius, -2.0, self.k1), np.float32)
+        return self._principal[1]
 
     def upsample(self, img: np.ndarray) -> np.ndarray:
         return np.asarray(Upsampled(img, self.size))
@@ -131,6 +139,17 @@ class _Coarse:
             _common._STRIP_ROWS,
         )
         return dx, dy
+
+
+@kernel
+def _principal_rows(trace, d, b, k1, k2):  # type: ignore[no-untyped-def]
+    """κ1 = trace/2 + r and κ2 = κ1 − 2r, r = sqrt(d² + b²), on rows."""
+    half, two = np.float32(0.5), np.float32(2.0)
+    for i in range(k1.shape[0]):
+        for j in range(k1.shape[1]):
+            r = np.sqrt(d[i, j] * d[i, j] + b[i, j] * b[i, j])
+            k1[i, j] = trace[i, j] * half + r
+            k2[i, j] = k1[i, j] - two * r
 
 
 @kernel
