@@ -9,6 +9,7 @@ from ops.color import luminance, luminance_of_sum
 from ops.curvature import isotropic, principal_curvatures
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import (
+    covered_percentile,
     reflectance_delta,
     scale_lobes,
     scaling_function,
@@ -147,6 +148,25 @@ def test_luminance_of_sum_is_the_luminance_of_the_total_bit_for_bit(count: int) 
     got = luminance_of_sum(rgbs, weights)
     assert got.shape == (301, 257) and got.dtype == np.float32
     assert np.array_equal(got, luminance(whole, weights))
+
+
+@pytest.mark.parametrize("odd", [False, True])
+def test_covered_percentile_is_numpys_exactly(odd: bool) -> None:
+    """The median (the kept lighting's scene scale) and other percentiles of the finite values
+    of covered pixels: NumPy's values bit for bit, an odd or even count, without gathering them."""
+    rng = np.random.default_rng(int(odd))
+    values = (rng.random((700, 611), dtype=np.float32) * 0.01 + 0.001).astype(np.float32)
+    values[rng.random(values.shape) < 0.01] = np.inf
+    mask = rng.random(values.shape) > 0.3
+    counted = mask & np.isfinite(values)
+    if (counted.sum() % 2 == 1) != odd:
+        mask[np.argwhere(counted)[0][0], np.argwhere(counted)[0][1]] = False
+        counted = mask & np.isfinite(values)
+    assert (counted.sum() % 2 == 1) == odd
+    assert covered_percentile(values, mask, 50.0) == float(np.median(values[counted]))
+    for p in (1.0, 37.5, 99.0):
+        assert covered_percentile(values, mask, p) == float(np.percentile(values[counted], p))
+    assert covered_percentile(values, np.zeros_like(mask), 50.0) == 0.0
 
 
 def test_white_level_is_a_robust_percentile_of_covered_pixels() -> None:

@@ -25,7 +25,12 @@ Modules: :mod:`.sigma` (Eq. 2), :mod:`.lobes` (Eq. 4 on a renderer's lobes), :mo
 (§5.1-5.2), :mod:`.precomputed` (§5.3); compiled kernels in :mod:`._kernels`.
 """
 
-from ops.radiance_scaling.lobes import reflectance_delta, scale_lobes, white_level
+from ops.radiance_scaling.lobes import (
+    covered_percentile,
+    reflectance_delta,
+    scale_lobes,
+    white_level,
+)
 from ops.radiance_scaling.precomputed import (
     environment,
     latlong_lookup,
@@ -42,6 +47,7 @@ from ops.radiance_scaling.sigma import scaling_function, sigma
 __all__ = [
     "Scaled",
     "ashikhmin_shirley",
+    "covered_percentile",
     "environment",
     "latlong_lookup",
     "lit_sphere",

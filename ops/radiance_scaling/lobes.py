@@ -22,7 +22,7 @@ from ops.radiance_scaling._common import (
 from ops.radiance_scaling._kernels import _count_rows, _scale_rows
 from ops.radiance_scaling.sigma import _clip01
 
-__all__ = ["reflectance_delta", "scale_lobes", "white_level"]
+__all__ = ["covered_percentile", "reflectance_delta", "scale_lobes", "white_level"]
 
 # -- reflectance mapping for renderer lobes (Eq. 4) ----------------------------------------------
 
@@ -50,6 +50,19 @@ def white_level(
     percentile : float
         In (0, 100].
     """
+    level = covered_percentile(values, mask, percentile, weights)
+    return level if level > 0.0 else 1.0
+
+
+def covered_percentile(
+    values: np.ndarray,
+    mask: np.ndarray | None = None,
+    percentile: float = 50.0,
+    weights: Weights = REC709_Y,
+) -> float:
+    """``np.percentile`` (linear) of the finite values of the covered pixels (``mask`` as in
+    :func:`white_level`; RGB: their luminance with ``weights``), exactly, in two compiled
+    passes over the frame instead of gathering and sorting every value; 0.0 when none counts."""
     p = PERCENTILE.check(percentile, "percentile")
     vals, m8, wid = _counting(values, mask)
     lw = np.asarray(weights, np.float32)
@@ -57,7 +70,7 @@ def white_level(
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
         y = _count(vals, m8, wid, lw)[2]
         level = float(np.percentile(y, p, overwrite_input=True)) if y.size else 0.0
-    return level if level > 0.0 else 1.0
+    return level
 
 
 _BAND_MIN = 1 << 16  # below this many values np.percentile is cheap enough

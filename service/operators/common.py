@@ -14,6 +14,7 @@ from gbuffer.frame import Frame
 from ops import checks
 from ops.color import luminance
 from ops.lighting import luminance_gain, weighed_gain
+from ops.radiance_scaling import covered_percentile
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
 from service.images import load_image
@@ -133,11 +134,9 @@ def kept_lighting_gain(
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
     """``fraction`` of the image height in scene units at the covered pixels' median pixel size
-    (1.0 when nothing is covered)."""
-    covered = (frame.mask > 0) & np.isfinite(pixel_size)
-    if not covered.any():
-        return 1.0
-    return fraction * frame.image_height * float(np.median(pixel_size[covered]))
+    (its finite values; 1.0 when nothing is covered)."""
+    median = covered_percentile(pixel_size, frame.mask > 0, 50.0)
+    return fraction * frame.image_height * median if median > 0.0 else 1.0
 
 
 def total(planes: Iterable[np.ndarray]) -> np.ndarray:
