@@ -34,9 +34,18 @@ def median_ms(fn: Callable[[], object], repeat: int = 7, warmup: int = 1) -> flo
 
 def copy_unit_ms(shape: tuple[int, int] = HD, repeat: int = 21) -> float:
     """Median time to copy an (H, W, 3) float32 array: the memory-bound unit."""
-    src = np.random.default_rng(0).random((*shape, 3), dtype=np.float32)
-    dst = np.empty_like(src)
-    return median_ms(lambda: np.copyto(dst, src), repeat=repeat, warmup=3)
+    return _Copy(shape).median_ms(repeat)
+
+
+class _Copy:
+    """An (H, W, 3) float32 array and its destination, copied on demand."""
+
+    def __init__(self, shape: tuple[int, int]) -> None:
+        self.src = np.random.default_rng(0).random((*shape, 3), dtype=np.float32)
+        self.dst = np.empty_like(self.src)
+
+    def median_ms(self, repeat: int, warmup: int = 3) -> float:
+        return median_ms(lambda: np.copyto(self.dst, self.src), repeat=repeat, warmup=warmup)
 
 
 class Report:
@@ -44,12 +53,16 @@ class Report:
 
     def __init__(self, title: str, shape: tuple[int, int] = HD) -> None:
         self.title = title
-        self.unit = copy_unit_ms(shape)
+        self.copy = _Copy(shape)
+        self.unit = self.copy.median_ms(21)
         self.rows: list[tuple[str, float, float | None]] = []
         print(f"== {title} ({shape[1]}x{shape[0]}); copy unit {self.unit:.2f} ms")
 
-    def add(self, name: str, ms: float, target_ratio: float | None = None) -> float:
-        ratio = ms / self.unit
+    def add(
+        self, name: str, ms: float, target_ratio: float | None = None, ratio: float | None = None
+    ) -> float:
+        """Print a row; its ratio is ``ms`` over the report's copy unit unless given."""
+        ratio = ms / self.unit if ratio is None else ratio
         self.rows.append((name, ms, target_ratio))
         target = (
             f"  (target <= {target_ratio:g}x: {'ok' if ratio <= target_ratio else 'OVER'})"
@@ -67,3 +80,21 @@ class Report:
         target_ratio: float | None = None,
     ) -> float:
         return self.add(name, median_ms(fn, repeat=repeat), target_ratio)
+
+    def paired(
+        self,
+        name: str,
+        fn: Callable[[], object],
+        repeat: int = 9,
+        target_ratio: float | None = None,
+    ) -> float:
+        """Like :meth:`time`, but each run of ``fn`` follows its own copy unit (the median of 5
+        copies) and the ratio is the median of the runs' ratios: where the machine's speed drifts
+        over the benchmark (a shared or throttled machine), each ratio sees one speed."""
+        fn()
+        times, ratios = [], []
+        for _ in range(repeat):
+            unit = self.copy.median_ms(5, warmup=1)
+            times.append(median_ms(fn, repeat=1, warmup=0))
+            ratios.append(times[-1] / unit)
+        return self.add(name, statistics.median(times), target_ratio, statistics.median(ratios))
