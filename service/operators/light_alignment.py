@@ -275,7 +275,7 @@ def _keep_lighting(
         for x in (*relit, *lights):
             x[r] *= g
 
-    row_strips(*out.shape[:2], rows)
+    row_strips(out.shape[0], out.shape[1], rows)
 
 
 def lights_power(lights: list[Light]) -> float:

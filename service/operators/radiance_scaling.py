@@ -239,7 +239,7 @@ def _with_gain(
         for x in minus:
             out -= x[r]
 
-    row_strips(*scaled.shape[:2], rows)
+    row_strips(scaled.shape[0], scaled.shape[1], rows)
 
 
 def _keep_untouched(
