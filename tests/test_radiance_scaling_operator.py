@@ -21,7 +21,7 @@ from ops import radiance_scaling as rs
 from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
 from ops.lighting import weighed_gain
-from ops.pyramid.masked import masked_gaussian
+from ops.pyramid.masked import masked_gaussian, masked_gaussians
 from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
 from service import pipeline
@@ -488,3 +488,19 @@ def test_masked_gaussian_matches_the_normalised_convolution(channels: tuple[int,
             want = np.where(c_v > 0, num / (den[..., None] if channels else den), values)
         out = masked_gaussian(values, m, 3.0)
         np.testing.assert_allclose(out, want, rtol=1e-6, atol=1e-7)
+
+
+def test_masked_gaussians_share_the_coverage_and_match_one_by_one() -> None:
+    """Several planes (a lobe's light each) over one mask: each bit for bit what
+    :func:`masked_gaussian` gives it alone, planes and RGB, with holes and non-finite values."""
+    rng = np.random.default_rng(7)
+    planes = [rng.uniform(0.0, 2.0, (61, 83)).astype(np.float32) for _ in range(2)]
+    planes.append(rng.uniform(0.0, 1.0, (61, 83, 3)).astype(np.float32))
+    planes[1][7, 7] = np.nan
+    mask = (rng.random((61, 83)) > 0.2).astype(np.float32)
+    for m in (mask, np.ones_like(mask)):
+        for sigma_px in (2.5, 0.0):
+            together = masked_gaussians(planes, m, sigma_px)
+            assert len(together) == len(planes)
+            for plane, got in zip(planes, together, strict=True):
+                assert np.array_equal(got, masked_gaussian(plane, m, sigma_px), equal_nan=True)

@@ -15,7 +15,7 @@ from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
 from ops.color import luminance, luminance_of_sum, row_strips
 from ops.colorspace import LINEAR_REC709, ColorSpace, convert
-from ops.pyramid.masked import masked_gaussian
+from ops.pyramid.masked import masked_gaussians
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import scale_lobes, white_level
 from service.operators.base import Context, register
@@ -161,12 +161,13 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
     return "lobes" if any(lobe in frame.buffers for lobe in LOBES) else "beauty"
 
 
-def _light(frame: Frame, p: RadianceScalingParams, light: np.ndarray) -> np.ndarray:
-    """The light δ̄ is mapped from, as a luminance (all δ̄ reads of it): averaged at
-    ``light_scale`` (default: the curvature's)."""
+def _lights(frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray]) -> list[np.ndarray]:
+    """The lights δ̄ is mapped from, as luminances (all δ̄ reads of them): averaged at
+    ``light_scale`` (default: the curvature's) over the covered pixels (one coverage average
+    for them all)."""
     scale = p.scale if p.light_scale is None else p.light_scale
-    y = light if light.ndim == 2 else luminance(light, frame.colorspace.weights)
-    return masked_gaussian(y, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
+    ys = [x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in lights]
+    return masked_gaussians(ys, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
 
 
 def _lighting_gain(
@@ -187,7 +188,8 @@ def _scale_renderer_lobes(
     if not names:
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
-    lights = {n: _light(frame, p, frame.buffers.get(f"{n}.light", lobes[n])) for n in names}
+    given = [frame.buffers.get(f"{n}.light", lobes[n]) for n in names]
+    lights = dict(zip(names, _lights(frame, p, given), strict=True))
     mask = frame.mask > 0
     weights = frame.colorspace.weights
     white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
@@ -269,7 +271,7 @@ def _scale_beauty(
         has_albedo = y_albedo > MIN_ALBEDO
         np.divide(light, y_albedo, out=light, where=has_albedo)
         counted &= has_albedo
-    light = _light(frame, p, light)
+    (light,) = _lights(frame, p, [light])
     white = _white(ctx, p, "beauty", light, counted, weights)
     scaled, sigmas = scale_lobes(
         {"beauty": beauty},
