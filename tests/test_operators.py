@@ -596,6 +596,37 @@ def test_shade_directions_per_component(ball: analytic.Scene) -> None:
     np.testing.assert_allclose(moved["diffuse"], expected, atol=1e-5)
 
 
+@pytest.mark.parametrize("ior", [1.5, 0.8])
+def test_shade_directions_transmission_is_the_refracted_view_lobe(
+    ball: analytic.Scene, ior: float
+) -> None:
+    """Directional lights with a transmission lobe (a path-traced frame's glass): the compiled
+    pass gives Σ_i E_i max(t·ℓ_i, 0)^e with t the refracted view ray (:func:`transmission`),
+    0 where the ray cannot enter (total internal reflection, ior < 1) and off the surface, and
+    the per-light direction fields of the component are used."""
+    view = np.array([0.0, 0.0, 1.0], np.float32)
+    pos = positions(ball)
+    lights = [parse_light("0.3,-0.2,-1"), parse_light("-0.5,0.1,-0.6@1,0.5,0.25*2")]
+    kw = {"transmission": True, "ior": ior, "transmission_exponent": 8.0}
+    got = shade_directions(ball.normal, view, pos, lights, **kw)
+    want = sum(
+        shading.transmission(ball.normal, np.float32(li.vector), view, ior, 8.0)[..., None]
+        * (ball.mask[..., None] * np.float32(li.intensity) * np.asarray(li.color, np.float32))
+        for li in lights
+    )
+    np.testing.assert_allclose(got["transmission"], want, rtol=1e-4, atol=1e-6)
+    assert got["transmission"][ball.mask].max() > 0.1
+    assert not got["transmission"][~ball.mask].any()
+    if ior < 1.0:  # grazing view rays are totally reflected: no transmission there
+        nv = ball.normal[..., 2]
+        inside = ball.mask & (1.0 - ior**-2 * (1.0 - nv * nv) < -0.05)
+        assert inside.sum() > 20 and not got["transmission"][inside].any()
+    fields = [np.broadcast_to(np.float32([0.0, 0.0, -1.0]), (*ball.shape, 3)).copy()] * 2
+    moved = shade_directions(ball.normal, view, pos, lights, {"transmission": fields}, **kw)
+    np.testing.assert_array_equal(moved["diffuse"], got["diffuse"])  # its own light
+    assert np.abs(moved["transmission"] - got["transmission"]).max() > 0.1
+
+
 def test_shade_directions_point_light_matches_shade_lobes(ball: analytic.Scene) -> None:
     view = np.array([0.0, 0.0, 1.0], np.float32)
     pos = positions(ball)

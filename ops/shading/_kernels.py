@@ -77,6 +77,41 @@ def _add_row(t, e0, e1, e2, first, o):
 
 
 @kernel
+def _transmission_rows(nrm, lt, ltc, v, vc, eta, base, gate):
+    """Per pixel of the rows of (rows, 3W) ``nrm``: max(t·ℓ_t, 0) into ``base`` (to be raised to
+    the lobe's exponent) and, into ``gate``, the coverage (|n|² > 0.25) where the view ray
+    enters (k >= 0): :func:`ops.shading.brdf.transmission`'s t·ℓ = (η n·v − √k) n·ℓ − η ℓ·v,
+    k = 1 − η²(1 − (n·v)²), η = 1/ior. ``lt`` and ``v`` as ``ld`` in :func:`_terms_rows`."""
+    zero, one, quarter = np.float32(0.0), np.float32(1.0), np.float32(0.25)
+    for i in range(nrm.shape[0]):
+        n, b, w = nrm[i], lt[0 if ltc else i], v[0 if vc else i]
+        tr, gr = base[i], gate[i]
+        for j in range(tr.shape[0]):
+            nx, ny, nz = n[3 * j], n[3 * j + 1], n[3 * j + 2]
+            lx, ly, lz = b[3 * j], b[3 * j + 1], b[3 * j + 2]
+            vx, vy, vz = w[3 * j], w[3 * j + 1], w[3 * j + 2]
+            nl = nx * lx + ny * ly + nz * lz
+            nv = nx * vx + ny * vy + nz * vz
+            lv = lx * vx + ly * vy + lz * vz
+            k = one - eta * eta * (one - nv * nv)
+            root = np.sqrt(max(k, zero))
+            tr[j] = max((eta * nv - root) * nl - eta * lv, zero)
+            gr[j] = one if (nx * nx + ny * ny + nz * nz > quarter) and k >= zero else zero
+
+
+@kernel
+def _add_gated(term, gate, e, first, out):
+    """``out`` (=, or += unless ``first``) term × gate × E, E = ``e`` (3,); ``term`` is
+    overwritten by term × gate; ``out`` (rows, 3W)."""
+    e0, e1, e2 = e[0], e[1], e[2]
+    for i in range(out.shape[0]):
+        t, g = term[i], gate[i]
+        for j in range(t.shape[0]):
+            t[j] = t[j] * g[j]
+        _add_row(t, e0, e1, e2, first, out[i])
+
+
+@kernel
 def _radiance_rows(lit, col, const, rad, beauty, first):
     """Rows (3W) of :func:`lobe_radiance`: ``rad`` = lit × col (``col`` one row for all with
     ``const``), ``beauty`` = (or += unless ``first``) rad."""

@@ -9,7 +9,7 @@ import numpy as np
 
 from ops.checks import EXPONENT, FRACTION, IOR, ROUGHNESS, SHININESS
 from ops.parallel import run_strips
-from ops.shading._kernels import _add_terms, _terms_rows
+from ops.shading._kernels import _add_gated, _add_terms, _terms_rows, _transmission_rows
 from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lambert
 from ops.shading.lights import Light, light_irradiance, light_vectors
 from ops.shading.vectors import _dot_rows, _dots, dot
@@ -113,9 +113,10 @@ def shade_directions(
     lobes = ["diffuse"] + (["specular"] if specular != "none" else [])
     lobes += ["transmission"] if transmission else []
     out = {lobe: np.empty((*shape, 3), np.float32) for lobe in lobes}
-    if all(light.kind == "directional" for light in lights) and lights and not transmission:
+    if all(light.kind == "directional" for light in lights) and lights:
         if specular in ("blinn_phong", "none"):
-            _shade_directional(normal, view_a, lights, dirs, diffuse, specular, shininess, out)
+            models = (diffuse, specular, shininess, ior, transmission_exponent)
+            _shade_directional(normal, view_a, lights, dirs, models, out)
             return out
 
     def strip(r0: int, r1: int) -> None:
@@ -189,60 +190,65 @@ def _flat_rows(
     return np.ascontiguousarray(a).reshape(hgt, 3 * wid), False
 
 
+#: A field as rows for a kernel and whether it is one row used for all (:func:`_flat_rows`).
+_Rows = tuple[np.ndarray, bool]
+
+
 def _shade_directional(
     normal: np.ndarray,
     view: np.ndarray,
     lights: Sequence[Light],
     dirs: dict[str, list[np.ndarray]],
-    diffuse: str,
-    specular: str,
-    shininess: float,
+    models: tuple[str, str, float, float, float],
     out: dict[str, np.ndarray],
 ) -> None:
-    """:func:`shade_directions` for directional lights, Lambert or half-Lambert and Blinn-Phong
-    or no specular: per light, one compiled pass per strip for the terms (:func:`_terms_rows`),
-    (n·h)^s with cv2.pow on the strip, and one pass adding them times the irradiance."""
+    """:func:`shade_directions` for directional lights, Lambert or half-Lambert, Blinn-Phong or
+    no specular, and transmission where ``out`` has that lobe (``models``: diffuse, specular,
+    shininess, ior, transmission exponent): per light, one compiled pass per strip for the terms
+    (:func:`_terms_rows`, :func:`_transmission_rows`), the powers with cv2.pow on the strip, and
+    one pass adding them times the irradiance."""
+    diffuse, specular, shininess, ior, exponent = models
     hgt, wid = normal.shape[:2]
     shape = (hgt, wid, 3)
     nrm = normal.reshape(hgt, 3 * wid)
     v, vc = _flat_rows(view, shape, "view", constant=True)
-    per_light = []
+
+    def field(comp: str, i: int, own: np.ndarray) -> _Rows:
+        given = dirs[comp][i] if comp in dirs else own
+        return _flat_rows(given, shape, f"directions[{comp!r}][{i}]", constant=True)
+
+    per_light: list[tuple[_Rows, _Rows, _Rows, np.ndarray]] = []
     for i, light in enumerate(lights):
         own = np.asarray(light.vector, np.float32)
-        d_field = dirs["diffuse"][i] if "diffuse" in dirs else own
-        s_field = dirs["specular"][i] if "specular" in dirs else own
-        ld, ldc = _flat_rows(d_field, shape, f"directions['diffuse'][{i}]", constant=True)
-        ls, lsc = _flat_rows(s_field, shape, f"directions['specular'][{i}]", constant=True)
         e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
-        per_light.append((ld, ldc, ls, lsc, e.reshape(3)))
+        ld, ls, lt = (field(c, i, own) for c in ("diffuse", "specular", "transmission"))
+        per_light.append((ld, ls, lt, e.reshape(3)))
     spec = specular != "none"
     half = diffuse != "lambert"
     od = out["diffuse"].reshape(hgt, 3 * wid)
     os_ = out["specular"].reshape(hgt, 3 * wid) if spec else od[:0]
+    ot = out["transmission"].reshape(hgt, 3 * wid) if "transmission" in out else None
+    eta = np.float32(1.0 / ior)
+
+    def rows(a: _Rows, r0: int, r1: int) -> np.ndarray:
+        return a[0] if a[1] else a[0][r0:r1]
 
     def strip(r0: int, r1: int) -> None:
         n = r1 - r0
         d_term = np.empty((n, wid), np.float32)
         nh = np.empty((n, wid), np.float32)
         gate = np.empty((n, wid), np.float32)
-        for i, (ld, ldc, ls, lsc, e) in enumerate(per_light):
-            _terms_rows(
-                nrm[r0:r1],
-                ld if ldc else ld[r0:r1],
-                ldc,
-                ls if lsc else ls[r0:r1],
-                lsc,
-                v if vc else v[r0:r1],
-                vc,
-                half,
-                spec,
-                d_term,
-                nh,
-                gate,
-            )
+        for i, (ld, ls, lt, e) in enumerate(per_light):
+            d_rows, s_rows, v_rows = rows(ld, r0, r1), rows(ls, r0, r1), rows((v, vc), r0, r1)
+            args = (d_rows, ld[1], s_rows, ls[1], v_rows, vc, half, spec, d_term, nh, gate)
+            _terms_rows(nrm[r0:r1], *args)
             if spec:
                 cv2.pow(nh, float(shininess), dst=nh)
             _add_terms(d_term, nh, gate, e, i == 0, spec, od[r0:r1], os_[r0:r1] if spec else os_)
+            if ot is not None:  # (nh and gate are free again)
+                _transmission_rows(nrm[r0:r1], rows(lt, r0, r1), lt[1], v_rows, vc, eta, nh, gate)
+                cv2.pow(nh, float(exponent), dst=nh)
+                _add_gated(nh, gate, e, i == 0, ot[r0:r1])
 
     run_strips(hgt, strip, rows=_SHADE_ROWS)
 
