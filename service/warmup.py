@@ -6,7 +6,7 @@ processes waits for the compiler (tens of seconds); every later process only loa
 container image or a farm node's provisioning runs ``depict warmup`` once: it renders the bundled
 example mesh small, in both renderer-lobe and G-buffer-only forms, and runs every operator of
 the registry on it with its default parameters, plus the frame-size variants the kernels
-specialise on (an odd size, a float coverage mask).
+specialise on (an odd size, a float coverage mask) and the lobes the example lacks (transmission).
 """
 
 from __future__ import annotations
@@ -18,6 +18,7 @@ import numpy as np
 
 from gbuffer.render import auto_camera, load_mesh, render
 from ops.curvature import isotropic, mean_curvature_layers, principal_curvatures
+from ops.shading import parse_light, shade_directions
 from service import pipeline
 from service.registry import operators
 
@@ -51,4 +52,8 @@ def warm(mesh: Path = EXAMPLE, size: tuple[int, int] = (96, 72)) -> dict[str, fl
         isotropic(principal_curvatures(normal[part], depth[part], scale=0.1))
     mean_curvature_layers(principal_curvatures(normal, depth, scale=0.1))  # their one pass
     times["curvature variants"] = time.perf_counter() - t0
+    t0 = time.perf_counter()  # a path-traced frame's transmission lobe (glass), as LLA shades it
+    view = np.array([0.0, 0.0, 1.0], np.float32)
+    shade_directions(normal, view, frame.positions(), [parse_light("0,0,-1")], transmission=True)
+    times["shading variants"] = time.perf_counter() - t0
     return times

@@ -165,6 +165,9 @@ mesh = load_mesh(EXAMPLE)
 frame = render(mesh, 480, 1080, camera=auto_camera(mesh, width=480, height=1080))
 for op in ("curvature", "radiance_scaling"):
     pipeline.run(frame, [{"op": op}])
+glass = frame.copy()  # a transmission lobe, as a path-traced frame's glass has
+glass.buffers["transmission"] = frame.buffers["diffuse"]
+pipeline.run(glass, [{"op": "light_alignment"}])
 after = loaded()
 print(sorted(name for name, n in after.items() if n > before.get(name, 0)))
 """
@@ -172,8 +175,9 @@ print(sorted(name for name, n in after.items() if n > before.get(name, 0)))
 
 def test_warmup_loads_every_kernel_a_full_height_frame_needs() -> None:
     """After ``depict warmup``, curvature and Radiance Scaling on a 1080-row frame (whose
-    curvature runs on a coarser working grid) need no kernel compiled or loaded for new types:
-    the first real frame does not pay a compilation."""
+    curvature runs on a coarser working grid), and Light Alignment on it with a transmission
+    lobe, need no kernel compiled or loaded for new types: the first real frame does not pay a
+    compilation."""
     run = subprocess.run([sys.executable, "-c", WARM_COVERS], capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
     assert run.stdout.strip().splitlines()[-1] == "[]"
