@@ -627,6 +627,26 @@ def test_shade_directions_transmission_is_the_refracted_view_lobe(
     assert np.abs(moved["transmission"] - got["transmission"]).max() > 0.1
 
 
+def test_apply_gain_scales_the_relit_lobes_and_moves_the_beauty_with_them() -> None:
+    """The kept lighting's gain on Light Alignment's relit lobes: each lobe and light × gain in
+    place, the beauty + Σ (gain − 1) lobe_j; lights do not count in the beauty."""
+    rng = np.random.default_rng(3)
+    shape = (37, 53, 3)
+    lobes = [rng.random(shape, dtype=np.float32) for _ in range(3)]
+    lights = [rng.random(shape, dtype=np.float32)]
+    beauty = rng.random(shape, dtype=np.float32) + sum(lobes)
+    gain = rng.uniform(0.5, 1.5, shape[:2]).astype(np.float32)
+    gain[::3] = 1.0
+    want_beauty = beauty + (gain[..., None] - 1.0) * sum(lobes)
+    want = [x * gain[..., None] for x in (*lobes, *lights)]
+    kept = beauty.copy()
+    shading.apply_gain(beauty, gain, lobes, lights)
+    for got, expected in zip((*lobes, *lights), want, strict=True):
+        np.testing.assert_array_equal(got, expected)
+    np.testing.assert_allclose(beauty, want_beauty, rtol=1e-6, atol=1e-6)
+    np.testing.assert_array_equal(beauty[::3], kept[::3])  # a gain of 1 changes nothing
+
+
 def test_shade_directions_point_light_matches_shade_lobes(ball: analytic.Scene) -> None:
     view = np.array([0.0, 0.0, 1.0], np.float32)
     pos = positions(ball)

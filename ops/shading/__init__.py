@@ -36,7 +36,7 @@ from ops.shading.brdf import (
 from ops.shading.directions import DIFFUSE_MODELS, SPECULAR_MODELS, shade_directions
 from ops.shading.lights import LIGHT_SYNTAX, Light, light_irradiance, light_vectors, parse_light
 from ops.shading.lobes import MODELS, Model, shade_lobes
-from ops.shading.relight import lobe_radiance, ratio_relight
+from ops.shading.relight import apply_gain, lobe_radiance, ratio_relight
 from ops.shading.vectors import Vec3, dot, normalize, reflect, refract
 
 __all__ = [
@@ -47,6 +47,7 @@ __all__ = [
     "Light",
     "Model",
     "Vec3",
+    "apply_gain",
     "ashikhmin_shirley",
     "blinn_phong",
     "dot",

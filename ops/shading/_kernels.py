@@ -149,3 +149,19 @@ def _ratio_rows(lobe, light, a, o, eps, rmax, new, new_light, acc):
             lt, nlt = light[i], new_light[i]
             for j in range(lt.shape[0]):
                 nlt[j] = lt[j] * ratio[j]
+
+
+@kernel
+def _gain_rows(x, gain, add, out):
+    """Rows (3W) of ``x`` × ``gain`` (rows of W) in place and, with ``add``, the change
+    x·gain − x added to ``out`` (rows like ``x``)."""
+    for i in range(x.shape[0]):
+        xr, g, o = x[i], gain[i], out[i]
+        for j in range(g.shape[0]):
+            for c in range(3):
+                m = 3 * j + c
+                old = xr[m]
+                new = old * g[j]
+                xr[m] = new
+                if add:
+                    o[m] += new - old

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 
 from ops.parallel import run_strips
-from ops.shading._kernels import _radiance_rows, _ratio_rows
+from ops.shading._kernels import _gain_rows, _radiance_rows, _ratio_rows
 from ops.shading.directions import _SHADE_ROWS, _flat_rows
 
-__all__ = ["lobe_radiance", "ratio_relight"]
+__all__ = ["apply_gain", "lobe_radiance", "ratio_relight"]
 
 
 def lobe_radiance(
@@ -125,3 +125,22 @@ def ratio_relight(
 
     run_strips(hgt, strip, rows=_SHADE_ROWS)
     return out, new, new_light
+
+
+def apply_gain(
+    beauty: np.ndarray, gain: np.ndarray, lobes: list[np.ndarray], lights: list[np.ndarray]
+) -> None:
+    """A per-pixel ``gain`` (H, W) applied in place to relit ``lobes`` and their ``lights``
+    ((H, W, 3) each, C-contiguous float32), the ``beauty`` they are part of changed by as much:
+    beauty += Σ_j (gain − 1) lobe_j (each lobe's change added as it is made). One compiled pass
+    per array and row strip."""
+    hgt, wid = gain.shape
+    flat = [(x.reshape(hgt, 3 * wid), True) for x in lobes]
+    flat += [(x.reshape(hgt, 3 * wid), False) for x in lights]
+    out = beauty.reshape(hgt, 3 * wid)
+
+    def strip(r0: int, r1: int) -> None:
+        for x, add in flat:
+            _gain_rows(x[r0:r1], gain[r0:r1], add, out[r0:r1])
+
+    run_strips(hgt, strip, rows=_SHADE_ROWS)

@@ -35,16 +35,15 @@ from pydantic import Field, model_validator
 
 from gbuffer.frame import LOBES, Frame
 from ops import checks, filtering
-from ops.color import luminance_of_sum, row_strips
+from ops.color import luminance_of_sum
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
-from ops.shading import Light, lobe_radiance, ratio_relight, shade_directions
+from ops.shading import Light, apply_gain, lobe_radiance, ratio_relight, shade_directions
 from service.operators.base import Context, register
 from service.operators.common import (
     LightsParams,
     channels,
     frame_albedo,
     kept_lighting_gain,
-    total,
 )
 
 Component = Literal["diffuse", "specular", "transmission"]
@@ -259,25 +258,6 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
             frame.set_layer(f"lla_n{i}", channels(n_i))
 
 
-def _keep_lighting(
-    out: np.ndarray, gain: np.ndarray, relit: list[np.ndarray], lights: list[np.ndarray]
-) -> None:
-    """The kept lighting's ``gain`` applied in place, by strips of rows: ``out`` (the beauty)
-    + (gain − 1) Σ ``relit``, and every relit lobe and its light × gain (new arrays of
-    :func:`ratio_relight`)."""
-
-    def rows(r: slice) -> None:
-        g = gain[r][..., None]
-        after = total(x[r] for x in relit)
-        change = after * g
-        change -= after
-        out[r] += change
-        for x in (*relit, *lights):
-            x[r] *= g
-
-    row_strips(out.shape[0], out.shape[1], rows)
-
-
 def lights_power(lights: list[Light]) -> float:
     """Σ of the lights' intensity × mean colour: the unit of the ratio form's ε."""
     return float(sum(light.intensity * float(np.mean(light.color)) for light in lights)) or 1.0
@@ -338,7 +318,7 @@ def _ratio(
         before = luminance_of_sum([given[lobe][0] for lobe in lobes], weights)
         after = luminance_of_sum([new[lobe] for lobe in lobes], weights)
         gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
-        _keep_lighting(out, gain, [new[lobe] for lobe in lobes], list(new_light.values()))
+        apply_gain(out, gain, [new[lobe] for lobe in lobes], list(new_light.values()))
     frame.buffers.update(new)
     frame.buffers.update({f"{lobe}.light": light for lobe, light in new_light.items()})
     frame.buffers["beauty"] = out
