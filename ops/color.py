@@ -183,7 +183,7 @@ def luminance_of_sum(
 ) -> np.ndarray:
     """``luminance(total(rgbs))`` of (H, W, 3) arrays, bit for bit (the sum taken in order in
     float32), by strips of rows: the RGB sum is never formed at full size."""
-    first, *others = (_check_rgb(x, "rgbs[i]") for x in rgbs)
+    first, *others = (_check_rgb(x, f"rgbs[{i}]") for i, x in enumerate(rgbs))
     h, w = first.shape[:2]
     w0, w1, w2 = (np.float32(x) for x in weights)
     out = np.empty((h, w), np.float32)

@@ -39,6 +39,16 @@ def test_sphere_is_convex_everywhere() -> None:
     assert (isotropic(c)[inner] > 0.2).all()
 
 
+def test_one_column_keeps_the_curvature_along_it() -> None:
+    """A frame one pixel wide has no derivative across it: the trace is 0, κ1 = −κ2 = |(d, b)|
+    from the derivatives along the column (as before d and b came out of the trace's pass)."""
+    s = analytic.sphere(128)
+    col = slice(60, 61)
+    c = principal_curvatures(s.normal[:, col], s.depth[:, col], s.mask[:, col], scale=0.0)
+    np.testing.assert_array_equal(c.k1, -c.k2)
+    assert (c.k1 >= 0).all() and c.k1[s.mask[:, col]].max() > 1.0
+
+
 def test_bowl_is_concave_everywhere() -> None:
     s = analytic.bowl(128)
     c = _curv(s)

@@ -645,6 +645,13 @@ def test_apply_gain_scales_the_relit_lobes_and_moves_the_beauty_with_them() -> N
         np.testing.assert_array_equal(got, expected)
     np.testing.assert_allclose(beauty, want_beauty, rtol=1e-6, atol=1e-6)
     np.testing.assert_array_equal(beauty[::3], kept[::3])  # a gain of 1 changes nothing
+    # arrays it cannot change in place are refused, not silently left as they were
+    wide = np.zeros((37, 106, 3), np.float32)
+    for bad in (wide[:, ::2], beauty.astype(np.float64)):
+        with pytest.raises(ValueError, match="C-contiguous float32"):
+            shading.apply_gain(bad, gain, lobes, lights)
+        with pytest.raises(ValueError, match="C-contiguous float32"):
+            shading.apply_gain(beauty, gain, [bad], lights)
 
 
 def test_shade_directions_point_light_matches_shade_lobes(ball: analytic.Scene) -> None:

@@ -504,3 +504,24 @@ def test_masked_gaussians_share_the_coverage_and_match_one_by_one() -> None:
             assert len(together) == len(planes)
             for plane, got in zip(planes, together, strict=True):
                 assert np.array_equal(got, masked_gaussian(plane, m, sigma_px), equal_nan=True)
+                want = _masked_gaussian_alone(plane, m, sigma_px)
+                assert np.array_equal(got, want, equal_nan=True)
+
+
+def _masked_gaussian_alone(values: np.ndarray, mask: np.ndarray, sigma_px: float) -> np.ndarray:
+    """The masked Gaussian of one plane as the release before the shared coverage average
+    computed it (its own G_σ * c), for the bit-for-bit comparison."""
+    src = np.ascontiguousarray(values, dtype=np.float32)
+    if sigma_px <= 0.0:
+        return src
+    covered = mask > 0
+    weighted = np.where(np.isfinite(src), src, np.float32(0.0))
+    if covered.all():
+        return np.asarray(cv2.GaussianBlur(weighted, (0, 0), sigma_px), np.float32)
+    weighted = cv2.copyTo(weighted, covered.view(np.uint8))
+    out = np.asarray(cv2.GaussianBlur(weighted, (0, 0), sigma_px), np.float32)
+    den = np.asarray(cv2.GaussianBlur(covered.astype(np.float32), (0, 0), sigma_px), np.float32)
+    keep = ~covered | (den <= 1e-4)
+    np.divide(1.0, den, out=den, where=~keep)
+    out *= den[..., None] if src.ndim == 3 else den
+    return np.asarray(cv2.copyTo(src, keep.view(np.uint8), out), np.float32)

@@ -328,8 +328,9 @@ def _trace_rows(smooth, nch, wsw, covp, f, rows, coef, trace, d_out, b_out, wgt)
         if wid >= 2:  # one-sided, doubled, on the first and last column
             _hessian_at(rows_q, 0, 0, 1, two * sx, ys, outs)
             _hessian_at(rows_q, wid - 1, wid - 2, wid - 1, two * sx, ys, outs)
-        else:
-            outs[0][0], outs[1][0], outs[2][0] = zero, zero, zero
+        else:  # one column: no derivative along it (a = 0); the trace is taken as 0
+            _hessian_at(rows_q, 0, 0, 0, zero, ys, outs)
+            outs[0][0] = zero
         # 3x3 erosion of the coverage (replicated at the edges of q's rows and of the image).
         ca = covp[max(r - 1, 0)]
         cb = covp[r]

@@ -51,7 +51,7 @@ def white_level(
         In (0, 100].
     """
     level = covered_percentile(values, mask, percentile, weights)
-    return level if level > 0.0 else 1.0
+    return level if level > 0.0 else 1.0  # (also when nothing counts: NaN)
 
 
 def covered_percentile(
@@ -62,14 +62,14 @@ def covered_percentile(
 ) -> float:
     """``np.percentile`` (linear) of the finite values of the covered pixels (``mask`` as in
     :func:`white_level`; RGB: their luminance with ``weights``), exactly, in two compiled
-    passes over the frame instead of gathering and sorting every value; 0.0 when none counts."""
+    passes over the frame instead of gathering and sorting every value; NaN when none counts."""
     p = PERCENTILE.check(percentile, "percentile")
     vals, m8, wid = _counting(values, mask)
     lw = np.asarray(weights, np.float32)
     level = _banded_percentile(vals, m8, wid, p, lw)
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
         y = _count(vals, m8, wid, lw)[2]
-        level = float(np.percentile(y, p, overwrite_input=True)) if y.size else 0.0
+        level = float(np.percentile(y, p, overwrite_input=True)) if y.size else math.nan
     return level
 
 

@@ -221,7 +221,8 @@ def _shade_directional(
     for i, light in enumerate(lights):
         own = np.asarray(light.vector, np.float32)
         e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
-        ld, ls, lt = (field(c, i, own) for c in ("diffuse", "specular", "transmission"))
+        ld, ls = field("diffuse", i, own), field("specular", i, own)
+        lt = field("transmission", i, own) if "transmission" in out else ld  # (not read)
         per_light.append((ld, ls, lt, e.reshape(3)))
     spec = specular != "none"
     half = diffuse != "lambert"

@@ -131,10 +131,17 @@ def apply_gain(
     beauty: np.ndarray, gain: np.ndarray, lobes: list[np.ndarray], lights: list[np.ndarray]
 ) -> None:
     """A per-pixel ``gain`` (H, W) applied in place to relit ``lobes`` and their ``lights``
-    ((H, W, 3) each, C-contiguous float32), the ``beauty`` they are part of changed by as much:
+    (C-contiguous float32 (H, W, 3) arrays, as the beauty; anything else is a ValueError), the
+    ``beauty`` they are part of changed by as much:
     beauty += Σ_j (gain − 1) lobe_j (each lobe's change added as it is made). One compiled pass
     per array and row strip."""
     hgt, wid = gain.shape
+    for x in (beauty, *lobes, *lights):  # (changed in place: a reshaped copy would lose it)
+        if x.shape != (hgt, wid, 3) or x.dtype != np.float32 or not x.flags.c_contiguous:
+            raise ValueError(
+                f"apply_gain changes C-contiguous float32 ({hgt}, {wid}, 3) arrays in place; "
+                f"got {x.dtype} {x.shape}{'' if x.flags.c_contiguous else ' (not contiguous)'}"
+            )
     flat = [(x.reshape(hgt, 3 * wid), True) for x in lobes]
     flat += [(x.reshape(hgt, 3 * wid), False) for x in lights]
     out = beauty.reshape(hgt, 3 * wid)

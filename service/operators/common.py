@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from typing import Annotated, Any, Literal
 
 import cv2
@@ -136,16 +136,7 @@ def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) 
     """``fraction`` of the image height in scene units at the covered pixels' median pixel size
     (its finite values; 1.0 when nothing is covered)."""
     median = covered_percentile(pixel_size, frame.mask > 0, 50.0)
-    return fraction * frame.image_height * median if median > 0.0 else 1.0
-
-
-def total(planes: Iterable[np.ndarray]) -> np.ndarray:
-    """The sum of ``planes`` (at least one), added in order into a new float32 array."""
-    first, *others = planes
-    out = np.array(first, np.float32)
-    for plane in others:
-        out += plane
-    return out
+    return 1.0 if math.isnan(median) else fraction * frame.image_height * median
 
 
 def channels(field: np.ndarray, names: str = "XYZ", *, copy: bool = True) -> dict[str, np.ndarray]:
