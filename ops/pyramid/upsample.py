@@ -96,14 +96,13 @@ def upsample_row(grid, f, y, v, out):  # type: ignore[no-untyped-def]
         o = -1 if fx < 0.0 else 0
         r = np.float32(fx - o)
         s = one - r
-        for j in range(wk):
-            lft = j + o
-            if lft < 0:
-                out[f * j + p] = v[0]
-            elif lft + 1 > wk - 1:
-                out[f * j + p] = v[wk - 1]
-            else:
-                out[f * j + p] = s * v[lft] + r * v[lft + 1]
+        j0, j1 = -o, wk - 1 - o  # j0 <= j < j1: both samples inside the row
+        for j in range(min(j0, wk)):  # before the first sample's centre: the edge
+            out[f * j + p] = v[0]
+        for j in range(j0, j1):
+            out[f * j + p] = s * v[j + o] + r * v[j + o + 1]
+        for j in range(max(j1, j0), wk):  # past the last one's
+            out[f * j + p] = v[wk - 1]
 
 
 @kernel

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ops.jit import inline_kernel, kernel
+from ops.pyramid.upsample import upsample_row
 
 #: Taps of the wider (4×4) pass: the columns of the tap arrays.
 MAX_TAPS = 16
@@ -94,48 +95,24 @@ def fine_fixups(blocks, fine_valid, fine_iz, iz_c, f, thr, r0, r1, out):  # type
     cells, as row-major flat indices into ``out`` (ascending; returns how many): the pixels on
     a surface (``fine_valid``) whose 2×2 block of cells is flagged (``blocks``, (hc + 1, wc + 1):
     block (i, j) holds cells i−1…i, j−1…j) or whose own depth guide ``fine_iz`` departs by more
-    than ``thr`` from the level's ``iz_c`` interpolated bilinearly (a small object inside a
-    cell)."""
+    than ``thr`` from the level's ``iz_c`` upsampled bilinearly (:func:`upsample_row`, as
+    cv2.resize): a small object inside a cell."""
     wf = fine_iz.shape[1]
-    hc = iz_c.shape[0]
-    xa, xb, fx = _taps_1d(wf, f, iz_c.shape[1])
-    ya, yb, fy = _taps_1d(r1, f, hc)
-    across = np.empty((hc, wf), np.float32)  # each cell row interpolated along the fine row
-    for c in range(ya[r0], yb[r1 - 1] + 1):
-        row = iz_c[c]
-        for x in range(wf):
-            across[c, x] = row[xa[x]] + fx[x] * (row[xb[x]] - row[xa[x]])
     bcol = np.empty(wf, np.int64)
     for x in range(wf):
         bcol[x] = (x + f // 2) // f
+    scratch = np.empty(iz_c.shape[1], np.float32)
+    near = np.empty(f * iz_c.shape[1], np.float32)  # the row of the upsampled guide
     need = np.empty(wf, np.bool_)
-    one = np.float32(1.0)
     n = 0
     for y in range(r0, r1):
         brow = blocks[(y + f // 2) // f]
-        top, bot, wy = across[ya[y]], across[yb[y]], fy[y]
+        upsample_row(iz_c, f, y, scratch, near)
         ok, iz = fine_valid[y], fine_iz[y]
         for x in range(wf):  # (vectorised)
-            far = abs(iz[x] - ((one - wy) * top[x] + wy * bot[x])) > thr
-            need[x] = (ok[x] != 0) & ((brow[bcol[x]] != 0) | far)
+            need[x] = (ok[x] != 0) & ((brow[bcol[x]] != 0) | (abs(iz[x] - near[x]) > thr))
         for x in range(wf):
             if need[x]:
                 out[n] = y * wf + x
                 n += 1
     return n
-
-
-@inline_kernel
-def _taps_1d(n, f, cells):  # type: ignore[no-untyped-def]
-    """Bilinear taps along an axis of ``n`` fine pixels, ``f`` per cell of ``cells``: the lower
-    and upper cell and the weight of the upper, at (i + ½) / f − ½ clamped to the cells."""
-    lo, hi = np.empty(n, np.int64), np.empty(n, np.int64)
-    w = np.empty(n, np.float32)
-    half, inv_f = np.float32(0.5), np.float32(1.0 / f)
-    for i in range(n):
-        s = (np.float32(i) + half) * inv_f - half
-        a = int(np.floor(s))
-        w[i] = s - np.float32(a) if a >= 0 else np.float32(0.0)
-        lo[i] = max(a, 0)
-        hi[i] = min(max(a, 0) + 1, cells - 1)
-    return lo, hi, w
