@@ -169,6 +169,20 @@ def test_covered_percentile_is_numpys_exactly(odd: bool) -> None:
     assert np.isnan(covered_percentile(values, np.zeros_like(mask), 50.0))  # nothing counts
 
 
+@pytest.mark.parametrize("share", [0.3, 0.55, 0.9])
+def test_covered_percentile_of_many_equal_values_is_numpys(share: float) -> None:
+    """A large share of pixels holding one value (a wall facing the camera, a clipped light):
+    the percentiles whose bracket holds only that value, and those beside it, are NumPy's."""
+    rng = np.random.default_rng(7)
+    values = (rng.random((600, 640), dtype=np.float32) + 0.5).astype(np.float32)
+    tied = rng.random(values.shape) < share
+    values[tied] = np.float32(1.0)
+    mask = rng.random(values.shape) > 0.2
+    counted = values[mask]
+    for p in (1.0, 25.0, 50.0, 62.5, 75.0, 99.0):
+        assert covered_percentile(values, mask, p) == float(np.percentile(counted, p)), p
+
+
 def test_white_level_is_a_robust_percentile_of_covered_pixels() -> None:
     rng = np.random.default_rng(2)
     y = rng.random((64, 64)).astype(np.float32)

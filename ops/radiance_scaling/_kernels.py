@@ -15,9 +15,9 @@ from ops.radiance_scaling._common import _ACC_BEAUTY, _ACC_LOBES
 def _count_rows(rows, m8, wid, step, lo, hi, lw, out):
     """:func:`_count` on every ``step``-th of ``rows`` ((n, W) values or (n, 3W) RGB; ``m8``
     uint8 coverage, or no rows; ``lw`` the (3,) float32 luminance weights): (counted, below
-    ``lo``, packed into ``out``). The counts are
-    vectorised reductions that also flag the values in the band; only the 8-byte words of flags
-    that hold one are looked at to pack them."""
+    ``lo``, in [``lo``, ``hi``]), those in the band packed into ``out`` unless it is empty. The
+    counts are vectorised reductions that also flag the values in the band; only the 8-byte
+    words of flags that hold one are looked at to pack them."""
     y = np.empty(wid, np.float32)
     ones = np.ones(wid, np.uint8)
     nw = (wid + 7) // 8
@@ -25,7 +25,8 @@ def _count_rows(rows, m8, wid, step, lo, hi, lw, out):
     words = flags.view(np.uint64)
     w0, w1, w2 = lw[0], lw[1], lw[2]
     big = np.float32(np.inf)
-    counted = below = k = 0
+    pack = out.shape[0] > 0
+    counted = below = inside = k = 0
     for i in range(0, rows.shape[0], step):
         if rows.shape[1] == wid:
             y[:] = rows[i]
@@ -41,14 +42,15 @@ def _count_rows(rows, m8, wid, step, lo, hi, lw, out):
             below += ok & (v < lo)
             n_in += band
             flags[j] = band
-        if n_in:
+        inside += n_in
+        if n_in and pack:
             for q in range(nw):
                 if words[q]:
                     for j in range(8 * q, min(8 * q + 8, wid)):
                         if flags[j]:
                             out[k] = y[j]
                             k += 1
-    return counted, below, k
+    return counted, below, inside
 
 
 @inline_kernel

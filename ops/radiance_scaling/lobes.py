@@ -68,7 +68,7 @@ def covered_percentile(
     lw = np.asarray(weights, np.float32)
     level = _banded_percentile(vals, m8, wid, p, lw)
     if level is None:  # small, or the bracket missed: np.percentile of all the counted values
-        y = _count(vals, m8, wid, lw)[2]
+        y = _count(vals, m8, wid, lw)[3]
         level = float(np.percentile(y, p, overwrite_input=True)) if y.size else math.nan
     return level
 
@@ -103,11 +103,13 @@ def _count(
     lw: np.ndarray,
     lo: float = -_INF,
     hi: float = _INF,
-) -> tuple[int, int, np.ndarray]:
+    pack: bool = True,
+) -> tuple[int, int, int, np.ndarray]:
     """Over the counted pixels (finite values of covered pixels; RGB: their luminance): how
-    many there are, how many are below ``lo``, and those in [lo, hi], in row order (1-D)."""
+    many there are, how many are below ``lo``, how many in [lo, hi], and (``pack``) those, in
+    row order (1-D; empty without ``pack``)."""
     hgt = vals.shape[0]
-    buf = np.empty(hgt * wid, np.float32)
+    buf = np.empty(hgt * wid if pack else 0, np.float32)
     starts = range(0, hgt, _STRIP_ROWS)
     res = np.zeros((len(starts), 3), np.int64)
     lo32, hi32 = np.float32(lo), np.float32(hi)
@@ -118,8 +120,11 @@ def _count(
         res[r0 // _STRIP_ROWS] = _count_rows(vals[r0:r1], rows, wid, 1, lo32, hi32, lw, out)
 
     run_strips(hgt, strip, _STRIP_ROWS)
+    inside = int(res[:, 2].sum())
+    if not pack:
+        return int(res[:, 0].sum()), int(res[:, 1].sum()), inside, buf
     pieces = [buf[a * wid : a * wid + n] for a, n in zip(starts, res[:, 2], strict=True)]
-    return int(res[:, 0].sum()), int(res[:, 1].sum()), np.concatenate(pieces)
+    return int(res[:, 0].sum()), int(res[:, 1].sum()), inside, np.concatenate(pieces)
 
 
 def _banded_percentile(
@@ -144,11 +149,16 @@ def _banded_percentile(
     margin = 8.0 * math.sqrt(ns * q * (1.0 - q)) + 32.0  # order-statistic spread, with room
     lo_r, hi_r = max(0, int(centre - margin)), min(ns - 1, int(centre + margin) + 1)
     sample.partition([lo_r, hi_r])
-    n, n_below, band = _count(vals, m8, wid, lw, sample[lo_r], sample[hi_r])
+    lo, hi = sample[lo_r], sample[hi_r]
+    # a bracket of one value (many pixels alike: a flat wall, a clipped light) holds nothing
+    # but that value: counting the band is enough
+    n, n_below, inside, band = _count(vals, m8, wid, lw, lo, hi, pack=bool(lo != hi))
     g = (n - 1) * q  # numpy's virtual index for the linear method
     k = math.floor(g)
-    if n < _BAND_MIN or k + 1 > n - 1 or not (n_below <= k and n_below + band.size > k + 1):
+    if n < _BAND_MIN or k + 1 > n - 1 or not (n_below <= k and n_below + inside > k + 1):
         return None
+    if lo == hi:
+        return float(lo)
     band.partition([k - n_below, k + 1 - n_below])
     pair = np.array([band[k - n_below], band[k + 1 - n_below]], np.float32)
     # quantile of the pair at the fractional part: numpy's lerp, with the same (weak) weight.
