@@ -31,6 +31,9 @@ F32 = NDArray[np.float32]
 #: Luminance below which a region's gain is not measured (its radiance is kept as it is).
 _DARK = np.float32(1e-6)
 
+#: Rows per strip of the compiled passes.
+_ROWS = 64
+
 
 def luminance_gain(
     y_before: np.ndarray,
@@ -54,12 +57,27 @@ def luminance_gain(
     lf_in, lf_out = surface_blurs(
         [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
     )
-    ok = (lf_in > _DARK) & (lf_out > _DARK) & (np.asarray(mask) > 0)
-    return np.divide(lf_in, lf_out, out=np.ones_like(lf_in), where=ok)
+    m = np.ascontiguousarray(mask)
+    if m.dtype == np.bool_:
+        m = m.view(np.uint8)
+    run_strips(  # (lf_in is surface_blurs' new array: the gain is written over it)
+        lf_in.shape[0],
+        lambda r0, r1: _gain_rows(lf_in[r0:r1], lf_out[r0:r1], m[r0:r1], lf_in[r0:r1]),
+        _ROWS,
+    )
+    return lf_in
 
 
-#: Rows per strip of :func:`weighed_gain`.
-_WEIGH_ROWS = 64
+@kernel
+def _gain_rows(lf_in, lf_out, mask, out):  # type: ignore[no-untyped-def]
+    """out = lf_in / lf_out where both are above _DARK and ``mask`` > 0, else 1 (``out`` may be
+    ``lf_in``)."""
+    dark = _DARK
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            a, b = lf_in[i, j], lf_out[i, j]
+            ok = (a > dark) & (b > dark) & (mask[i, j] > 0)
+            out[i, j] = a / b if ok else np.float32(1.0)
 
 
 def weighed_gain(
@@ -78,7 +96,7 @@ def weighed_gain(
     run_strips(
         g.shape[0],
         lambda r0, r1: _weigh_rows(g[r0:r1], y0[r0:r1], y1[r0:r1], k, out[r0:r1]),
-        _WEIGH_ROWS,
+        _ROWS,
     )
     return out
 

@@ -20,10 +20,11 @@ from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
 from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
-from ops.lighting import weighed_gain
+from ops.lighting import luminance_gain, weighed_gain
 from ops.pyramid.masked import masked_gaussian, masked_gaussians
 from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
+from ops.unsharp import surface_blurs
 from service import pipeline
 from service.registry import Context, PipelineError
 from tests import analytic
@@ -467,6 +468,35 @@ def test_weighed_gain_is_its_formula() -> None:
     assert (out[::4] == 1.0).all() and np.isnan(out[2, 0])
     assert out[1, 0] == 1.0 and out[1, 1] == 1.0 + 0.5 * (gain[1, 1] - 1.0)
     assert out[1, 2] == gain[1, 2]
+
+
+@pytest.mark.parametrize("bool_mask", [False, True])
+def test_luminance_gain_is_its_formula(bool_mask: bool) -> None:
+    # LF(y0) / LF(y1) on one surface pyramid, 1 where either is darker than 1e-6 at that scale
+    # (two boxes in front of a wall, each dark in one luminance: the smoothing keeps them
+    # apart) or off the surface (a background strip)
+    rng = np.random.default_rng(8)
+    h, w = 120, 160
+    depth = np.full((h, w), 5.0, np.float32)
+    depth[20:60, 30:80] = 3.0
+    depth[70:110, 90:150] = 2.0
+    normal = np.zeros((h, w, 3), np.float32)
+    normal[..., 2] = 1.0
+    mask = np.ones((h, w), np.float32)
+    mask[:, :12] = 0.0
+    y0 = rng.uniform(0.2, 1.0, (h, w)).astype(np.float32)
+    y1 = y0 * rng.uniform(0.5, 1.5, (h, w)).astype(np.float32)
+    y1[20:60, 30:80] = 0.0
+    y0[70:110, 90:150] = 0.0
+    m = mask > 0 if bool_mask else mask
+    kw: dict[str, Any] = {"sigma_scene": 0.05, "pixel_size": depth / np.float32(200.0)}
+    lf0, lf1 = surface_blurs([y0, y1], depth, normal, m, **kw)
+    ok = (lf0 > np.float32(1e-6)) & (lf1 > np.float32(1e-6)) & (mask > 0)
+    expect = np.divide(lf0, lf1, out=np.ones_like(lf0), where=ok)
+    got = luminance_gain(y0, y1, depth, normal, m, **kw)
+    np.testing.assert_array_equal(got, expect)
+    assert (got[:, :12] == 1.0).all() and not np.allclose(got[:, 12:25], 1.0)
+    assert (got[25:55, 35:75] == 1.0).all() and (got[75:105, 95:145] == 1.0).all()
 
 
 @pytest.mark.parametrize("channels", [(), (3,)])
