@@ -422,6 +422,7 @@ def test_surface_blurs_is_surface_blur_of_each_signal(sigma_scene: float) -> Non
     # bit for bit as each smoothed alone
     beauty, depth, normal, mask, ps, _ = _square_scene()
     mask[:, :12] = False
+    mask[40:44, 60:70] = False  # a hole inside the surface's bounding box
     first = beauty[..., 0] + np.float32(0.01) * np.arange(160, dtype=np.float32)
     second = np.random.default_rng(3).uniform(0.1, 1.0, first.shape).astype(np.float32)
     kw = dict(sigma_scene=sigma_scene, pixel_size=ps)
@@ -430,6 +431,7 @@ def test_surface_blurs_is_surface_blur_of_each_signal(sigma_scene: float) -> Non
         alone = surface_blur(sig, depth, normal, mask, **kw)
         assert np.array_equal(one, alone)
         assert not np.array_equal(one[mask], sig[mask])  # smoothed
+        assert np.array_equal(one[~mask], sig[~mask])  # off the surface: the input
     assert not np.array_equal(both[0], both[1])
 
 

@@ -160,7 +160,8 @@ def surface_blurs(
             fb, a0 = fade
             fs, ss = full[fb], sub_i[fb]
             _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
-        np.copyto(out[box], full, where=surf.valid.view(bool))
+        # (cv2.copyTo: many times faster than np.copyto's where=)
+        _write(_cv.copyTo(full, surf.valid, dst=out[box]), out, box)
     return outs
 
 
