@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from ops import shading
-from ops.filtering import multiscale_normals, normal_pyramid
+from ops.filtering import NormalPyramid, multiscale_normals, normal_pyramid
 from ops.light_alignment import (
     align_components,
     align_light,
@@ -350,6 +350,45 @@ def test_align_lights_handles_directional_and_point_lights() -> None:
         np.testing.assert_allclose(got[~s.mask], point_dirs[~s.mask], atol=1e-6)
         rot = np.degrees(np.arccos(np.clip((got * point_dirs).sum(-1), -1, 1)))[s.mask]
         assert 0.5 < rot.mean() < 60.0
+
+
+def test_align_lights_is_each_light_aligned_alone() -> None:
+    # two lights on one pyramid (the joint bilateral taps and the view's coarse levels made
+    # once) come out bit for bit as each light aligned alone on a pyramid of its own; a sphere
+    # before a wall (depth jumps: joint bilateral upsampling) with a per-pixel view for the
+    # specular and transmission guides
+    s = analytic.sphere(160, radius=0.7)
+    depth = np.where(s.mask, s.depth, np.float32(s.depth[s.mask].max() + 2.0)).astype(np.float32)
+    normal = np.where(s.mask[..., None], s.normal, np.float32([0.0, 0.0, 1.0])).astype(np.float32)
+    u, v = analytic.pixel_coords(160, 160)
+    position = np.stack([2 * u, 2 * v, -depth], axis=-1).astype(np.float32)
+    view = -position / np.linalg.norm(position, axis=-1, keepdims=True)
+    view = view.astype(np.float32)
+    lights = [
+        shading.Light("directional", (1.0, 1.0, 1.0)),
+        shading.Light("point", (2.0, 1.0, -8.0)),
+    ]
+    comps = {"diffuse": [0.5] * 4, "specular": [0.3] * 4, "transmission": [0.4] * 4}
+
+    def pyramid() -> NormalPyramid:
+        return normal_pyramid(normal, depth, None, scales=5)
+
+    used, fresh = pyramid().geometry, pyramid().geometry
+    planes = [np.ascontiguousarray(normal[::2, ::2, c]) for c in range(3)]
+    used.up_sparse([p[::2, ::2] for p in planes], 2, 1)
+    got, want = used.up_sparse(planes, 1, 0), fresh.up_sparse(planes, 1, 0)
+    assert got[0].size and all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
+    out = align_lights(lights, pyramid(), position, view, comps)
+    for i, light in enumerate(lights):
+        ldir = light.vector if light.kind == "directional" else None
+        alone = align_components(
+            shading.light_vectors(light, position) if ldir is None else np.asarray(ldir),
+            pyramid(),
+            comps,
+            view=view,
+        )
+        for g in comps:
+            assert np.array_equal(out[g][i], alone[g]), (i, g)
 
 
 # -- parameters -----------------------------------------------------------------------------

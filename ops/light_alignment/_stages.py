@@ -181,7 +181,7 @@ class _Inputs:
         else:
             assert mask is not None
             self.masks = [mask]
-        self._views: dict[int, SoA] = {}
+        self.views: dict[int, SoA] = {}  # the view at coarse levels (view_planes)
         self._lights: dict[int, SoA] = {}
         self.rows: F32 | None = None
         if const is not None:  # a strip of the constant light (level-0 rows are copied from it)
@@ -195,12 +195,12 @@ class _Inputs:
     def view_planes(self, k: int) -> SoA:
         """The view at level k > 0 (the field is smooth: plain area averaging, each level from
         the finest one already made), renormalised, as planes (cached)."""
-        got = self._views.get(k)
+        got = self.views.get(k)
         if got is None:
             assert self.view is not None and self.pyr is not None
             hk, wk = self.pyr.geometry.shape(k)
-            src = max((lv for lv in self._views if lv < k), default=0)
-            base = self.view if src == 0 else cv2.merge(list(self._views[src]))
+            src = max((lv for lv in self.views if lv < k), default=0)
+            base = self.view if src == 0 else cv2.merge(list(self.views[src]))
             f = 1 << (k - src)
             if base.shape[:2] == (hk * f, wk * f) and base.flags.c_contiguous:
                 # an exact f×f block average: row strips on all cores give the same result
@@ -216,7 +216,7 @@ class _Inputs:
                 small = np.asarray(
                     cv2.resize(base, (wk, hk), interpolation=cv2.INTER_AREA), np.float32
                 )
-            got = self._views[k] = _soa(normalize_field(small))
+            got = self.views[k] = _soa(normalize_field(small))
         return got
 
     def light_planes(self, k: int) -> SoA:

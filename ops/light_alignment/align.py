@@ -9,7 +9,7 @@ import numpy as np
 
 from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
 from ops.filtering import F32, NormalPyramid
-from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide
+from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide, SoA
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
 from ops.pyramid import normalize_field
 from ops.shading import Light, light_vectors
@@ -73,6 +73,21 @@ def align_components(
     -------
     dict guide -> (H, W, 3) float32 unit directions ℓ_1; background keeps ``light_dir``.
     """
+    return _align_components(light_dir, normals, components, gamma, view, ior, mask, None)
+
+
+def _align_components(
+    light_dir: np.ndarray,
+    normals: Sequence[np.ndarray] | NormalPyramid,
+    components: Mapping[str, Sequence[float]],
+    gamma: float,
+    view: np.ndarray | None,
+    ior: float,
+    mask: np.ndarray | None,
+    views: dict[int, SoA] | None,
+) -> dict[str, F32]:
+    """:func:`align_components`; ``views``: a cache of the view at the pyramid's coarse levels
+    (see ``_Inputs.view_planes``) shared by calls with the same view and pyramid, or None."""
     gamma = LLA_GAMMA.check(gamma, "gamma")
     ior = IOR.check(ior, "ior")
     pyr = normals if isinstance(normals, NormalPyramid) else None
@@ -139,6 +154,8 @@ def align_components(
         return _align_full(inp)
     assert pyr is not None
     inp = _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, const, lfield, pyr=pyr)
+    if views is not None:  # the view at coarse levels, shared by the calls of align_lights
+        inp.views = views
     return _align_pyramid(inp)
 
 
@@ -209,14 +226,13 @@ def align_lights(
     dict guide -> one (H, W, 3) float32 field of unit directions per light, in ``lights`` order.
     """
     out: dict[str, list[F32]] = {g: [] for g in components}
+    views: dict[int, SoA] = {}  # one view, one pyramid: its coarse levels made once
     for light in lights:
         if light.kind == "directional":
             ldir: np.ndarray = np.asarray(light.vector, np.float32)
         else:
             ldir = light_vectors(light, np.asarray(position, np.float32))
-        res = align_components(
-            ldir, normals, components, gamma=gamma, view=view, ior=ior, mask=mask
-        )
+        res = _align_components(ldir, normals, components, gamma, view, ior, mask, views)
         for g in components:
             out[g].append(res[g])
     return out

@@ -75,6 +75,10 @@ def _log_depth(depth: F32, mask: np.ndarray | None, out: F32 | None = None) -> F
     return out
 
 
+#: Pixels upsampled by joint bilateral weights (rows, columns), their samples and weights.
+_SparseTaps = tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64], F32]
+
+
 @dataclass
 class DepthPyramid:
     """Log depth and coverage at pyramid levels 0 (input) … K, each level half the previous.
@@ -97,6 +101,7 @@ class DepthPyramid:
     cover: list[F32] = field(default_factory=list)
     _keep3: dict[int, F32] = field(default_factory=dict, repr=False)
     _masks: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
+    _taps: dict[tuple[int, int], _SparseTaps] = field(default_factory=dict, repr=False)
 
     @classmethod
     def build(
@@ -388,31 +393,46 @@ class DepthPyramid:
         :meth:`_jb_weights` (bilinear where the footprint is on the pixel's own surface), each
         vector renormalised. Returns (ys, xs, values (N, C)), sorted by row."""
         n_ch = len(planes_k)
+        ys, xs, idx, w = self._sparse_taps(k, k_to)
+        acc = np.empty((ys.size, n_ch), np.float32)
+        if ys.size:
+            flat = tuple(np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k)
+            _gather_unit(idx, w, flat, acc)
+        return ys, xs, acc
+
+    def _sparse_taps(self, k: int, k_to: int) -> _SparseTaps:
+        """The pixels of :meth:`up_sparse` from level k to level ``k_to`` (rows, columns, sorted
+        by row) and their samples and weights (:meth:`_jb_weights`): the geometry's alone, so
+        kept for every later upsampling between the two levels (each light of Light Alignment
+        upsamples the same levels)."""
+        got = self._taps.get((k, k_to))
+        if got is not None:
+            return got
         h_to, w_to = self.shape(k_to)
         f = 1 << (k - k_to)
         w_k = self.shape(k)[1]
         dirty = np.flatnonzero(self._dirty(k))
         empty = np.zeros(0, np.int64)
-        if not dirty.size:
-            return empty, empty, np.zeros((0, n_ch), np.float32)
-        py, px = np.divmod(dirty, w_k)
-        off = np.arange(f)
-        ys = (py * f)[:, None, None] + off[None, :, None]
-        xs = (px * f)[:, None, None] + off[None, None, :]
-        ys, xs = (arr.reshape(-1) for arr in np.broadcast_arrays(ys, xs))
-        inside = (ys < h_to) & (xs < w_to)
-        ys, xs = ys[inside], xs[inside]
-        covered = self.mask[k_to][ys, xs] > 0
-        ys, xs = ys[covered], xs[covered]
-        order = np.argsort(ys, kind="stable")
-        ys, xs = ys[order], xs[order]
-        if not ys.size:
-            return empty, empty, np.zeros((0, n_ch), np.float32)
-        idx, w = self._jb_weights(k, f, ys, xs, self.logd[k_to][ys, xs])
-        acc = np.empty((ys.size, n_ch), np.float32)
-        flat = tuple(np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k)
-        _gather_unit(idx, np.ascontiguousarray(w, np.float32), flat, acc)
-        return ys, xs, acc
+        ys, xs = empty, empty
+        if dirty.size:
+            py, px = np.divmod(dirty, w_k)
+            off = np.arange(f)
+            ys = (py * f)[:, None, None] + off[None, :, None]
+            xs = (px * f)[:, None, None] + off[None, None, :]
+            ys, xs = (arr.reshape(-1) for arr in np.broadcast_arrays(ys, xs))
+            inside = (ys < h_to) & (xs < w_to)
+            ys, xs = ys[inside], xs[inside]
+            covered = self.mask[k_to][ys, xs] > 0
+            ys, xs = ys[covered], xs[covered]
+            order = np.argsort(ys, kind="stable")
+            ys, xs = ys[order], xs[order]
+        if ys.size:
+            idx, w = self._jb_weights(k, f, ys, xs, self.logd[k_to][ys, xs])
+            got = (ys, xs, idx, np.ascontiguousarray(w, np.float32))
+        else:
+            got = (empty, empty, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
+        self._taps[(k, k_to)] = got
+        return got
 
     def up_rows(
         self,
