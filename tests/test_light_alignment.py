@@ -375,7 +375,7 @@ def test_align_lights_is_each_light_aligned_alone() -> None:
 
     used, fresh = pyramid().geometry, pyramid().geometry
     planes = [np.ascontiguousarray(normal[::2, ::2, c]) for c in range(3)]
-    used.up_sparse([p[::2, ::2] for p in planes], 2, 1)
+    used.up_sparse([q[::2, ::2] for q in planes], 2, 1)
     got, want = used.up_sparse(planes, 1, 0), fresh.up_sparse(planes, 1, 0)
     assert got[0].size and all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
     out = align_lights(lights, pyramid(), position, view, comps)

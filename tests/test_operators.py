@@ -178,6 +178,31 @@ def test_only_the_listed_components_get_layers(spot: Frame) -> None:
     assert names == {"lla_light.diffuse", "lla_light2.diffuse"}
 
 
+def _aligned(frame: Frame) -> set[str]:
+    return {n.rsplit(".", 1)[0] for n in frame.outputs if n.startswith("lla_light")}
+
+
+def test_only_the_components_the_result_depends_on_are_aligned(spot: Frame) -> None:
+    # ratio form: no transmission lobe, no transmission aligned (the same pixels as listing
+    # diffuse and specular only), one when there is; relight: specular unless "none",
+    # transmission with a weight
+    both = {f"{k}.{c}" for k in ("lla_light", "lla_light2") for c in ("diffuse", "specular")}
+    full = run(spot, "light_alignment")
+    two = run(spot, "light_alignment", {"components": ["diffuse", "specular"]})
+    assert _aligned(full) == _aligned(two) == both
+    assert np.array_equal(full.buffers["beauty"], two.buffers["beauty"])
+    glass = spot.copy()
+    glass.buffers["transmission"] = spot.buffers["diffuse"]
+    assert "lla_light.transmission" in _aligned(run(glass, "light_alignment"))
+    relight = {"form": "relight", "specular": "none"}
+    assert _aligned(run(spot, "light_alignment", relight)) == {
+        "lla_light.diffuse",
+        "lla_light2.diffuse",
+    }
+    weighted = run(spot, "light_alignment", {"form": "relight", "transmission_weight": 0.5})
+    assert _aligned(weighted) == both | {"lla_light.transmission", "lla_light2.transmission"}
+
+
 @pytest.mark.parametrize("sigmas", [[0.5], [0.5, 0.3, 0.1, 0.2, 0.2]])
 def test_debug_layers_hold_every_scale(spot: Frame, sigmas: list[float]) -> None:
     out = run(spot, "light_alignment", {"sigmas": sigmas}, debug_layers=True)

@@ -19,23 +19,23 @@ _INF = np.float32(np.inf)
 
 
 @kernel
-def _gather_unit(idx, w, planes, out):
-    """out[n, c] = Σ_t w[t, n] planes[c][idx[t, n]] (the weighted samples of
-    :meth:`DepthPyramid.up_sparse`), then each group of 3 channels renormalised as by
-    :func:`normalize_field` (0 where |v|² ≤ 1e-20)."""
-    n_ch = out.shape[1]
+def _gather_unit(idx, w, x, y, z, out, c0):
+    """out[n, c0 + c] = Σ_t w[t, n] (x, y, z)[c][idx[t, n]] (the weighted samples of
+    :meth:`DepthPyramid.up_sparse` for one unit-vector field given as three flat planes),
+    renormalised as by :func:`normalize_field` (0 where |v|² ≤ 1e-20). One field per call: the
+    kernel has one signature whatever the number of fields upsampled together."""
     for n in range(out.shape[0]):
-        for c in range(n_ch):
-            plane = planes[c]
-            acc = np.float32(0.0)
-            for t in range(idx.shape[0]):
-                acc += w[t, n] * plane[idx[t, n]]
-            out[n, c] = acc
-        for c0 in range(0, n_ch - 2, 3):
-            x, y, z = out[n, c0], out[n, c0 + 1], out[n, c0 + 2]
-            n2 = x * x + y * y + z * z
-            inv = np.float32(1.0) / np.sqrt(n2) if n2 > np.float32(1e-20) else np.float32(0.0)
-            out[n, c0], out[n, c0 + 1], out[n, c0 + 2] = x * inv, y * inv, z * inv
+        ax = np.float32(0.0)
+        ay = np.float32(0.0)
+        az = np.float32(0.0)
+        for t in range(idx.shape[0]):
+            i = idx[t, n]
+            ax += w[t, n] * x[i]
+            ay += w[t, n] * y[i]
+            az += w[t, n] * z[i]
+        n2 = ax * ax + ay * ay + az * az
+        inv = np.float32(1.0) / np.sqrt(n2) if n2 > np.float32(1e-20) else np.float32(0.0)
+        out[n, c0], out[n, c0 + 1], out[n, c0 + 2] = ax * inv, ay * inv, az * inv
 
 
 @kernel

@@ -393,11 +393,14 @@ class DepthPyramid:
         :meth:`_jb_weights` (bilinear where the footprint is on the pixel's own surface), each
         vector renormalised. Returns (ys, xs, values (N, C)), sorted by row."""
         n_ch = len(planes_k)
+        if n_ch % 3:
+            raise ValueError(f"up_sparse takes unit-vector fields, 3 planes each; got {n_ch}")
         ys, xs, idx, w = self._sparse_taps(k, k_to)
         acc = np.empty((ys.size, n_ch), np.float32)
         if ys.size:
-            flat = tuple(np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k)
-            _gather_unit(idx, w, flat, acc)
+            flat = [np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k]
+            for c0 in range(0, n_ch, 3):
+                _gather_unit(idx, w, *flat[c0 : c0 + 3], acc, c0)
         return ys, xs, acc
 
     def _sparse_taps(self, k: int, k_to: int) -> _SparseTaps:

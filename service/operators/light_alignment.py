@@ -19,9 +19,12 @@ vector; transmission: refracted view vector, §6), then the frame is shaded with
 ``auto``
     ``ratio`` when the frame has a diffuse, specular or transmission lobe, else ``relight``.
 
-The aligned directions are written as ``lla_light.<component>.X/Y/Z`` (the first light;
-``lla_light<k>.<component>`` for the k-th, k ≥ 2), camera space, for any shader downstream;
-``--debug-layers`` adds the multi-scale normals ``lla_n<i>.X/Y/Z`` (i = 1 finest … S).
+Only the components the result depends on are aligned (ratio: those with a lobe in the frame;
+relight: diffuse, specular unless ``specular: "none"``, transmission with a
+``transmission_weight``). Their aligned directions are written as
+``lla_light.<component>.X/Y/Z`` (the first light; ``lla_light<k>.<component>`` for the k-th,
+k ≥ 2), camera space, for any shader downstream; ``--debug-layers`` adds the multi-scale
+normals ``lla_n<i>.X/Y/Z`` (i = 1 finest … S).
 """
 
 from __future__ import annotations
@@ -90,8 +93,10 @@ class LightAlignmentParams(LightsParams):
     components: list[Component] = Field(
         default_factory=lambda: list(COMPONENTS),
         min_length=1,
-        description="components whose light is aligned (others keep the original light; "
-        "transmission only changes frames with a transmission lobe)",
+        description="components whose light may be aligned (others keep the original light); "
+        "of these only those the result depends on are aligned and written: ratio, those with "
+        "a lobe in the frame; relight, diffuse, specular unless 'none', transmission with a "
+        "transmission_weight",
     )
     gamma: float = Field(DEFAULT_GAMMA, **checks.LLA_GAMMA.bounds, description="γ of W_γ (Eq. 1)")
     base: float = Field(
@@ -185,6 +190,17 @@ def _form(frame: Frame, p: LightAlignmentParams) -> str:
     return "ratio" if has_lobes else "relight"
 
 
+def _shaded(frame: Frame, p: LightAlignmentParams, form: str, component: str) -> bool:
+    """Whether the result depends on ``component``'s light: ratio, a lobe of the frame;
+    relight, a lobe of its shading (diffuse; specular unless 'none'; transmission with a
+    weight). Only those are aligned."""
+    if form == "ratio":
+        return component in frame.buffers
+    if component == "specular":
+        return p.specular != "none"
+    return component == "diffuse" or p.transmission_weight > 0.0
+
+
 def _light_layer(k: int, component: str) -> str:
     return f"lla_light{'' if k == 0 else k + 1}.{component}"
 
@@ -218,9 +234,15 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
     view = frame.view_vectors()
     position = frame.positions()
     lights = p.parsed_lights()
-    components: dict[str, list[float]] = {c: p.sigmas_of(c) for c in p.components}
-    aligned = align_lights(
-        lights, pyramid, position, view, components, gamma=p.gamma, ior=p.ior, mask=mask
+    components: dict[str, list[float]] = {
+        c: p.sigmas_of(c) for c in p.components if _shaded(frame, p, form, c)
+    }
+    aligned = (
+        align_lights(
+            lights, pyramid, position, view, components, gamma=p.gamma, ior=p.ior, mask=mask
+        )
+        if components
+        else {}
     )
     with_transmission = (
         p.transmission_weight > 0.0 if form == "relight" else "transmission" in frame.buffers
