@@ -400,7 +400,8 @@ class DepthPyramid:
         if ys.size:
             flat = [np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k]
             for c0 in range(0, n_ch, 3):
-                _gather_unit(idx, w, *flat[c0 : c0 + 3], acc, c0)
+                x, y, z = flat[c0 : c0 + 3]
+                _gather_unit(idx, w, x, y, z, acc, c0)
         return ys, xs, acc
 
     def _sparse_taps(self, k: int, k_to: int) -> _SparseTaps:
