@@ -21,7 +21,10 @@ Rows, each a ratio to its reference measured just before or after it:
 * ``depict batch`` of 8 frames (2 workers) vs 8 ``oiiotool`` copies on 2 processes (throughput);
 * ``pipeline.run`` of curvature, Radiance Scaling and Light Alignment on a fully covered 1080p
   frame, in ratio to a memory-bound copy (``bench.common``) measured just before each run (the
-  median of the runs' ratios: ``Report.paired``).
+  median of the runs' ratios: ``Report.paired``); then, without a target, what their defaults
+  add to the papers' operators: Radiance Scaling without the kept lighting and with the paper's
+  preset, Light Alignment without the kept lighting, in the relight form and with the paper's
+  preset.
 
 Targets (issue 20): enhance <= 1.0x oiiotool; HTTP and batch >= 0.8x its throughput;
 curvature <= 6x, Radiance Scaling <= 10x, Light Alignment <= 60x a copy; peak memory <= 2x.
@@ -252,8 +255,19 @@ def covered_frame() -> Frame:
     return Frame(buffers=buffers)
 
 
+#: What the defaults cost beyond the papers' operators: ``pipeline.run`` rows without a target.
+PIPELINE_VARIANTS: tuple[tuple[str, dict[str, object]], ...] = (
+    ("radiance_scaling", {"keep_lighting": False}),
+    ("radiance_scaling", {"preset": "paper"}),
+    ("light_alignment", {"keep_lighting": False}),
+    ("light_alignment", {"form": "relight"}),
+    ("light_alignment", {"preset": "paper"}),
+)
+
+
 def pipeline_rows() -> None:
-    """``pipeline.run`` of each operator, in ratio to a memory-bound copy."""
+    """``pipeline.run`` of each operator, in ratio to a memory-bound copy; then the defaults'
+    parts (:data:`PIPELINE_VARIANTS`)."""
     from service import pipeline
 
     report = Report("pipeline.run on a fully covered frame", HD)
@@ -261,6 +275,10 @@ def pipeline_rows() -> None:
     for op, target in (("curvature", 6.0), ("radiance_scaling", 10.0), ("light_alignment", 60.0)):
         compiled = pipeline.compile([{"op": op}])
         report.paired(f"pipeline.run {op}", partial(pipeline.run, frame, compiled), 9, target)
+    for op, params in PIPELINE_VARIANTS:
+        compiled = pipeline.compile([{"op": op, "params": params}])
+        name = ", ".join(f"{k}: {v}" for k, v in params.items())
+        report.paired(f"  … {op} {name}", partial(pipeline.run, frame, compiled), 5)
 
 
 SECTIONS = ("enhance", "http", "batch", "pipeline")
