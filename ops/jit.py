@@ -15,6 +15,9 @@ Options:
 * ``cache=True``: compiled code is kept beside the module (or in Numba's cache directory when
   that is read-only), so only the first process to use a kernel compiles it.
 
+:func:`exact_kernel` leaves out the contraction: every product and sum is rounded on its own, as
+NumPy and OpenCV round them, for kernels that replace a chain of their calls bit for bit.
+
 Constants inside kernels must be ``np.float32``: a Python float literal promotes the arithmetic
 to float64. Transcendental functions are not vectorised by Numba here (no SVML): kernels take
 their results (cv2.phase, ...) as inputs computed on the strip, or use a polynomial of
@@ -28,17 +31,26 @@ from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ["FASTMATH", "inline_kernel", "kernel"]
+__all__ = ["EXACT_FASTMATH", "FASTMATH", "exact_kernel", "inline_kernel", "kernel"]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
 #: LLVM fast-math flags of every kernel (see the module docstring).
 FASTMATH = frozenset({"contract", "nsz"})
+#: Those of :func:`exact_kernel`: no contraction.
+EXACT_FASTMATH = frozenset({"nsz"})
 
 
 def kernel(fn: F) -> F:
     """Compile ``fn`` as a serial, GIL-free, cached Numba kernel with the options above."""
     jit = numba.njit(nogil=True, cache=True, fastmath=set(FASTMATH), error_model="numpy")
+    return cast(F, jit(fn))
+
+
+def exact_kernel(fn: F) -> F:
+    """:func:`kernel` without contraction (no fused multiply-add): the result of each operation
+    rounded as NumPy and OpenCV round it."""
+    jit = numba.njit(nogil=True, cache=True, fastmath=set(EXACT_FASTMATH), error_model="numpy")
     return cast(F, jit(fn))
 
 

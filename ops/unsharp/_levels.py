@@ -14,8 +14,8 @@ import numpy as np
 
 from ops import color
 from ops.parallel import STRIP_PIXELS
-from ops.pyramid.reduce import halve
-from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _ONE, _SIGMA_C, _WALL, Array
+from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _SIGMA_C, _WALL, Array
+from ops.unsharp._reduce import block_average, block_weights
 from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface, _write
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -171,36 +171,16 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     Each sample predicts the depth guide at the block centre along its own plane (normals); the
     samples within _JUMP (at this level's scale) of the nearest prediction are averaged and the
     others (a farther surface) dropped, so a coarse cell does not mix an object with what lies
-    behind it, while a steep surface keeps all its samples.
+    behind it, while a steep surface keeps all its samples (weight 1 within _JUMP/2 of the
+    front, fading to 0 at _JUMP: no hard switch along a contact). Compiled passes
+    (``ops.unsharp._reduce``).
     """
-    h, w = lv.cov.shape
-    hp, wp = h + h % 2, w + w % 2
-    d = float(2**lv.k)
-    # each sample's prediction at its block centre, half a cell away along its plane
-    if lv.grad is not None:
-        sc, sr = _parity(h, w, d)
-        p = _cv.add(lv.iz, _cv.multiply(lv.grad[0], sc))
-        _cv.add(p, _cv.multiply(lv.grad[1], sr), dst=p)
-    else:
-        p = lv.iz.copy()
-    p[~lv.valid] = _BIG
-    if (hp, wp) != (h, w):
-        p = _cv.copyMakeBorder(p, 0, hp - h, 0, wp - w, _cv.BORDER_CONSTANT, value=float(_BIG))
-    # the nearest prediction of each block (a 2×2 minimum), back on the cells
-    near = _cv.erode(p, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_REPLICATE)[::2, ::2]
-    # weight 1 within _JUMP/2 of the front, fading to 0 at _JUMP (no hard switch along a contact)
-    half = np.float32(0.5 * _JUMP * 2**lv.k)
-    near = near + np.float32(2.0) * half
-    keep = _cv.resize(near, (wp, hp), interpolation=_cv.INTER_NEAREST)[:h, :w]
-    np.subtract(keep, p[:h, :w], out=keep)
-    np.divide(keep, half, out=keep)
-    np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
-    sel = _cv.multiply(lv.cov, keep)
-    cov = halve(sel)
-    inv = np.divide(_ONE, _cv.max(cov, 1e-12))  # empty cells: the sums are 0, stay 0
+    c = np.ascontiguousarray
+    grad = None if lv.grad is None else (c(lv.grad[0]), c(lv.grad[1]))
+    sel, cov, inv = block_weights(c(lv.cov), c(lv.iz), grad, lv.k, _JUMP, float(_BIG))
 
     def red(field: Array) -> Array:
-        return _cv.multiply(halve(_cv.multiply(field, sel)), inv)
+        return block_average(c(field, dtype=np.float32), sel, inv)
 
     iz = red(lv.iz)
     if surf.lps is None:
@@ -221,18 +201,6 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
 
 
 _BLOCK = np.ones((2, 2), np.uint8)
-
-
-@functools.lru_cache(maxsize=32)
-def _parity(h: int, w: int, d: float) -> tuple[Array, Array]:
-    """(+d/2, −d/2, +d/2, …) along the columns and along the rows of an (h, w) grid: the
-    offset of each cell from the centre of its 2×2 block, in image pixels. Read-only."""
-    alt = np.array([0.5 * d, -0.5 * d], np.float32)
-    sc = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (w + 1) // 2)[None, :w], (h, w)))
-    sr = np.ascontiguousarray(np.broadcast_to(np.tile(alt, (h + 1) // 2)[:h, None], (h, w)))
-    sc.flags.writeable = False
-    sr.flags.writeable = False
-    return sc, sr
 
 
 @functools.lru_cache(maxsize=16)
