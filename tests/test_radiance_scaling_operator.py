@@ -522,13 +522,15 @@ def test_masked_gaussian_matches_the_normalised_convolution(channels: tuple[int,
 
 def test_masked_gaussians_share_the_coverage_and_match_one_by_one() -> None:
     """Several planes (a lobe's light each) over one mask: each bit for bit what
-    :func:`masked_gaussian` gives it alone, planes and RGB, with holes and non-finite values."""
+    :func:`masked_gaussian` gives it alone, and what the release before the compiled passes
+    gave, planes and RGB, with holes and non-finite values, float and bool masks."""
     rng = np.random.default_rng(7)
     planes = [rng.uniform(0.0, 2.0, (61, 83)).astype(np.float32) for _ in range(2)]
     planes.append(rng.uniform(0.0, 1.0, (61, 83, 3)).astype(np.float32))
     planes[1][7, 7] = np.nan
     mask = (rng.random((61, 83)) > 0.2).astype(np.float32)
-    for m in (mask, np.ones_like(mask)):
+    mask[:, :9] = 0.0  # a band far from any covered pixel: values kept, too little weight
+    for m in (mask, mask > 0, np.ones_like(mask), np.ones(mask.shape, bool)):
         for sigma_px in (2.5, 0.0):
             together = masked_gaussians(planes, m, sigma_px)
             assert len(together) == len(planes)
