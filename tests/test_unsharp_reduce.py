@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ops.pyramid.reduce import halve
-from ops.unsharp._reduce import block_average, block_weights
+from ops.unsharp._reduce import block_average, block_weights, step_flags
 
 _cv: Any = cv2
 BIG = 1.0e30
@@ -92,3 +92,40 @@ def test_block_weights_and_averages_are_the_opencv_chain(
     field[0, 0] = np.float32(1e30)  # large values stay finite products of a weight
     reduced = block_average(field, sel, inv)
     assert np.array_equal(reduced, _cv.multiply(_halve(_cv.multiply(field, sel)), inv))
+
+
+def _reference_flags(
+    cov: np.ndarray, iz: np.ndarray, grad: tuple[np.ndarray, np.ndarray] | None, k: int, thr: float
+) -> np.ndarray:
+    """The blocks that are not one surface, as OpenCV calls on the replicated level."""
+    rep, d = _cv.BORDER_REPLICATE, float(2**k)
+    bad = _cv.copyMakeBorder(_cv.compare(cov, 0.0, _cv.CMP_LE), 1, 1, 1, 1, rep)
+    bad = _cv.dilate(bad, np.ones((2, 2), np.uint8), anchor=(0, 0), borderType=rep)[:-1, :-1]
+    z = _cv.copyMakeBorder(iz, 1, 1, 1, 1, rep)
+    if grad is None:
+        tl, tr, bl, br = z[:-1, :-1], z[:-1, 1:], z[1:, :-1], z[1:, 1:]
+    else:
+        gx, gy = (_cv.copyMakeBorder(g, 1, 1, 1, 1, rep) for g in grad)
+        right, left = _cv.scaleAdd(gx, 0.5 * d, z), _cv.scaleAdd(gx, -0.5 * d, z)
+        tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
+        tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
+        bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
+        br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
+    hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
+    lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
+    step = _cv.compare(_cv.subtract(hi, lo), thr, _cv.CMP_GT)
+    return np.minimum(_cv.bitwise_or(bad, step), 1)
+
+
+@pytest.mark.parametrize("shape", [(64, 96), (65, 97), (1, 7), (5, 1)])
+@pytest.mark.parametrize("k", [1, 3])
+@pytest.mark.parametrize("slopes", [True, False])
+def test_step_flags_are_the_opencv_chain(shape: tuple[int, int], k: int, slopes: bool) -> None:
+    cov, iz, grad = _level(shape, seed=2 * shape[1] + k)
+    g = grad if slopes else None
+    thr = float(np.float32(2.0 * JUMP))
+    got = step_flags(cov, iz, g, k, thr)
+    want = _reference_flags(cov, iz, g, k, thr)
+    assert got.shape == (shape[0] + 1, shape[1] + 1) and np.array_equal(got, want)
+    if shape[0] > 8:
+        assert got.min() == 0 and got.max() == 1  # one-surface blocks, and steps or holes

@@ -12,11 +12,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops import color
-from ops.parallel import STRIP_PIXELS
 from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _SIGMA_C, _WALL, Array
-from ops.unsharp._reduce import block_average, block_weights
-from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface, _write
+from ops.unsharp._reduce import block_average, block_weights, step_flags
+from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -284,42 +282,12 @@ def _block_flags(lv: _Level, thr: np.float32) -> Array:
     Entry (i, j) covers cells (i−1…i, j−1…j) (clamped at the borders). A block is flagged when
     one of its cells is empty, or when the four cells, each extrapolating the depth guide along
     its own plane (``grad``) to the block's centre, disagree by more than ``thr``: a step
-    between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1). Large levels are
-    done in strips of block rows over the shared pool (OpenCV's element-wise operations run on
-    one thread each).
+    between surfaces, not a steep surface. uint8 0/1, shape (h + 1, w + 1); one compiled pass
+    (``ops.unsharp._reduce.step_flags``).
     """
-    h, w = lv.cov.shape
-    out = np.empty((h + 1, w + 1), np.uint8)
-    rep = _cv.BORDER_REPLICATE
-    d = float(2**lv.k)
-
-    def rows(r: slice) -> None:
-        # block rows r read cell rows r.start − 1 … r.stop − 1, clamped (replicated)
-        c = slice(max(r.start - 1, 0), min(r.stop, h))
-        pad = (int(r.start == 0), int(r.stop > h), 1, 1)
-        inv = _cv.copyMakeBorder(_cv.compare(lv.cov[c], 0.0, _cv.CMP_LE), *pad, rep)
-        bad = _cv.dilate(inv, _BLOCK, anchor=(0, 0), borderType=rep)[:-1, :-1]  # 2×2 maximum
-        # the four cells' predictions at the block centre, I + (±½, ±½) 2^k ∇I
-        iz = _cv.copyMakeBorder(lv.iz[c], *pad, rep)
-        if lv.grad is None:
-            tl, tr, bl, br = iz[:-1, :-1], iz[:-1, 1:], iz[1:, :-1], iz[1:, 1:]
-        else:
-            gx, gy = (_cv.copyMakeBorder(g[c], *pad, rep) for g in lv.grad)
-            right, left = _cv.scaleAdd(gx, 0.5 * d, iz), _cv.scaleAdd(gx, -0.5 * d, iz)
-            tl = _cv.scaleAdd(gy[:-1, :-1], 0.5 * d, right[:-1, :-1])
-            tr = _cv.scaleAdd(gy[:-1, 1:], 0.5 * d, left[:-1, 1:])
-            bl = _cv.scaleAdd(gy[1:, :-1], -0.5 * d, right[1:, :-1])
-            br = _cv.scaleAdd(gy[1:, 1:], -0.5 * d, left[1:, 1:])
-        hi = _cv.max(_cv.max(tl, tr), _cv.max(bl, br))
-        lo = _cv.min(_cv.min(tl, tr), _cv.min(bl, br))
-        step = _cv.compare(_cv.subtract(hi, lo, dst=hi), float(thr), _cv.CMP_GT)
-        _write(_cv.min(_cv.bitwise_or(bad, step, dst=bad), 1, dst=out[r]), out, r)
-
-    if (h + 1) * (w + 1) >= 2 * STRIP_PIXELS:
-        color.row_strips(h + 1, w + 1, rows, max(1, STRIP_PIXELS // 2 // (w + 1)))
-    else:
-        rows(slice(0, h + 1))
-    return out
+    c = np.ascontiguousarray
+    grad = None if lv.grad is None else (c(lv.grad[0]), c(lv.grad[1]))
+    return step_flags(c(lv.cov), c(lv.iz), grad, lv.k, float(thr))
 
 
 def _sub_resize(a: Array, f: int, rows: slice, cols: slice) -> Array:

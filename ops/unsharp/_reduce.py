@@ -1,5 +1,6 @@
-"""The compiled passes of the surface pyramid's selective reduction (``_reduce_selective``): the
-weight each cell keeps in its 2×2 block, and the weighted block averages of each field.
+"""Compiled passes over the cells of a surface pyramid's level: the selective reduction
+(``_reduce_selective``: the weight each cell keeps in its 2×2 block, and the weighted block
+averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
 Both run on one thread (a level is at most a quarter of the frame: a pass over it costs less
 than handing strips to the pool) and replace a chain of OpenCV and NumPy calls
@@ -14,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ops.jit import exact_kernel
+from ops.parallel import run_strips
 
 Array = np.ndarray
 
@@ -116,3 +118,60 @@ def _average_rows(field, sel, inv, r0, r1, out):  # type: ignore[no-untyped-def]
                 o[bj] = (((a + b) + (_F0 + _F0)) * _QUARTER) * q[bj]
             if wf < out.shape[1]:
                 o[wf] = (((f0[w - 1] * s0[w - 1] + _F0) + (_F0 + _F0)) * _QUARTER) * q[wf]
+
+
+def step_flags(
+    cov: Array, iz: Array, grad: tuple[Array, Array] | None, k: int, thr: float
+) -> Array:
+    """uint8 (h + 1, w + 1): 1 for each 2×2 block of cells (cells i − 1 … i, j − 1 … j, clamped
+    at the borders) holding an empty cell, or whose four cells' predictions of the depth guide
+    at the block's centre, I + (±½, ±½) 2^k ∇I (``grad``; I alone without), spread over more
+    than ``thr``. Strips of block rows on the shared pool."""
+    h, w = cov.shape
+    out = np.empty((h + 1, w + 1), np.uint8)
+    none = np.zeros((0, 0), np.float32)
+    gx, gy = grad if grad is not None else (none, none)
+    hd, t = np.float32(0.5 * 2**k), np.float32(thr)
+    rows = max(16, (1 << 16) // (w + 1))
+    run_strips(h + 1, lambda a, b: _flags_rows(cov, iz, gx, gy, hd, t, a, b, out), rows)
+    return out
+
+
+@exact_kernel
+def _flags_rows(cov, iz, gx, gy, hd, thr, r0, r1, out):  # type: ignore[no-untyped-def]
+    """:func:`step_flags` for block rows r0 … r1 − 1; ``hd`` = 2^k / 2 (a power of two: the
+    products are exact). Block (i, j) reads cells (i − 1 … i, j − 1 … j), clamped: per block
+    row, the two cell rows, and each block's left and right cells at columns j − 1 and j."""
+    h, w = cov.shape
+    has_grad = gx.shape[0] > 0
+    ta = np.empty(w + 1, np.float32)  # the cells' predictions at the corner: top-left, …
+    tb = np.empty(w + 1, np.float32)
+    ba = np.empty(w + 1, np.float32)
+    bb = np.empty(w + 1, np.float32)
+    bad = np.empty(w + 1, np.bool_)
+    for bi in range(r0, r1):
+        ia, ib = max(bi - 1, 0), min(bi, h - 1)
+        ca, cb, za, zb = cov[ia], cov[ib], iz[ia], iz[ib]
+        for j in range(w):  # cell j as the right (top, bottom) and the left cell of a block
+            if has_grad:
+                xa, ya, xb, yb = gx[ia, j] * hd, gy[ia, j] * hd, gx[ib, j] * hd, gy[ib, j] * hd
+                ta[j] = ya + (-xa + za[j])  # top row, right cell of block j: tr
+                tb[j + 1] = ya + (xa + za[j])  # top row, left cell of block j + 1: tl
+                ba[j] = -yb + (-xb + zb[j])  # br
+                bb[j + 1] = -yb + (xb + zb[j])  # bl
+            else:
+                ta[j] = za[j]
+                tb[j + 1] = za[j]
+                ba[j] = zb[j]
+                bb[j + 1] = zb[j]
+            bad[j] = (ca[j] <= _F0) | (cb[j] <= _F0)
+        ta[w], tb[0], ba[w], bb[0] = ta[w - 1], tb[1], ba[w - 1], bb[1]  # replicated borders
+        bad[w] = bad[w - 1]
+        o = out[bi]
+        o[0] = bad[0]
+        for j in range(1, w + 1):
+            o[j] = bad[j - 1] | bad[j]
+        for j in range(w + 1):
+            hi = max(max(tb[j], ta[j]), max(bb[j], ba[j]))
+            lo = min(min(tb[j], ta[j]), min(bb[j], ba[j]))
+            o[j] = o[j] | ((hi - lo) > thr)
