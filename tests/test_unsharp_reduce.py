@@ -13,7 +13,14 @@ import numpy as np
 import pytest
 
 from ops.pyramid.reduce import halve
-from ops.unsharp._reduce import block_average, block_weights, step_flags
+from ops.unsharp._reduce import (
+    block_average,
+    block_weights,
+    cell_average,
+    cell_coverage,
+    masked_rows,
+    step_flags,
+)
 
 _cv: Any = cv2
 BIG = 1.0e30
@@ -129,3 +136,31 @@ def test_step_flags_are_the_opencv_chain(shape: tuple[int, int], k: int, slopes:
     assert got.shape == (shape[0] + 1, shape[1] + 1) and np.array_equal(got, want)
     if shape[0] > 8:
         assert got.min() == 0 and got.max() == 1  # one-surface blocks, and steps or holes
+
+
+@pytest.mark.parametrize("shape", [(64, 96), (65, 97), (7, 1), (1, 5)])
+def test_first_level_cells_are_the_opencv_chain(shape: tuple[int, int]) -> None:
+    # the first level's coverage and averages of full-resolution rows: OpenCV's area halving
+    # of the rows with 0 off the surface (squared for the variance), times the inverse coverage
+    rng = np.random.default_rng(shape[1])
+    valid = (rng.random(shape) > 0.3).astype(np.uint8)
+    src = rng.normal(0.0, 1.0, shape).astype(np.float32)
+    cells = ((shape[0] + 1) // 2, (shape[1] + 1) // 2)
+    cov, inv = np.empty(cells, np.float32), np.empty(cells, np.float32)
+    cell_coverage(valid, cov, inv)
+    assert np.array_equal(cov, halve(valid.astype(np.float32)))
+    assert np.array_equal(inv, np.divide(np.float32(1.0), _cv.max(cov, 1e-12)))
+    masked = _cv.copyTo(src, valid)
+    cases: list[tuple[np.ndarray | None, bool, np.ndarray]] = [
+        (valid, False, _cv.multiply(halve(masked), inv)),
+        (valid, True, _cv.multiply(halve(_cv.multiply(masked, masked)), inv)),
+        (None, False, _cv.multiply(halve(src), inv)),
+    ]
+    for mask, square, want in cases:
+        out = np.empty(cells, np.float32)
+        cell_average(src, mask, inv, out, square=square)
+        assert np.array_equal(out, want)
+    wide = np.stack([src, src, src], axis=-1)
+    rows = np.empty(shape, np.float32)
+    masked_rows(wide[..., 0], valid, 1.0, rows)  # a view with a stride: copied first
+    assert np.array_equal(rows, np.where(valid > 0, src, np.float32(1.0)))

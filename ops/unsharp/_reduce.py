@@ -1,4 +1,5 @@
-"""Compiled passes over the cells of a surface pyramid's level: the selective reduction
+"""Compiled passes over the cells of a surface pyramid's level: the first level's averages of
+full-resolution rows (``_surface``), the selective reduction of the others
 (``_reduce_selective``: the weight each cell keeps in its 2×2 block, and the weighted block
 averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
@@ -175,3 +176,104 @@ def _flags_rows(cov, iz, gx, gy, hd, thr, r0, r1, out):  # type: ignore[no-untyp
             hi = max(max(tb[j], ta[j]), max(bb[j], ba[j]))
             lo = min(min(tb[j], ta[j]), min(bb[j], ba[j]))
             o[j] = o[j] | ((hi - lo) > thr)
+
+
+def masked_rows(src: Array, valid: Array, fill: float, out: Array) -> None:
+    """out = ``src`` where ``valid`` (uint8), else ``fill``: rows, before their logarithm.
+
+    Here and below, inputs that are views with a row stride (a crop of the frame) are copied:
+    the kernels are compiled for C-contiguous rows only (one set of types, loaded once)."""
+    c = np.ascontiguousarray
+    _masked_rows(c(src), c(valid), np.float32(fill), out)
+
+
+def cell_coverage(valid: Array, cov: Array, inv: Array) -> None:
+    """The first level's coverage of full-resolution rows ``valid`` (uint8 0/1): each cell's
+    share of valid pixels, and its inverse (floored at 1e-12)."""
+    _coverage_rows(np.ascontiguousarray(valid), cov, inv)
+
+
+def cell_average(
+    src: Array, valid: Array | None, inv: Array, out: Array, square: bool = False
+) -> None:
+    """``out`` = the 2×2 averages of rows ``src`` (0 where ``valid`` is 0, when given; squared
+    after that with ``square``) times ``inv``."""
+    c = np.ascontiguousarray
+    none = np.zeros((0, 0), np.uint8)
+    _average_cells(c(src), none if valid is None else c(valid), square, inv, out)
+
+
+def cell_planes(n3: Array, inv: Array, out: list[Array]) -> None:
+    """Each channel of (h, w, 3) averaged normals times ``inv``, into three planes."""
+    _planes_rows(np.ascontiguousarray(n3), inv, out[0], out[1], out[2])
+
+
+@exact_kernel
+def _masked_rows(src, valid, fill, out):  # type: ignore[no-untyped-def]
+    for i in range(out.shape[0]):
+        s, v, o = src[i], valid[i], out[i]
+        for j in range(o.shape[0]):
+            o[j] = s[j] if v[j] != 0 else fill
+
+
+@exact_kernel
+def _coverage_rows(valid, cov, inv):  # type: ignore[no-untyped-def]
+    n, w = valid.shape
+    wf = w // 2  # blocks with both columns
+    for bi in range(cov.shape[0]):
+        i0 = 2 * bi
+        full = i0 + 1 < n  # (else the padded row: 0)
+        va, vb, c, q = valid[i0], valid[i0 + 1 if full else i0], cov[bi], inv[bi]
+        low = _F1 if full else _F0
+        for bj in range(wf + (w % 2)):
+            j0 = 2 * bj
+            j1 = j0 + 1 if j0 + 1 < w else j0
+            right = _F1 if j0 + 1 < w else _F0  # 0: the padded column
+            a = np.float32(va[j0] != 0)
+            b = np.float32(va[j1] != 0) * right
+            d = np.float32(vb[j0] != 0) * low
+            e = np.float32(vb[j1] != 0) * (low * right)
+            x = ((a + b) + (d + e)) * _QUARTER
+            c[bj] = x
+            q[bj] = _F1 / (x if x > _EPS else _EPS)
+
+
+@exact_kernel
+def _average_cells(src, valid, square, inv, out):  # type: ignore[no-untyped-def]
+    n, w = src.shape
+    masked = valid.shape[0] > 0
+    wf = w // 2  # blocks with both columns
+    every = np.ones(w, np.uint8)
+    for bi in range(out.shape[0]):
+        i0 = 2 * bi
+        full = i0 + 1 < n  # (else the padded row: 0)
+        i1 = i0 + 1 if full else i0
+        s0, s1, o, q = src[i0], src[i1], out[bi], inv[bi]
+        v0 = valid[i0] if masked else every
+        v1 = valid[i1] if masked else every
+        for bj in range(wf + (w % 2)):
+            j0 = 2 * bj
+            pair = j0 + 1 < w  # (else the padded column: 0)
+            j1 = j0 + 1 if pair else j0
+            a, b, c, d = s0[j0], s0[j1], s1[j0], s1[j1]
+            if masked:
+                a = a if v0[j0] != 0 else _F0
+                b = b if v0[j1] != 0 else _F0
+                c = c if v1[j0] != 0 else _F0
+                d = d if v1[j1] != 0 else _F0
+            if square:
+                a, b, c, d = a * a, b * b, c * c, d * d
+            b = b if pair else _F0
+            c = c if full else _F0
+            d = d if pair and full else _F0
+            o[bj] = (((a + b) + (c + d)) * _QUARTER) * q[bj]
+
+
+@exact_kernel
+def _planes_rows(n3, inv, x, y, z):  # type: ignore[no-untyped-def]
+    for i in range(inv.shape[0]):
+        for j in range(inv.shape[1]):
+            q = inv[i, j]
+            x[i, j] = n3[i, j, 0] * q
+            y[i, j] = n3[i, j, 1] * q
+            z[i, j] = n3[i, j, 2] * q

@@ -15,7 +15,8 @@ import numpy as np
 from ops import color
 from ops.parallel import STRIP_PIXELS
 from ops.pyramid.reduce import halve
-from ops.unsharp._common import _MIN_LEVEL_SIDE, _ONE, Array
+from ops.unsharp._common import _MIN_LEVEL_SIDE, Array
+from ops.unsharp._reduce import cell_average, cell_coverage, cell_planes, masked_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -213,43 +214,39 @@ def _surface(
     def strip(r: slice) -> None:
         r0 = r.start
         v = valid[r]
-        w_r = np.empty((r.stop - r0, w), np.float32)  # the weight: 1 on the surface, 0 elsewhere
         iz_r = iz[r]
-        if focal is None:
-            iz_r.fill(0.0)  # 0 off the surface
-            _write(_cv.copyTo(depth[r], v, iz_r), iz, r)
+        if focal is None:  # 0 off the surface
+            masked_rows(depth[r], v, 0.0, iz_r)
         else:  # ln 1 = 0 off the surface
-            w_r.fill(1.0)
-            _write(_cv.log(_cv.copyTo(depth[r], v, w_r), dst=iz_r), iz, r)
+            masked_rows(depth[r], v, 1.0, iz_r)
+            _write(_cv.log(iz_r, dst=iz_r), iz, r)
         scale_iz(iz_r)
         if lps is not None:
-            w_r.fill(1.0)
-            _write(_cv.log(_cv.copyTo(pixel_size[r], v, w_r), dst=lps[r]), lps, r)
+            masked_rows(pixel_size[r], v, 1.0, lps[r])
+            _write(_cv.log(lps[r], dst=lps[r]), lps, r)
         s_r = sig[r]
         signal(r, s_r)
         if not first:
             return
-        np.copyto(w_r, v, casting="unsafe")
+        # level 1: 2×2 averages (0 off the surface) normalised by the cell's coverage, compiled
+        # (ops.unsharp._reduce; the numbers of OpenCV's area halving)
         c = slice(r0 // 2, (r.stop + 1) // 2)
-        cv_c = cov[c]
-        _write(halve(w_r), cov, c)
-        inv = np.divide(_ONE, _cv.max(cv_c, 1e-12))  # fields are 0 in empty cells: stay 0
-        sw = _cv.copyTo(s_r, v)  # 0 off the surface
-        _write(_cv.multiply(halve(sw), inv, dst=sig1[0][c]), sig1[0], c)
+        inv = np.empty((c.stop - c.start, wc), np.float32)
+        cell_coverage(v, cov[c], inv)
+        cell_average(s_r, v, inv, sig1[0][c])
         if squares:
-            _write(_cv.multiply(halve(_cv.multiply(sw, sw)), inv, dst=sig1[1][c]), sig1[1], c)
+            cell_average(s_r, v, inv, sig1[1][c], square=True)
         for i, other in enumerate(others, 1):
-            _write(_cv.multiply(halve(_cv.copyTo(other[r], v)), inv, dst=sig1[i][c]), sig1[i], c)
-        _write(_cv.multiply(halve(iz_r), inv, dst=iz1[c]), iz1, c)
+            cell_average(other[r], v, inv, sig1[i][c])
+        cell_average(iz_r, None, inv, iz1[c])
         if lps is not None and lps1 is not None:
-            _write(_cv.multiply(halve(lps[r]), inv, dst=lps1[c]), lps1, c)
+            cell_average(lps[r], None, inv, lps1[c])
         if normal is not None and nrm1 is not None:
             # normals off the surface may be anything (0, NaN): average them in and zero the
             # NaN; a partial cell's sum is renormalised by its coverage
             n3 = halve(normal[r])
             _cv.patchNaNs(n3, 0.0)
-            for i, ch in enumerate(_cv.split(n3)):
-                _write(_cv.multiply(ch, inv, dst=nrm1[i][c]), nrm1[i], c)
+            cell_planes(n3, inv, [n[c] for n in nrm1])
 
     color.row_strips(h, w, strip, step)
     if not first:
