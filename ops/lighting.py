@@ -17,14 +17,16 @@ frames:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import numpy as np
 from numpy.typing import NDArray
 
-from ops.jit import kernel
+from ops.jit import exact_kernel, kernel
 from ops.parallel import run_strips
 from ops.unsharp import surface_blurs
 
-__all__ = ["luminance_gain", "weighed_gain"]
+__all__ = ["apply_lighting_gain", "luminance_gain", "weighed_gain"]
 
 F32 = NDArray[np.float32]
 
@@ -115,3 +117,52 @@ def _weigh_rows(gain, y0, y1, k, out):  # type: ignore[no-untyped-def]
             if b == a:
                 w = np.float32(0.0)
             out[i, j] = one + w * (gain[i, j] - one)
+
+
+def apply_lighting_gain(
+    out: np.ndarray, gain: np.ndarray, plus: np.ndarray | None, minus: Sequence[np.ndarray]
+) -> None:
+    """``out`` · gain + ``plus`` − Σ ``minus``, in place, in that order (each operation rounded
+    as NumPy rounds it): an enhanced sum of lobes given the kept lighting's ``gain`` (H, W),
+    with what the lobes leave out of the beauty added back. ``out`` and the others (H, W, 3)
+    float32, ``out`` C-contiguous. One compiled pass per array and strip of rows, while the
+    strip is in cache."""
+    hgt, wid = gain.shape
+    if out.shape != (hgt, wid, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
+        raise ValueError(f"out must be a C-contiguous float32 ({hgt}, {wid}, 3) array")
+    flat = (hgt, 3 * wid)
+    o = out.reshape(flat)
+    g = np.ascontiguousarray(gain, np.float32)
+    p = o if plus is None else np.ascontiguousarray(plus, np.float32).reshape(flat)
+    ms = [np.ascontiguousarray(x, np.float32).reshape(flat) for x in minus]
+
+    def strip(r0: int, r1: int) -> None:
+        _times_plus_rows(o[r0:r1], g[r0:r1], p[r0:r1], plus is not None)
+        for m in ms:
+            _minus_rows(o[r0:r1], m[r0:r1])
+
+    run_strips(hgt, strip, _ROWS)
+
+
+@exact_kernel
+def _times_plus_rows(out, gain, plus, add):  # type: ignore[no-untyped-def]
+    """Rows (3W) of ``out`` × ``gain`` (rows of W), then + ``plus`` with ``add``."""
+    for i in range(out.shape[0]):
+        o, g = out[i], gain[i]
+        for j in range(g.shape[0]):
+            gj = g[j]
+            o[3 * j] = o[3 * j] * gj
+            o[3 * j + 1] = o[3 * j + 1] * gj
+            o[3 * j + 2] = o[3 * j + 2] * gj
+        if add:
+            q = plus[i]
+            for m in range(o.shape[0]):
+                o[m] = o[m] + q[m]
+
+
+@exact_kernel
+def _minus_rows(out, x):  # type: ignore[no-untyped-def]
+    for i in range(out.shape[0]):
+        o, q = out[i], x[i]
+        for m in range(o.shape[0]):
+            o[m] = o[m] - q[m]

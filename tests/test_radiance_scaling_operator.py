@@ -20,7 +20,7 @@ from gbuffer.frame import LOBES, Frame
 from ops import radiance_scaling as rs
 from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
-from ops.lighting import luminance_gain, weighed_gain
+from ops.lighting import apply_lighting_gain, luminance_gain, weighed_gain
 from ops.pyramid.masked import masked_gaussian, masked_gaussians
 from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
@@ -497,6 +497,26 @@ def test_luminance_gain_is_its_formula(bool_mask: bool) -> None:
     np.testing.assert_array_equal(got, expect)
     assert (got[:, :12] == 1.0).all() and not np.allclose(got[:, 12:25], 1.0)
     assert (got[25:55, 35:75] == 1.0).all() and (got[75:105, 95:145] == 1.0).all()
+
+
+def test_apply_lighting_gain_is_numpys_in_order() -> None:
+    # out · gain + plus − Σ minus, each operation rounded as NumPy rounds it (bit for bit),
+    # with and without what is added back; a strided array is refused
+    rng = np.random.default_rng(9)
+    shape = (70, 90, 3)
+    scaled, plus, *minus = (rng.uniform(0.0, 2.0, shape).astype(np.float32) for _ in range(5))
+    gain = rng.uniform(0.5, 1.5, shape[:2]).astype(np.float32)
+    for add, less in ((plus, minus), (plus, []), (None, [])):
+        want = scaled * gain[..., None]
+        if add is not None:
+            want += add
+        for x in less:
+            want -= x
+        got = scaled.copy()
+        apply_lighting_gain(got, gain, add, less)
+        assert np.array_equal(got, want)
+    with pytest.raises(ValueError, match="C-contiguous"):
+        apply_lighting_gain(np.zeros((90, 70, 3), np.float32).transpose(1, 0, 2), gain, None, [])
 
 
 @pytest.mark.parametrize("channels", [(), (3,)])

@@ -13,8 +13,9 @@ from gbuffer.frame import LOBES, Frame
 from ops import checks
 from ops import curvature as curv_ops
 from ops import radiance_scaling as rs
-from ops.color import luminance, luminance_of_sum, row_strips
+from ops.color import luminance, luminance_of_sum
 from ops.colorspace import LINEAR_REC709, ColorSpace, convert
+from ops.lighting import apply_lighting_gain
 from ops.pyramid.masked import masked_gaussians
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import scale_lobes, white_level
@@ -220,28 +221,11 @@ def _scale_renderer_lobes(
     gain = _lighting_gain(frame, p, scaled, before)
     del before
     if remainder is not None:
-        _with_gain(scaled, gain, remainder, [])
+        apply_lighting_gain(scaled, gain, remainder, [])
     else:  # + beauty − Σ lobe_j
-        _with_gain(scaled, gain, beauty, [] if beauty is None else list(lobes.values()))
+        apply_lighting_gain(scaled, gain, beauty, [] if beauty is None else list(lobes.values()))
     _keep_untouched(scaled, frame.buffers.get("beauty"), gain, kappa)
     return scaled, sigmas
-
-
-def _with_gain(
-    scaled: np.ndarray, gain: np.ndarray, plus: np.ndarray | None, minus: list[np.ndarray]
-) -> None:
-    """``scaled`` · gain + ``plus`` − Σ ``minus``, in place, by strips of rows (each strip's
-    operations while it is in cache, in the order written)."""
-
-    def rows(r: slice) -> None:
-        out = scaled[r]
-        out *= gain[r][..., None]
-        if plus is not None:
-            out += plus[r]
-        for x in minus:
-            out -= x[r]
-
-    row_strips(scaled.shape[0], scaled.shape[1], rows)
 
 
 def _keep_untouched(
