@@ -4,7 +4,7 @@ full-resolution rows (``_surface``), the selective reduction of the others
 averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
 The first level's passes run on ``_surface``'s strips of rows, the block flags on strips of
-block rows, the selective reduction on one thread (a coarser level is at most a sixteenth of the
+block rows, the selective reduction on one thread (the largest level it reads holds a quarter of the
 frame: a pass over it costs less than handing strips to the pool). Each replaces a chain of
 OpenCV and NumPy calls (:func:`ops.jit.exact_kernel`: each product and sum rounded on its own)
 with the same numbers:
