@@ -4,10 +4,10 @@ full-resolution rows (``_surface``), the selective reduction of the others
 averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
 The first level's passes run on ``_surface``'s strips of rows, the block flags on strips of
-block rows, the selective reduction on one thread (the largest level it reads holds a quarter of the
-frame: a pass over it costs less than handing strips to the pool). Each replaces a chain of
-OpenCV and NumPy calls (:func:`ops.jit.exact_kernel`: each product and sum rounded on its own)
-with the same numbers:
+block rows, the selective reduction on one thread (the largest level it reads holds a quarter
+of the frame: a pass over it costs less than handing strips to the pool). Each replaces a chain
+of OpenCV and NumPy calls (:func:`ops.jit.exact_kernel`: each product and sum rounded on its
+own) with the same numbers:
 the 2×2 average is summed in pairs, ((a + b) + (c + d)) / 4, an odd level padded with zeros, as
 OpenCV's area resize sums at exactly one half in its vector loop (the last few columns of a
 row, which it leaves to a scalar loop summing in order, may differ by a rounding).
