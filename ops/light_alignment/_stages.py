@@ -165,6 +165,7 @@ class _Inputs:
         pyr: NormalPyramid | None = None,
         fields: list[F32] | None = None,
         mask: F32 | None = None,
+        views: dict[int, SoA] | None = None,
     ) -> None:
         self.shape = shape
         self.comps = comps
@@ -181,7 +182,9 @@ class _Inputs:
         else:
             assert mask is not None
             self.masks = [mask]
-        self.views: dict[int, SoA] = {}  # the view at coarse levels (view_planes)
+        # the view at coarse levels (view_planes); ``views``: a cache shared by the calls of
+        # one view and pyramid (align_lights)
+        self.views: dict[int, SoA] = {} if views is None else views
         self._lights: dict[int, SoA] = {}
         self.rows: F32 | None = None
         if const is not None:  # a strip of the constant light (level-0 rows are copied from it)

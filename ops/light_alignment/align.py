@@ -153,9 +153,9 @@ def _align_components(
         )
         return _align_full(inp)
     assert pyr is not None
-    inp = _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, const, lfield, pyr=pyr)
-    if views is not None:  # the view at coarse levels, shared by the calls of align_lights
-        inp.views = views
+    inp = _Inputs(
+        shape, comps, math.exp(-gamma), ior, view_f, view_c, const, lfield, pyr=pyr, views=views
+    )
     return _align_pyramid(inp)
 
 

@@ -66,8 +66,9 @@ def _weighted(src: F32, cov: np.ndarray | None) -> F32:
     itself when nothing changes."""
     c = 1 if src.ndim == 2 else src.shape[2]
     flat = src.reshape(src.shape[0], src.shape[1] * c)
+    # all finite and nothing masked: ``src`` itself (a sum that overflows takes the long way)
     if cov is None and bool(np.isfinite(src.sum(dtype=np.float32))):
-        return src  # (an overflow: take the long way)
+        return src
     out = np.empty_like(src)
     dst = out.reshape(flat.shape)
     none = np.zeros((0, 0), np.uint8)
