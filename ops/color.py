@@ -51,6 +51,7 @@ __all__ = [
     "REC709_Y",
     "RGB_TO_XYZ",
     "auto_white",
+    "check_in_place",
     "lab_phi_to_rgb",
     "lab_to_rgb",
     "lightness",
@@ -144,6 +145,16 @@ def _check_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
     if arr.ndim != 3 or arr.shape[2] != 3:
         raise ValueError(f"{name} must have shape (H, W, 3), got {arr.shape}")
     return np.ascontiguousarray(arr, dtype=np.float32)
+
+
+def check_in_place(x: np.ndarray, shape: tuple[int, int], who: str) -> None:
+    """Refuse (ValueError) an array that ``who`` cannot change in place as an (H, W, 3) float32
+    one: another shape or type, or not C-contiguous (a reshape of it would be a copy)."""
+    if x.shape != (*shape, 3) or x.dtype != np.float32 or not x.flags.c_contiguous:
+        raise ValueError(
+            f"{who} changes C-contiguous float32 ({shape[0]}, {shape[1]}, 3) arrays in place; "
+            f"got {x.dtype} {x.shape}{'' if x.flags.c_contiguous else ' (not contiguous)'}"
+        )
 
 
 def _flat(a: np.ndarray) -> np.ndarray:

@@ -22,6 +22,7 @@ from collections.abc import Sequence
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.color import check_in_place
 from ops.jit import exact_kernel, kernel
 from ops.parallel import run_strips
 from ops.unsharp import surface_blurs
@@ -128,8 +129,7 @@ def apply_lighting_gain(
     float32, ``out`` C-contiguous. One compiled pass per array and strip of rows, while the
     strip is in cache."""
     hgt, wid = gain.shape
-    if out.shape != (hgt, wid, 3) or out.dtype != np.float32 or not out.flags.c_contiguous:
-        raise ValueError(f"out must be a C-contiguous float32 ({hgt}, {wid}, 3) array")
+    check_in_place(out, (hgt, wid), "apply_lighting_gain")
     flat = (hgt, 3 * wid)
     o = out.reshape(flat)
     g = np.ascontiguousarray(gain, np.float32)

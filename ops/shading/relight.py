@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ops.color import check_in_place
 from ops.parallel import run_strips
 from ops.shading._kernels import _gain_rows, _radiance_rows, _ratio_rows
 from ops.shading.directions import _SHADE_ROWS, _flat_rows
@@ -136,12 +137,8 @@ def apply_gain(
     beauty += Σ_j (gain − 1) lobe_j (each lobe's change added as it is made). One compiled pass
     per array and row strip."""
     hgt, wid = gain.shape
-    for x in (beauty, *lobes, *lights):  # (changed in place: a reshaped copy would lose it)
-        if x.shape != (hgt, wid, 3) or x.dtype != np.float32 or not x.flags.c_contiguous:
-            raise ValueError(
-                f"apply_gain changes C-contiguous float32 ({hgt}, {wid}, 3) arrays in place; "
-                f"got {x.dtype} {x.shape}{'' if x.flags.c_contiguous else ' (not contiguous)'}"
-            )
+    for x in (beauty, *lobes, *lights):
+        check_in_place(x, (hgt, wid), "apply_gain")
     flat = [(x.reshape(hgt, 3 * wid), True) for x in lobes]
     flat += [(x.reshape(hgt, 3 * wid), False) for x in lights]
     out = beauty.reshape(hgt, 3 * wid)
