@@ -21,6 +21,8 @@ from analysis.score import score_frame
 from gbuffer.errors import MissingBufferError, MissingCameraError
 from gbuffer.frame import LOBES, Frame
 from ops import shading
+from ops.filtering import normal_pyramid
+from ops.light_alignment import align_lights
 from ops.shading import parse_light, shade_directions, shade_lobes
 from service import pipeline
 from service.operators.common import DEFAULT_LIGHTS
@@ -619,6 +621,31 @@ def test_shade_directions_per_component(ball: analytic.Scene) -> None:
     e = sum(np.float32(li.intensity) * np.asarray(li.color, np.float32) for li in LIGHTS)
     expected = np.maximum(ball.normal[..., 2], 0.0)[..., None] * e
     np.testing.assert_allclose(moved["diffuse"], expected, atol=1e-5)
+
+
+@pytest.mark.parametrize("specular", ["blinn_phong", "ggx"])
+def test_positions_are_read_by_point_lights_only(ball: analytic.Scene, specular: str) -> None:
+    # directional lights shade and align alike without positions (Light Alignment skips
+    # rebuilding them); a point light without them is refused by name
+    view = np.array([0.0, 0.0, 1.0], np.float32)
+    pos = positions(ball)
+    directional = [li for li in LIGHTS if li.kind == "directional"]
+    assert directional
+    with_pos = shade_directions(ball.normal, view, pos, directional, specular=specular)
+    without = shade_directions(ball.normal, view, None, directional, specular=specular)
+    for lobe, got in without.items():
+        assert np.array_equal(got, with_pos[lobe]), lobe
+    pyr = normal_pyramid(ball.normal, ball.depth, ball.mask, scales=3)
+    comps = {"diffuse": [0.5, 0.5]}
+    aligned = align_lights(directional, pyr, None, view, comps)
+    assert np.array_equal(
+        aligned["diffuse"][0], align_lights(directional, pyr, pos, view, comps)["diffuse"][0]
+    )
+    point = [shading.Light("point", (1.0, 1.0, 2.0))]
+    with pytest.raises(ValueError, match="point lights need the surface positions"):
+        shade_directions(ball.normal, view, None, point)
+    with pytest.raises(ValueError, match="point lights need the surface positions"):
+        align_lights(point, pyr, None, view, comps)
 
 
 @pytest.mark.parametrize("ior", [1.5, 0.8])

@@ -12,7 +12,7 @@ from ops.filtering import F32, NormalPyramid
 from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide, SoA
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
 from ops.pyramid import normalize_field
-from ops.shading import Light, light_vectors
+from ops.shading import Light, light_vectors, need_positions
 
 __all__ = ["align_components", "align_light", "align_lights"]
 
@@ -200,7 +200,7 @@ def align_light(
 def align_lights(
     lights: Sequence[Light],
     normals: Sequence[np.ndarray] | NormalPyramid,
-    position: np.ndarray,
+    position: np.ndarray | None,
     view: np.ndarray | None,
     components: Mapping[str, Sequence[float]],
     gamma: float = DEFAULT_GAMMA,
@@ -216,7 +216,7 @@ def align_lights(
     ----------
     lights : :class:`ops.shading.Light` list (camera space).
     normals : :class:`~ops.filtering.NormalPyramid` or [n_1, …, n_S].
-    position : (H, W, 3) camera-space positions (used by point lights).
+    position : (H, W, 3) camera-space positions (used by point lights; None when there are none).
     view : (H, W, 3) or (3,) directions towards the eye (specular / transmission).
     components : guide -> σ_1 … σ_{S−1}, e.g. ``{"diffuse": [...], "specular": [...]}``.
     gamma, ior, mask : as in :func:`align_components`.
@@ -231,7 +231,7 @@ def align_lights(
         if light.kind == "directional":
             ldir: np.ndarray = np.asarray(light.vector, np.float32)
         else:
-            ldir = light_vectors(light, np.asarray(position, np.float32))
+            ldir = light_vectors(light, need_positions(position))
         res = _align_components(ldir, normals, components, gamma, view, ior, mask, views)
         for g in components:
             out[g].append(res[g])

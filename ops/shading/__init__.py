@@ -34,7 +34,14 @@ from ops.shading.brdf import (
     transmission,
 )
 from ops.shading.directions import DIFFUSE_MODELS, SPECULAR_MODELS, shade_directions
-from ops.shading.lights import LIGHT_SYNTAX, Light, light_irradiance, light_vectors, parse_light
+from ops.shading.lights import (
+    LIGHT_SYNTAX,
+    Light,
+    light_irradiance,
+    light_vectors,
+    need_positions,
+    parse_light,
+)
 from ops.shading.lobes import MODELS, Model, shade_lobes
 from ops.shading.relight import apply_gain, lobe_radiance, ratio_relight
 from ops.shading.vectors import Vec3, dot, normalize, reflect, refract
@@ -57,6 +64,7 @@ __all__ = [
     "light_irradiance",
     "light_vectors",
     "lobe_radiance",
+    "need_positions",
     "normalize",
     "parse_light",
     "phong",

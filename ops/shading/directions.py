@@ -11,7 +11,7 @@ from ops.checks import EXPONENT, FRACTION, IOR, ROUGHNESS, SHININESS
 from ops.parallel import run_strips
 from ops.shading._kernels import _add_gated, _add_terms, _terms_rows, _transmission_rows
 from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lambert
-from ops.shading.lights import Light, light_irradiance, light_vectors
+from ops.shading.lights import Light, light_irradiance, light_vectors, need_positions
 from ops.shading.vectors import _dot_rows, _dots, dot
 
 __all__ = ["DIFFUSE_MODELS", "SPECULAR_MODELS", "shade_directions"]
@@ -50,10 +50,20 @@ def _checked_models(
     return rough
 
 
+def _positions(
+    position: np.ndarray | None, lights: Sequence[Light], shape: tuple[int, ...]
+) -> np.ndarray:
+    """``position`` as float32; None, where no light needs it, as a read-only (H, W, 3) view of
+    one zero (directional lights never read it; point lights do: ValueError)."""
+    if position is not None or any(light.kind != "directional" for light in lights):
+        return need_positions(position)
+    return np.broadcast_to(np.zeros(3, np.float32), (*shape[:2], 3))
+
+
 def shade_directions(
     normal: np.ndarray,
     view: np.ndarray,
-    position: np.ndarray,
+    position: np.ndarray | None,
     lights: Sequence[Light],
     directions: dict[str, Sequence[np.ndarray]] | None = None,
     *,
@@ -84,7 +94,8 @@ def shade_directions(
     ----------
     normal : (H, W, 3) camera-space unit normals; (0, 0, 0) marks pixels without a surface.
     view : (H, W, 3) or (3,) unit directions towards the eye.
-    position : (H, W, 3) camera-space positions (point lights' irradiance and directions).
+    position : (H, W, 3) camera-space positions (point lights' irradiance and directions); None
+        when every light is directional.
     lights : the lights, camera space.
     directions : component ("diffuse", "specular", "transmission") -> one (H, W, 3) unit field
         per light, in ``lights`` order; a component not given is lit from the light itself.
@@ -107,7 +118,7 @@ def shade_directions(
             raise ValueError(f"unknown component {comp!r} in directions")
         if len(fields) != len(lights):
             raise ValueError(f"directions[{comp!r}] must hold one field per light")
-    pos = np.asarray(position, np.float32)
+    pos = _positions(position, lights, shape)
     view_a = np.asarray(view, np.float32)
     dirs = {comp: [np.asarray(f, np.float32) for f in given[comp]] for comp in given}
     lobes = ["diffuse"] + (["specular"] if specular != "none" else [])

@@ -13,7 +13,14 @@ import numpy as np
 
 from ops.shading.vectors import Vec3, _outer, dot, normalize
 
-__all__ = ["LIGHT_SYNTAX", "Light", "light_irradiance", "light_vectors", "parse_light"]
+__all__ = [
+    "LIGHT_SYNTAX",
+    "Light",
+    "light_irradiance",
+    "light_vectors",
+    "need_positions",
+    "parse_light",
+]
 
 
 def _vec3(value: Sequence[float] | np.ndarray, name: str) -> Vec3:
@@ -104,6 +111,13 @@ def parse_light(text: str) -> Light:
 
 
 # -- lights on fields -------------------------------------------------------------------------
+
+
+def need_positions(position: np.ndarray | None) -> np.ndarray:
+    """``position`` (H, W, 3) as float32, for point lights: ValueError when it is None."""
+    if position is None:
+        raise ValueError("point lights need the surface positions (position is None)")
+    return np.asarray(position, np.float32)
 
 
 def light_vectors(light: Light, position: np.ndarray) -> np.ndarray:

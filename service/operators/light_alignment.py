@@ -232,8 +232,9 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         depth_sigma=p.depth_sigma,
     )
     view = frame.view_vectors()
-    position = frame.positions()
     lights = p.parsed_lights()
+    # (camera-space positions: only point lights read them)
+    position = frame.positions() if any(li.kind != "directional" for li in lights) else None
     components: dict[str, list[float]] = {
         c: p.sigmas_of(c) for c in p.components if _shaded(frame, p, form, c)
     }
