@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _SIGMA_C, _WALL, Array
+from ops.unsharp._front import AS_IS, NAN_AS_ZERO, ON_SURFACE, SQUARED, front_sums, front_taps
 from ops.unsharp._reduce import block_average, block_weights, step_flags
 from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface
 
@@ -58,67 +59,38 @@ def _front_most_cells(lv: _Level, surf: _Surface, sigs: list[Array]) -> None:
         return
     pts = pts.reshape(-1, 2)
     cx, cy = pts[:, 0].astype(np.intp), pts[:, 1].astype(np.intp)
-    cell = cy * lv.cov.shape[1] + cx  # flat index of the cell in its level
-    hf, wf = surf.iz.shape
-    # (4, N): the cell's pixels (top-left, top-right, bottom-left, bottom-right), then cells
-    px = (2 * cx)[None, :] + np.array([0, 1, 0, 1], np.intp)[:, None]
-    py = (2 * cy)[None, :] + np.array([0, 0, 1, 1], np.intp)[:, None]
-    inside = (px < wf) & (py < hf)
-    np.minimum(px, wf - 1, out=px)
-    np.minimum(py, hf - 1, out=py)
-    at = _Gather(py, px, wf)
-    ok = inside & at(surf.valid).view(bool)
-    iz = at(surf.iz)
-    slope = np.float32(0.0)
-    if lv.grad is not None:
-        slope = (np.abs(lv.grad[0].ravel()[cell]) + np.abs(lv.grad[1].ravel()[cell]))[None, :]
-    front = np.where(ok, iz, np.float32(_BIG)).min(axis=0, keepdims=True)
-    # weight 1 within _JUMP/2 (+ the cell's slope) of the front, fading to 0 at _JUMP
-    half = np.float32(0.5) * thr
-    keep = (front + thr + 2.0 * slope - iz) / half
-    keep = np.minimum(np.maximum(keep, np.float32(0.0), out=keep), np.float32(1.0), out=keep)
-    keep *= ok
-    n = _sum_taps(keep).astype(np.float32)
-    wk = keep / np.maximum(n, np.float32(1e-6))[None, :]
-    np.put(lv.cov, cell, n * np.float32(0.25))
+    # per cell (N, 4): its pixels (top-left, top-right, bottom-left, bottom-right), whether
+    # each is on the surface, and its weight (ops.unsharp._front, compiled)
+    py, px, ok, wk, n = front_taps(cx, cy, surf.valid, surf.iz, lv.grad, float(thr))
+
+    def taps(field: Array, mode: int, out: Array) -> None:  # into the level's cells
+        front_sums(field, py, px, ok, wk, mode, cy, cx, out)
+
+    lv.cov[cy, cx] = n * np.float32(0.25)
     for i, sig in enumerate(sigs):
-        vals = np.where(ok, at(sig), np.float32(0.0))  # the signal, 0 off the surface
-        np.put(lv.sig[i], cell, _sum_taps(wk * vals))
+        taps(sig, ON_SURFACE, lv.sig[i])
     if len(lv.sig) > len(sigs):  # and the square of the one signal
-        np.put(lv.sig[1], cell, _sum_taps(wk * (vals * vals)))
-    iz_c = _sum_taps(wk * iz)
-    np.put(lv.iz, cell, iz_c)
+        taps(sigs[-1], SQUARED, lv.sig[1])
+    taps(surf.iz, AS_IS, lv.iz)
     if surf.lps is not None:
-        np.put(lv.lps, cell, _sum_taps(wk * at(surf.lps)))
+        taps(surf.lps, AS_IS, lv.lps)
     else:
         a, b = surf.lps_from
-        np.put(lv.lps, cell, a * iz_c + b)
+        lv.lps[cy, cx] = a * lv.iz[cy, cx] + b
     if lv.nrm is not None and surf.normal is not None:
-        nv = at(surf.normal)  # (4, N, 3)
-        np.copyto(nv, np.float32(0.0), where=np.isnan(nv))  # (normals off the surface: any)
-        nv *= wk[:, :, None]
-        nc = _sum_taps(nv)  # (N, 3)
-        for i in range(3):
-            np.put(lv.nrm[i], cell, nc[:, i])
+        for i in range(3):  # (normals off the surface: any)
+            taps(surf.normal[..., i], NAN_AS_ZERO, lv.nrm[i])
         if lv.grad is not None:  # the re-averaged cells' slopes
+            nc = [q[cy, cx] for q in lv.nrm]
             gx, gy = _plane_slope(
-                nc[:, 0],
-                nc[:, 1],
-                nc[:, 2],
-                cy.astype(np.float32),
-                cx.astype(np.float32),
-                1,
-                surf,
+                nc[0], nc[1], nc[2], cy.astype(np.float32), cx.astype(np.float32), 1, surf
             )
             bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
             gx[bad] = 0.0
             gy[bad] = 0.0
-            np.put(lv.grad[0], cell, gx)
-            np.put(lv.grad[1], cell, gy)
-    lv._valid = None
-    # the blocks' flags after the change: only blocks touching a changed cell can differ (cell
-    # validity is kept: each changed cell keeps at least its front-most pixel)
-    lv.flags = (float(thr), _update_flags(lv, thr, fl, cand))
+            lv.grad[0][cy, cx] = gx
+            lv.grad[1][cy, cx] = gy
+    lv._valid = None  # (and the blocks' flags are made anew where an upsampling needs them)
 
 
 def _touching(cells: Array) -> Array:
@@ -127,40 +99,6 @@ def _touching(cells: Array) -> Array:
     i−1…i, j−1…j."""
     near = _cv.copyMakeBorder(cells, 1, 0, 1, 0, _cv.BORDER_CONSTANT, value=0)
     return _cv.dilate(near, _BLOCK, anchor=(0, 0), borderType=_cv.BORDER_CONSTANT, borderValue=0)
-
-
-def _update_flags(lv: _Level, thr: np.float32, fl: Array, changed: Array) -> Array:
-    """``_block_flags(lv, thr)`` from ``fl``, the flags before the cells where ``changed``
-    (uint8, non-zero) changed their guide or slope (not their validity): the blocks touching
-    them are tested again, sparsely, with the same float32 operations."""
-    h, w = lv.cov.shape
-    pts = _cv.findNonZero(_touching(changed))
-    out = fl.copy()
-    if pts is None:
-        return out
-    pts = pts.reshape(-1, 2)
-    bi, bj = pts[:, 1].astype(np.int64), pts[:, 0].astype(np.int64)
-    # (np.clip is slow on small arrays)
-    r0, r1 = np.maximum(bi - 1, 0) * w, np.minimum(bi, h - 1) * w
-    c0, c1 = np.maximum(bj - 1, 0), np.minimum(bj, w - 1)
-    cells = (r0 + c0, r0 + c1, r1 + c0, r1 + c1)  # tl, tr, bl, br
-    cov = lv.cov.ravel()
-    bad = (cov[cells[0]] <= 0) | (cov[cells[1]] <= 0) | (cov[cells[2]] <= 0) | (cov[cells[3]] <= 0)
-    iz = lv.iz.ravel()
-    if lv.grad is None:
-        tl, tr, bl, br = (iz[c] for c in cells)
-    else:
-        hd = np.float32(0.5 * 2**lv.k)  # a power of 2: the products are exact, as in OpenCV
-        gx, gy = lv.grad[0].ravel(), lv.grad[1].ravel()
-        tl = gy[cells[0]] * hd + (gx[cells[0]] * hd + iz[cells[0]])
-        tr = gy[cells[1]] * hd + (gx[cells[1]] * -hd + iz[cells[1]])
-        bl = gy[cells[2]] * -hd + (gx[cells[2]] * hd + iz[cells[2]])
-        br = gy[cells[3]] * -hd + (gx[cells[3]] * -hd + iz[cells[3]])
-    hi = np.maximum(np.maximum(tl, tr), np.maximum(bl, br))
-    lo = np.minimum(np.minimum(tl, tr), np.minimum(bl, br))
-    step = (hi - lo) > thr
-    out[bi, bj] = (bad | step).view(np.uint8)
-    return out
 
 
 def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
@@ -301,23 +239,3 @@ def _sub_resize(a: Array, f: int, rows: slice, cols: slice) -> Array:
     size = ((x1 - x0) * f, (y1 - y0) * f)
     sub = _cv.resize(a[y0:y1, x0:x1], size, interpolation=_cv.INTER_LINEAR)
     return sub[rows.start - y0 * f : rows.stop - y0 * f, cols.start - x0 * f : cols.stop - x0 * f]
-
-
-def _sum_taps(a: Array) -> Array:
-    """Sum of a (taps, points) array over its taps, in the order NumPy sums a (points, taps)
-    row (sequential below 8 terms, 8 partial sums and a pairwise tree from 8 to 128)."""
-    t = a.shape[0]
-    if t < 8:
-        res = a[0].copy()
-        for i in range(1, t):
-            res += a[i]
-        return res
-    r = a[:8].copy()
-    i = 8
-    while i + 8 <= t:
-        r += a[i : i + 8]
-        i += 8
-    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
-    for j in range(i, t):
-        res += a[j]
-    return res
