@@ -9,7 +9,9 @@ its error; the tests compare them with NumPy's float64 functions.
 * :func:`exp_neg`: e^{−u} for u ≥ 0, 2e-7 absolute, for range weights near 1;
 * :func:`atan2_upper`: atan2(y, x) for y ≥ 0, ~1e-7 rad;
 * :func:`sincos_upper`: (sin θ, cos θ) for θ ∈ [0, π], ~1e-8;
-* :func:`dot3_row`: a row of interleaved triples dotted with constant weights (luminance).
+* :func:`dot3_row`: a row of interleaved triples dotted with constant weights (luminance);
+* :func:`finite_quotient`: a plane divided by a number where finite, inf elsewhere (pixel
+  sizes from depth), on row strips.
 
 Constants are ``np.float32``: a Python float would promote a kernel's arithmetic to float64.
 """
@@ -23,9 +25,18 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from ops.jit import inline_kernel, kernel
+from ops.jit import exact_kernel, inline_kernel, kernel
+from ops.parallel import run_strips, strip_rows
 
-__all__ = ["EXPF_MAX", "atan2_upper", "dot3_row", "exp_neg", "expf", "sincos_upper"]
+__all__ = [
+    "EXPF_MAX",
+    "atan2_upper",
+    "dot3_row",
+    "exp_neg",
+    "expf",
+    "finite_quotient",
+    "sincos_upper",
+]
 
 _F0, _F1 = np.float32(0.0), np.float32(1.0)
 _TINY = np.float32(1e-12)
@@ -165,3 +176,28 @@ def dot3_row(rgb, w0, w1, w2, out):
     """out[j] = (w0, w1, w2) · triple j of the flat interleaved row ``rgb`` (3 · len(out))."""
     for j in range(out.shape[0]):
         out[j] = w0 * rgb[3 * j] + w1 * rgb[3 * j + 1] + w2 * rgb[3 * j + 2]
+
+
+def finite_quotient(a: np.ndarray, divisor: float) -> np.ndarray:
+    """``a / divisor`` (float32, ``divisor`` > 0 rounded to float32) where ``a`` is finite, inf
+    elsewhere: ``np.where(np.isfinite(a), a, np.inf) / np.float32(divisor)`` in one compiled
+    pass over row strips of the (H, W) plane ``a`` (e.g. pixel sizes, depth / focal length)."""
+    src = np.ascontiguousarray(a, np.float32)
+    out = np.empty_like(src)
+    d = np.float32(divisor)
+    flat_in, flat_out = src.reshape(src.shape[0], -1), out.reshape(src.shape[0], -1)
+    run_strips(
+        src.shape[0],
+        lambda r0, r1: _finite_quotient_rows(flat_in[r0:r1], d, flat_out[r0:r1]),
+        strip_rows(flat_in.shape[1]),
+    )
+    return out
+
+
+@exact_kernel
+def _finite_quotient_rows(a, d, out):  # type: ignore[no-untyped-def]
+    inf = np.float32(np.inf)
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            x = a[i, j]
+            out[i, j] = (x if abs(x) < inf else inf) / d

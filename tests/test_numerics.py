@@ -1,12 +1,21 @@
 """The shared kernel numerics (ops/numerics.py): each polynomial within its stated error of
-NumPy's float64 function over its whole domain."""
+NumPy's float64 function over its whole domain; the compiled passes bit for bit as NumPy."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from ops.jit import kernel
-from ops.numerics import EXPF_MAX, atan2_upper, dot3_row, exp_neg, expf, sincos_upper
+from ops.numerics import (
+    EXPF_MAX,
+    atan2_upper,
+    dot3_row,
+    exp_neg,
+    expf,
+    finite_quotient,
+    sincos_upper,
+)
 
 
 @kernel
@@ -97,3 +106,21 @@ def test_dot3_row_weighs_interleaved_triples() -> None:
     out = np.empty(4, np.float32)
     dot3_row(rgb, np.float32(1.0), np.float32(10.0), np.float32(100.0), out)
     np.testing.assert_array_equal(out, [210.0, 543.0, 876.0, 1209.0])
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (37, 53), (300, 7)])
+def test_finite_quotient_is_numpys_where_and_division(shape: tuple[int, int]) -> None:
+    rng = np.random.default_rng(3)
+    a = (rng.random(shape) * 50.0).astype(np.float32)
+    a.ravel()[::5] = np.inf
+    a.ravel()[1::7] = -np.inf
+    a.ravel()[2::11] = np.nan
+    a.ravel()[3::13] = 0.0
+    for divisor in (1.0, 1234.5678, 3e-3):
+        want = np.where(np.isfinite(a), a, np.inf) / np.float32(divisor)
+        got = finite_quotient(a, divisor)
+        assert got.dtype == np.float32 and np.array_equal(got, want)
+    view = a[:, ::2]  # a view with a row stride is read as it is
+    assert np.array_equal(
+        finite_quotient(view, 7.0), np.where(np.isfinite(view), view, np.inf) / np.float32(7.0)
+    )

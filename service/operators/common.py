@@ -14,6 +14,7 @@ from gbuffer.frame import Frame
 from ops import checks
 from ops.color import luminance
 from ops.lighting import luminance_gain, weighed_gain
+from ops.numerics import finite_quotient
 from ops.radiance_scaling import covered_percentile
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
 from service.errors import PipelineError
@@ -82,7 +83,9 @@ def pixel_sizes(frame: Frame, why: str) -> np.ndarray:
     """Scene units per pixel at each pixel (depth / focal length, or the orthographic size)."""
     camera = frame.need_camera(why)
     depth = frame.need("depth", why)
-    return camera.pixel_size_at(np.where(np.isfinite(depth), depth, np.inf), frame.image_height)
+    if camera.projection == "orthographic":
+        return camera.pixel_size_at(depth, frame.image_height)
+    return finite_quotient(depth, np.float32(camera.focal_px(frame.image_height)))
 
 
 #: Vertical field of view assumed for sizes relative to the image height when a frame has no
@@ -98,9 +101,7 @@ def relative_pixel_sizes(frame: Frame, why: str) -> np.ndarray:
         return pixel_sizes(frame, why)
     depth = frame.need("depth", why)
     focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
-    return (np.where(np.isfinite(depth), depth, np.inf) / np.float32(focal)).astype(
-        np.float32, copy=False
-    )
+    return finite_quotient(depth, focal)
 
 
 #: Relative luminance change from which an operator's change is corrected in full by
