@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from ops.color import check_in_place
 from ops.jit import exact_kernel, kernel
 from ops.parallel import run_strips
+from ops.pyramid.upsample import Upsampled, upsample_row
 from ops.unsharp import surface_blurs
 
 __all__ = ["apply_lighting_gain", "luminance_gain", "weighed_gain"]
@@ -121,13 +122,19 @@ def _weigh_rows(gain, y0, y1, k, out):  # type: ignore[no-untyped-def]
 
 
 def apply_lighting_gain(
-    out: np.ndarray, gain: np.ndarray, plus: np.ndarray | None, minus: Sequence[np.ndarray]
+    out: np.ndarray,
+    gain: np.ndarray,
+    plus: np.ndarray | None,
+    minus: Sequence[np.ndarray],
+    unchanged: tuple[np.ndarray, Upsampled] | None = None,
 ) -> None:
     """``out`` · gain + ``plus`` − Σ ``minus``, in place, in that order (each operation rounded
     as NumPy rounds it): an enhanced sum of lobes given the kept lighting's ``gain`` (H, W),
     with what the lobes leave out of the beauty added back. ``out`` and the others (H, W, 3)
-    float32, ``out`` C-contiguous. One compiled pass per array and strip of rows, while the
-    strip is in cache."""
+    float32, ``out`` C-contiguous. ``unchanged`` = (``original``, κ): where the gain is exactly
+    1 and κ is 0 (the operator changed nothing there), ``original`` instead, bit for bit (the
+    sum of lobes and the rest only rounds back to it). One compiled pass per array and strip of
+    rows, while the strip is in cache."""
     hgt, wid = gain.shape
     check_in_place(out, (hgt, wid), "apply_lighting_gain")
     flat = (hgt, 3 * wid)
@@ -135,13 +142,36 @@ def apply_lighting_gain(
     g = np.ascontiguousarray(gain, np.float32)
     p = o if plus is None else np.ascontiguousarray(plus, np.float32).reshape(flat)
     ms = [np.ascontiguousarray(x, np.float32).reshape(flat) for x in minus]
+    orig = None if unchanged is None else np.ascontiguousarray(unchanged[0], np.float32)
+    kappa = None if unchanged is None else unchanged[1]
 
     def strip(r0: int, r1: int) -> None:
         _times_plus_rows(o[r0:r1], g[r0:r1], p[r0:r1], plus is not None)
         for m in ms:
             _minus_rows(o[r0:r1], m[r0:r1])
+        if orig is not None and kappa is not None:
+            _restore_rows(
+                o[r0:r1], orig.reshape(flat)[r0:r1], g[r0:r1], kappa.grid, kappa.factor, r0
+            )
 
     run_strips(hgt, strip, _ROWS)
+
+
+@kernel
+def _restore_rows(out, orig, gain, grid, f, r0):  # type: ignore[no-untyped-def]
+    """Rows (3W) of ``out`` = ``orig`` where ``gain`` is 1 and κ (``grid`` upsampled ``f``
+    times, its rows from ``r0`` on: :func:`ops.pyramid.upsample_row`, as ``np.asarray`` of the
+    :class:`~ops.pyramid.Upsampled` makes them) is 0."""
+    one, zero = np.float32(1.0), np.float32(0.0)
+    wid = gain.shape[1]
+    v = np.empty(grid.shape[1], np.float32)
+    k = np.empty(wid, np.float32)
+    for i in range(out.shape[0]):
+        upsample_row(grid, f, r0 + i, v, k)
+        o, q, g = out[i], orig[i], gain[i]
+        for j in range(wid):
+            if (g[j] == one) & (k[j] == zero):
+                o[3 * j], o[3 * j + 1], o[3 * j + 2] = q[3 * j], q[3 * j + 1], q[3 * j + 2]
 
 
 @exact_kernel

@@ -22,6 +22,7 @@ from ops.color import luminance
 from ops.curvature import DEFAULT_SCALE, Curvature, isotropic, principal_curvatures
 from ops.lighting import apply_lighting_gain, luminance_gain, weighed_gain
 from ops.pyramid.masked import masked_gaussian, masked_gaussians
+from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import reflectance_delta, sigma
 from ops.shading import parse_light
 from ops.unsharp import surface_blurs
@@ -514,6 +515,20 @@ def test_apply_lighting_gain_is_numpys_in_order() -> None:
             want -= x
         got = scaled.copy()
         apply_lighting_gain(got, gain, add, less)
+        assert np.array_equal(got, want)
+    # where the gain is exactly 1 and κ is 0, the original instead (κ on a grid 2x smaller,
+    # or at full resolution)
+    gain[10:40, 20:60] = 1.0
+    original = rng.uniform(0.0, 2.0, shape).astype(np.float32)
+    for grid in (np.zeros((35, 45), np.float32), np.zeros(shape[:2], np.float32)):
+        grid[grid.shape[0] // 4 :, : grid.shape[1] // 3] = 0.5  # κ ≠ 0 there
+        kappa = Upsampled(grid, shape[:2])
+        alone = (gain == 1.0) & (np.asarray(kappa) == 0.0)
+        assert 0 < alone.sum() < (gain == 1.0).sum()
+        want = scaled * gain[..., None] + plus
+        want[alone] = original[alone]
+        got = scaled.copy()
+        apply_lighting_gain(got, gain, plus, [], (original, kappa))
         assert np.array_equal(got, want)
     with pytest.raises(ValueError, match="C-contiguous"):
         apply_lighting_gain(np.zeros((90, 70, 3), np.float32).transpose(1, 0, 2), gain, None, [])

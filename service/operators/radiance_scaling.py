@@ -5,7 +5,6 @@ from __future__ import annotations
 
 from typing import Any, ClassVar, Literal
 
-import cv2
 import numpy as np
 from pydantic import Field, field_validator
 
@@ -220,22 +219,16 @@ def _scale_renderer_lobes(
     before = luminance_of_sum(list(lobes.values()), weights)
     gain = _lighting_gain(frame, p, scaled, before)
     del before
+    # where the operator changed nothing (κ = 0, so σ̄ = 1 for every lobe, and a lighting gain of
+    # exactly 1), the beauty as it was, bit for bit: Σ lobe_j + rest only rounds back to it
+    original = frame.buffers.get("beauty")
+    unchanged = None if original is None else (original, kappa)
     if remainder is not None:
-        apply_lighting_gain(scaled, gain, remainder, [])
+        apply_lighting_gain(scaled, gain, remainder, [], unchanged)
     else:  # + beauty − Σ lobe_j
-        apply_lighting_gain(scaled, gain, beauty, [] if beauty is None else list(lobes.values()))
-    _keep_untouched(scaled, frame.buffers.get("beauty"), gain, kappa)
+        minus = [] if beauty is None else list(lobes.values())
+        apply_lighting_gain(scaled, gain, beauty, minus, unchanged)
     return scaled, sigmas
-
-
-def _keep_untouched(
-    out: np.ndarray, beauty: np.ndarray | None, gain: np.ndarray, kappa: Upsampled
-) -> None:
-    """Where the operator changed nothing (κ = 0, so σ̄ = 1 for every lobe, and a lighting gain
-    of exactly 1), ``beauty`` as it was, bit for bit: Σ lobe_j + rest only rounds back to it."""
-    if beauty is not None:
-        alone = (gain == np.float32(1.0)) & (np.asarray(kappa) == np.float32(0.0))
-        cv2.copyTo(beauty, alone.view(np.uint8), out)  # (in place; 100x np.copyto's where=)
 
 
 def _scale_beauty(
