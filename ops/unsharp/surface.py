@@ -132,9 +132,8 @@ def surface_blurs(
     ps = _plane("pixel_size", pixel_size, shape)
     nrm = None if normal is None else _normals(normal, shape)
     valid, ps_range, box, _ = _valid(depth_a, ps, _mask(mask, shape))
-    outs = [sig.copy() for sig in sigs]
     if box is None:
-        return outs
+        return [sig.copy() for sig in sigs]
     ys, xs = box
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     first_box = sigs[0][box]
@@ -153,15 +152,24 @@ def surface_blurs(
     subs = [sub, *(np.ascontiguousarray(sig[box]) for sig in sigs[1:])]
     res = _surface_pyramid(surf, subs, first, sigma, None, ns)
     if res is None:
-        return outs
+        return [sig.copy() for sig in sigs]
     fade = _fade(sigma, surf, ps[box])
-    for out, full, sub_i in zip(outs, res[0].full(), subs, strict=True):
+    off = _cv.subtract(1, surf.valid)  # 0/1: pixels of the box off the surface keep the signal
+    outs = []
+    for sig, full, sub_i in zip(sigs, res[0].full(), subs, strict=True):
         if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
             fb, a0 = fade
             fs, ss = full[fb], sub_i[fb]
             _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
-        # (cv2.copyTo: many times faster than np.copyto's where=)
-        _write(_cv.copyTo(full, surf.valid, dst=out[box]), out, box)
+        # the smoothed signal on the surface, the signal itself elsewhere: made in the box's
+        # upsampled array (cv2.copyTo: many times faster than np.copyto's where=)
+        _write(_cv.copyTo(sig[box], off, dst=full), full, slice(None))
+        if full.shape == shape:
+            outs.append(np.ascontiguousarray(full))
+        else:
+            out = _outside(sig, box)
+            out[box] = full
+            outs.append(out)
     return outs
 
 
