@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.color import check_in_place
-from ops.jit import exact_kernel, kernel
+from ops.jit import exact_kernel, inline_kernel, kernel
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled, upsample_row
 from ops.unsharp import surface_blurs
@@ -48,6 +48,7 @@ def luminance_gain(
     *,
     sigma_scene: float,
     pixel_size: np.ndarray | float,
+    full_change: float | None = None,
 ) -> F32:
     """The per-pixel factor that gives an enhanced luminance ``y_after`` the low-frequency
     luminance of ``y_before`` ((H, W) each, in the frame's working space)::
@@ -56,7 +57,8 @@ def luminance_gain(
 
     (both smoothed on one surface pyramid). The gain is 1 on uncovered pixels and where either
     is darker than 1e-6 at that scale. See :func:`ops.unsharp.surface_blur` for ``depth``,
-    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units.
+    ``normal``, ``mask``, ``pixel_size`` and the scale in scene units. With ``full_change``,
+    the gain :func:`weighed_gain` makes of it, in the same pass.
     """
     lf_in, lf_out = surface_blurs(
         [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
@@ -64,24 +66,31 @@ def luminance_gain(
     m = np.ascontiguousarray(mask)
     if m.dtype == np.bool_:
         m = m.view(np.uint8)
+    weigh = full_change is not None
+    y0, y1 = (np.ascontiguousarray(y, np.float32) for y in (y_before, y_after))
+    k = np.float32(full_change if weigh else 0.0)
     run_strips(  # (lf_in is surface_blurs' new array: the gain is written over it)
         lf_in.shape[0],
-        lambda r0, r1: _gain_rows(lf_in[r0:r1], lf_out[r0:r1], m[r0:r1], lf_in[r0:r1]),
+        lambda r0, r1: _gain_rows(
+            lf_in[r0:r1], lf_out[r0:r1], m[r0:r1], y0[r0:r1], y1[r0:r1], k, weigh, lf_in[r0:r1]
+        ),
         _ROWS,
     )
     return lf_in
 
 
 @kernel
-def _gain_rows(lf_in, lf_out, mask, out):  # type: ignore[no-untyped-def]
+def _gain_rows(lf_in, lf_out, mask, y0, y1, k, weigh, out):  # type: ignore[no-untyped-def]
     """out = lf_in / lf_out where both are above _DARK and ``mask`` > 0, else 1 (``out`` may be
-    ``lf_in``)."""
+    ``lf_in``); with ``weigh``, that gain weighed by the change from ``y0`` to ``y1``
+    (:func:`_weighed`)."""
     dark = _DARK
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):
             a, b = lf_in[i, j], lf_out[i, j]
             ok = (a > dark) & (b > dark) & (mask[i, j] > 0)
-            out[i, j] = a / b if ok else np.float32(1.0)
+            g = a / b if ok else np.float32(1.0)
+            out[i, j] = _weighed(g, y0[i, j], y1[i, j], k) if weigh else g
 
 
 def weighed_gain(
@@ -107,18 +116,23 @@ def weighed_gain(
 
 @kernel
 def _weigh_rows(gain, y0, y1, k, out):  # type: ignore[no-untyped-def]
-    one = np.float32(1.0)
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):
-            a, b = y0[i, j], y1[i, j]
-            w = abs(b - a)
-            if a != 0:
-                w = w / (k * abs(a))
-            if w > one:
-                w = one
-            if b == a:
-                w = np.float32(0.0)
-            out[i, j] = one + w * (gain[i, j] - one)
+            out[i, j] = _weighed(gain[i, j], y0[i, j], y1[i, j], k)
+
+
+@inline_kernel
+def _weighed(gain, a, b, k):  # type: ignore[no-untyped-def]
+    """1 + w (``gain`` − 1), w = min(1, |b − a| / (k |a|)) (|b| where a = 0), 0 where b = a."""
+    one = np.float32(1.0)
+    w = abs(b - a)
+    if a != 0:
+        w = w / (k * abs(a))
+    if w > one:
+        w = one
+    if b == a:
+        w = np.float32(0.0)
+    return one + w * (gain - one)
 
 
 def apply_lighting_gain(

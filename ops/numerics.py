@@ -195,7 +195,7 @@ def finite_quotient(a: np.ndarray, divisor: float) -> np.ndarray:
 
 
 @exact_kernel
-def _finite_quotient_rows(a, d, out):  # type: ignore[no-untyped-def]
+def _finite_quotient_rows(a, d, out):
     inf = np.float32(np.inf)
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):

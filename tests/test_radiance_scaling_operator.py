@@ -498,6 +498,12 @@ def test_luminance_gain_is_its_formula(bool_mask: bool) -> None:
     np.testing.assert_array_equal(got, expect)
     assert (got[:, :12] == 1.0).all() and not np.allclose(got[:, 12:25], 1.0)
     assert (got[25:55, 35:75] == 1.0).all() and (got[75:105, 95:145] == 1.0).all()
+    # weighed in the same pass: weighed_gain's numbers (some pixels left unchanged)
+    y1[5:15, 40:60] = y0[5:15, 40:60]
+    weighed = luminance_gain(y0, y1, depth, normal, m, **kw, full_change=0.05)
+    plain = luminance_gain(y0, y1, depth, normal, m, **kw)
+    assert np.array_equal(weighed, weighed_gain(plain, y0, y1, 0.05))
+    assert (weighed[5:15, 40:60] == 1.0).all() and not np.array_equal(weighed, plain)
 
 
 def test_apply_lighting_gain_is_numpys_in_order() -> None:

@@ -13,7 +13,7 @@ from pydantic import Field, field_validator
 from gbuffer.frame import Frame
 from ops import checks
 from ops.color import luminance
-from ops.lighting import luminance_gain, weighed_gain
+from ops.lighting import luminance_gain
 from ops.numerics import finite_quotient
 from ops.radiance_scaling import covered_percentile
 from ops.shading import LIGHT_SYNTAX, Light, parse_light
@@ -85,7 +85,7 @@ def pixel_sizes(frame: Frame, why: str) -> np.ndarray:
     depth = frame.need("depth", why)
     if camera.projection == "orthographic":
         return camera.pixel_size_at(depth, frame.image_height)
-    return finite_quotient(depth, np.float32(camera.focal_px(frame.image_height)))
+    return finite_quotient(depth, camera.focal_px(frame.image_height))
 
 
 #: Vertical field of view assumed for sizes relative to the image height when a frame has no
@@ -121,7 +121,7 @@ def kept_lighting_gain(
     the curvature ends, e.g. beside a CAD part's creases)."""
     pixel_size = relative_pixel_sizes(frame, why)
     y0, y1 = (x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in (before, after))
-    gain = luminance_gain(
+    return luminance_gain(
         y0,
         y1,
         frame.need("depth", why),
@@ -129,8 +129,8 @@ def kept_lighting_gain(
         frame.mask,
         sigma_scene=relative_scene_sigma(frame, pixel_size, scale),
         pixel_size=pixel_size,
+        full_change=KEPT_CHANGE,  # (weighed_gain, in the same pass)
     )
-    return weighed_gain(gain, y0, y1, KEPT_CHANGE)
 
 
 def relative_scene_sigma(frame: Frame, pixel_size: np.ndarray, fraction: float) -> float:
