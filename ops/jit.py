@@ -26,12 +26,21 @@ their results (cv2.phase, ...) as inputs computed on the strip, or use a polynom
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
 import numba
 
-__all__ = ["EXACT_FASTMATH", "FASTMATH", "exact_kernel", "inline_kernel", "kernel"]
+__all__ = [
+    "EXACT_FASTMATH",
+    "FASTMATH",
+    "exact_kernel",
+    "inline_kernel",
+    "kernel",
+    "prepare",
+    "prepare_in_background",
+]
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -61,3 +70,32 @@ def inline_kernel(fn: F) -> F:
         nogil=True, cache=True, fastmath=set(FASTMATH), error_model="numpy", inline="always"
     )
     return cast(F, jit(fn))
+
+
+@kernel
+def _ready(x):  # type: ignore[no-untyped-def]
+    return x + 1
+
+
+def prepare() -> None:
+    """Make Numba's compiler ready in this process: the first kernel a process loads, even from
+    the cache, first loads Numba's registries of NumPy support (~0.3 s, a third of it importing
+    SciPy's linear algebra to find a BLAS); this loads a trivial kernel to pay that now."""
+    _ready(0)
+
+
+def prepare_in_background() -> threading.Thread:
+    """:func:`prepare` on a thread of its own (join it before the first kernel runs, or not:
+    a kernel loaded meanwhile waits for it), so that the registries load while this thread does
+    other work, e.g. decode a frame (the OpenEXR library does that without Python's lock).
+    A failure is left for the kernels themselves to raise."""
+
+    def run() -> None:
+        try:
+            prepare()
+        except Exception:  # (best effort: the kernels will say what is wrong)
+            return
+
+    thread = threading.Thread(target=run, name="depict-jit-prepare", daemon=True)
+    thread.start()
+    return thread

@@ -112,8 +112,12 @@ def enhance(
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
     whether parameters may name image files on this machine (False for the HTTP service).
     """
+    from ops.jit import prepare_in_background
+
     read, write = read or ReadRequest(), write or WriteRequest()
+    prepared = prepare_in_background()  # Numba's start-up, while the frame decodes
     frame = read_for(in_path, read, write)
+    prepared.join()
     return enhance_frame(frame, out_path, steps, write, pinned=pinned, files=files)
 
 

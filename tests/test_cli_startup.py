@@ -132,3 +132,37 @@ def test_the_executable_ends_without_teardown_but_keeps_output_and_exit_code(
     )
     assert failed.returncode == 2
     assert failed.stderr.startswith("depict: error:") and len(failed.stderr.splitlines()) == 1
+
+
+PREPARE_PROBE = """
+import json, sys, threading
+import service.enhance as enhance
+from service import pipeline
+from ops.jit import prepare
+loaded = "numba.np.arraymath" in sys.modules
+names = []
+read_for = enhance.read_for
+def reading(*args, **kwargs):  # the threads alive as the frame starts to decode
+    names.extend(t.name for t in threading.enumerate())
+    return read_for(*args, **kwargs)
+enhance.read_for = reading
+enhance.enhance(sys.argv[1], sys.argv[2], pipeline.compile([{"op": "curvature"}]))
+print(json.dumps({"before": loaded, "after": "numba.np.arraymath" in sys.modules, "names": names}))
+"""
+
+
+def test_enhance_readies_numbas_compiler_while_the_frame_decodes(tmp_path: Path) -> None:
+    """The first kernel of a process loads Numba's registries (~0.3 s, SciPy's linear algebra
+    among them); ``enhance`` has a thread of its own load them (``ops.jit.prepare``) while the
+    frame decodes."""
+    out = tmp_path / "out.exr"
+    run = subprocess.run(
+        [sys.executable, "-c", PREPARE_PROBE, str(FRAME), str(out)],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=ROOT,
+    )
+    answer = json.loads(run.stdout.splitlines()[-1])
+    assert not answer["before"] and answer["after"] and out.is_file()
+    assert "depict-jit-prepare" in answer["names"]
