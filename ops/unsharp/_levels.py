@@ -90,7 +90,7 @@ def _front_most_cells(lv: _Level, surf: _Surface, sigs: list[Array]) -> None:
             gy[bad] = 0.0
             lv.grad[0][cy, cx] = gx
             lv.grad[1][cy, cx] = gy
-    lv._valid = None  # (and the blocks' flags are made anew where an upsampling needs them)
+    lv._valid = None
 
 
 def _touching(cells: Array) -> Array:

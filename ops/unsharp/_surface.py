@@ -271,7 +271,6 @@ class _Level:
     lps: Array  # ln(pixel_size)
     nrm: list[Array] | None  # normal x, y, z (averaged, not renormalised)
     grad: tuple[Array, Array] | None = None  # ∂I/∂column, ∂I/∂row from the normals
-    flags: tuple[float, Array] | None = None  # (thr, _block_flags(self, thr)) once known
     _valid: Array | None = None
 
     @property

@@ -51,9 +51,7 @@ class _Upsampler:
         self.coarse: list[Array] = []
         self.in_order = False  # idx ascending
         thr = np.float32(_JUMP * 2**lv.k)
-        blocks = (
-            lv.flags[1] if lv.flags is not None and lv.flags[0] == thr else _block_flags(lv, thr)
-        )
+        blocks = _block_flags(lv, thr)
         # flat fine indices of the re-weighted pixels (ascending where ``fine_k`` is 0)
         self.idx: Array | None = None
         self.taps: _FixupTaps | None = None  # their taps and weights (in the order of idx)
