@@ -156,17 +156,17 @@ def apply_lighting_gain(
     g = np.ascontiguousarray(gain, np.float32)
     p = o if plus is None else np.ascontiguousarray(plus, np.float32).reshape(flat)
     ms = [np.ascontiguousarray(x, np.float32).reshape(flat) for x in minus]
-    orig = None if unchanged is None else np.ascontiguousarray(unchanged[0], np.float32)
-    kappa = None if unchanged is None else unchanged[1]
+    keep = None
+    if unchanged is not None:
+        keep = (np.ascontiguousarray(unchanged[0], np.float32).reshape(flat), unchanged[1])
 
     def strip(r0: int, r1: int) -> None:
         _times_plus_rows(o[r0:r1], g[r0:r1], p[r0:r1], plus is not None)
         for m in ms:
             _minus_rows(o[r0:r1], m[r0:r1])
-        if orig is not None and kappa is not None:
-            _restore_rows(
-                o[r0:r1], orig.reshape(flat)[r0:r1], g[r0:r1], kappa.grid, kappa.factor, r0
-            )
+        if keep is not None:
+            orig, kappa = keep
+            _restore_rows(o[r0:r1], orig[r0:r1], g[r0:r1], kappa.grid, kappa.factor, r0)
 
     run_strips(hgt, strip, _ROWS)
 
