@@ -58,6 +58,7 @@ __all__ = [
     "lightness_rows",
     "luminance",
     "luminance_of_sum",
+    "luminance_of_sum_rows",
     "resolve_white",
     "rgb_to_lab",
     "rgb_to_lab_phi",
@@ -194,19 +195,23 @@ def luminance_of_sum(
 ) -> np.ndarray:
     """``luminance(total(rgbs))`` of (H, W, 3) arrays, bit for bit (the sum taken in order in
     float32), by strips of rows: the RGB sum is never formed at full size."""
-    first, *others = (_check_rgb(x, f"rgbs[{i}]") for i, x in enumerate(rgbs))
-    h, w = first.shape[:2]
-    w0, w1, w2 = (np.float32(x) for x in weights)
+    arrays = [_check_rgb(x, f"rgbs[{i}]") for i, x in enumerate(rgbs)]
+    h, w = arrays[0].shape[:2]
     out = np.empty((h, w), np.float32)
-
-    def rows(r: slice) -> None:
-        acc = first[r].copy()
-        for x in others:
-            acc += x[r]
-        _luma_rows(acc, w0, w1, w2, out[r])
-
-    row_strips(h, w, rows)
+    row_strips(h, w, lambda r: luminance_of_sum_rows([x[r] for x in arrays], weights, out[r]))
     return out
+
+
+def luminance_of_sum_rows(
+    rows: Sequence[np.ndarray], weights: tuple[float, float, float], out: np.ndarray
+) -> None:
+    """Rows of :func:`luminance_of_sum`: ``out`` (rows, W) = the luminance of the sum of float32
+    RGB rows ((rows, W, 3) or flat (rows, 3W)), taken in order in float32."""
+    acc = rows[0].copy()
+    for x in rows[1:]:
+        acc += x
+    w0, w1, w2 = (np.float32(x) for x in weights)
+    _luma_rows(acc, w0, w1, w2, out)
 
 
 @kernel

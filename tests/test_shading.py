@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from ops.color import luminance_of_sum
 from ops.shading import (
     Light,
     ashikhmin_shirley,
@@ -21,10 +22,13 @@ from ops.shading import (
     normalize,
     parse_light,
     phong,
+    Made,
     ratio_relight,
     reflect,
     refract,
+    shade_directions,
     shade_lobes,
+    shading,
     transmission,
 )
 
@@ -363,7 +367,8 @@ def test_ratio_relight_scales_each_lobe_by_the_clamped_ratio() -> None:
     aligned = {n: 3 * rng.random(shape, dtype=np.float32) for n in ("diffuse", "specular")}
     kept = {n: a.copy() for n, a in original.items()}
     lobes = {"diffuse": (diffuse, light), "specular": (specular, None)}
-    out, new, new_light = ratio_relight(beauty, lobes, original, aligned, 0.05, 4.0)
+    out, new, new_light, y0, y1 = ratio_relight(beauty, lobes, original, aligned, 0.05, 4.0)
+    assert y0 is None and y1 is None  # (no weights: no luminances)
     ratio = {n: np.clip((aligned[n] + 0.05) / (original[n] + 0.05), 0, 4.0) for n in aligned}
     np.testing.assert_allclose(new["diffuse"], diffuse * ratio["diffuse"], rtol=1e-6)
     np.testing.assert_allclose(new["specular"], specular * ratio["specular"], rtol=1e-6)
@@ -372,3 +377,84 @@ def test_ratio_relight_scales_each_lobe_by_the_clamped_ratio() -> None:
     np.testing.assert_allclose(out, remainder + new["diffuse"] + new["specular"], atol=1e-5)
     for n in original:  # the inputs are left as they were
         np.testing.assert_array_equal(original[n], kept[n])
+
+
+def _unit_field(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    v = rng.standard_normal((*shape, 3)).astype(np.float32)
+    return (v / np.linalg.norm(v, axis=-1, keepdims=True)).astype(np.float32)
+
+
+LIGHTS_2 = [parse_light("-0.4,0.6,0.7"), parse_light("0.6,0.2,0.5*0.35")]
+
+
+@pytest.mark.parametrize(
+    "models",
+    [{}, {"diffuse": "half_lambert", "specular": "none"}, {"transmission": True, "shininess": 7.5}],
+)
+def test_a_shading_made_strip_by_strip_is_shade_directions(models: dict[str, object]) -> None:
+    """Directional lights: ``shading`` makes the lobes on demand; any strip of them is
+    ``shade_directions``' rows bit for bit, constant and per-pixel light directions alike."""
+    rng = np.random.default_rng(5)
+    shape = (37, 29)
+    normal = _unit_field(rng, shape)
+    normal[:4] = 0.0  # background rows
+    view = _unit_field(rng, shape)
+    view[..., 2] = np.abs(view[..., 2])
+    dirs = {"specular": [_unit_field(rng, shape) for _ in LIGHTS_2]}
+    whole = shade_directions(normal, view, None, LIGHTS_2, dirs, **models)  # type: ignore[arg-type]
+    lazy = shading(normal, view, None, LIGHTS_2, dirs, **models)  # type: ignore[arg-type]
+    assert not isinstance(lazy, Made) and lazy.lobes == list(whole)
+    for r0, r1 in ((0, 37), (3, 4), (5, 22), (30, 37)):
+        rows = lazy.rows(r0, r1)
+        for lobe, arr in whole.items():
+            np.testing.assert_array_equal(rows[lobe], arr[r0:r1].reshape(r1 - r0, -1))
+    point = [parse_light("point:0,0,2")]
+    position = np.zeros((*shape, 3), np.float32)
+    assert isinstance(shading(normal, view, position, point), Made)  # made at once
+
+
+def test_ratio_relight_from_shadings_made_in_its_pass_is_the_same() -> None:
+    """The ratio pass making both shadings strip by strip gives the result of the shadings
+    made first, bit for bit, and the luminances of the lobes' sums before and after are
+    ``luminance_of_sum``'s."""
+    rng = np.random.default_rng(11)
+    shape = (53, 31)
+    normal = _unit_field(rng, shape)
+    normal[:, :3] = 0.0
+    view = _unit_field(rng, shape)
+    dirs = {c: [_unit_field(rng, shape) for _ in LIGHTS_2] for c in ("diffuse", "specular")}
+    diffuse, specular, light, rest = (rng.random((*shape, 3), dtype=np.float32) for _ in range(4))
+    beauty = diffuse + specular + rest
+    lobes = {"diffuse": (diffuse, light), "specular": (specular, None)}
+    weights = (0.25, 0.6, 0.15)
+    lazy = ratio_relight(
+        beauty,
+        lobes,
+        shading(normal, view, None, LIGHTS_2),
+        shading(normal, view, None, LIGHTS_2, dirs),
+        0.05,
+        2.0,
+        weights,
+    )
+    made = ratio_relight(
+        beauty,
+        lobes,
+        shade_directions(normal, view, None, LIGHTS_2),
+        shade_directions(normal, view, None, LIGHTS_2, dirs),
+        0.05,
+        2.0,
+    )
+    np.testing.assert_array_equal(lazy.beauty, made.beauty)
+    for lobe in lobes:
+        np.testing.assert_array_equal(lazy.lobes[lobe], made.lobes[lobe])
+    np.testing.assert_array_equal(lazy.lights["diffuse"], made.lights["diffuse"])
+    assert lazy.y_before is not None and lazy.y_after is not None
+    np.testing.assert_array_equal(lazy.y_before, luminance_of_sum([diffuse, specular], weights))
+    after = luminance_of_sum([made.lobes["diffuse"], made.lobes["specular"]], weights)
+    np.testing.assert_array_equal(lazy.y_after, after)
+    with pytest.raises(ValueError, match="original"):
+        small = shading(normal[1:], view[1:], None, LIGHTS_2)
+        ratio_relight(beauty, lobes, small, made.lobes, 0.05, 2.0)
+    with pytest.raises(ValueError, match=r"aligned\['specular'\]"):
+        wrong = {"diffuse": diffuse, "specular": specular[:, 1:]}
+        ratio_relight(beauty, lobes, made.lobes, wrong, 0.05, 2.0)

@@ -33,7 +33,14 @@ from ops.shading.brdf import (
     phong,
     transmission,
 )
-from ops.shading.directions import DIFFUSE_MODELS, SPECULAR_MODELS, shade_directions
+from ops.shading.directions import (
+    DIFFUSE_MODELS,
+    SPECULAR_MODELS,
+    Made,
+    Shading,
+    shade_directions,
+    shading,
+)
 from ops.shading.lights import (
     LIGHT_SYNTAX,
     Light,
@@ -43,7 +50,7 @@ from ops.shading.lights import (
     parse_light,
 )
 from ops.shading.lobes import MODELS, Model, shade_lobes
-from ops.shading.relight import apply_gain, lobe_radiance, ratio_relight
+from ops.shading.relight import Relit, apply_gain, lobe_radiance, ratio_relight
 from ops.shading.vectors import Vec3, dot, normalize, reflect, refract
 
 __all__ = [
@@ -52,7 +59,10 @@ __all__ = [
     "MODELS",
     "SPECULAR_MODELS",
     "Light",
+    "Made",
     "Model",
+    "Relit",
+    "Shading",
     "Vec3",
     "apply_gain",
     "ashikhmin_shirley",
@@ -73,5 +83,6 @@ __all__ = [
     "refract",
     "shade_directions",
     "shade_lobes",
+    "shading",
     "transmission",
 ]

@@ -14,7 +14,7 @@ from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lamber
 from ops.shading.lights import Light, light_irradiance, light_vectors, need_positions
 from ops.shading.vectors import _dot_rows, _dots, dot
 
-__all__ = ["DIFFUSE_MODELS", "SPECULAR_MODELS", "shade_directions"]
+__all__ = ["DIFFUSE_MODELS", "SPECULAR_MODELS", "Made", "Shading", "shade_directions", "shading"]
 
 # -- shading with per-pixel light directions ----------------------------------------------------
 
@@ -107,6 +107,33 @@ def shade_directions(
     dict lobe -> (H, W, 3) float32 light without colour: ``"diffuse"``, ``"specular"`` (unless
     ``specular="none"``) and ``"transmission"`` (when asked); 0 where the normal is 0.
     """
+    return shading(
+        normal, view, position, lights, directions,
+        diffuse=diffuse, specular=specular, shininess=shininess, roughness=roughness, f0=f0,
+        transmission=transmission, ior=ior, transmission_exponent=transmission_exponent,
+    ).arrays()  # fmt: skip
+
+
+def shading(
+    normal: np.ndarray,
+    view: np.ndarray,
+    position: np.ndarray | None,
+    lights: Sequence[Light],
+    directions: dict[str, Sequence[np.ndarray]] | None = None,
+    *,
+    diffuse: str = "lambert",
+    specular: str = "blinn_phong",
+    shininess: float = 32.0,
+    roughness: float | np.ndarray = 0.4,
+    f0: float = 0.04,
+    transmission: bool = False,
+    ior: float = 1.5,
+    transmission_exponent: float = 16.0,
+) -> Shading:
+    """:func:`shade_directions` (the same arguments, checked alike) as a :class:`Shading`: made
+    on demand, strip by strip, where every light is directional and the models are Lambert or
+    half-Lambert and Blinn-Phong or none (a consumer then reads it from the caches, never from
+    full-frame arrays); made at once otherwise."""
     rough = _checked_models(diffuse, specular, shininess, transmission_exponent, f0, ior, roughness)
     normal = np.ascontiguousarray(normal, np.float32)
     if normal.ndim != 3 or normal.shape[2] != 3:
@@ -123,12 +150,32 @@ def shade_directions(
     dirs = {comp: [np.asarray(f, np.float32) for f in given[comp]] for comp in given}
     lobes = ["diffuse"] + (["specular"] if specular != "none" else [])
     lobes += ["transmission"] if transmission else []
-    out = {lobe: np.empty((*shape, 3), np.float32) for lobe in lobes}
-    if all(light.kind == "directional" for light in lights) and lights:
+    if lights and all(light.kind == "directional" for light in lights):
         if specular in ("blinn_phong", "none"):
             models = (diffuse, specular, shininess, ior, transmission_exponent)
-            _shade_directional(normal, view_a, lights, dirs, models, out)
-            return out
+            return _Directional(normal, view_a, lights, dirs, models, lobes)
+    out = {lobe: np.empty((*shape, 3), np.float32) for lobe in lobes}
+    models_any = (diffuse, specular, shininess, f0, ior, transmission_exponent)
+    _shade_any(normal, view_a, pos, lights, dirs, models_any, rough, out)
+    return Made(out)
+
+
+def _shade_any(
+    normal: np.ndarray,
+    view_a: np.ndarray,
+    pos: np.ndarray,
+    lights: Sequence[Light],
+    dirs: dict[str, list[np.ndarray]],
+    models: tuple[str, str, float, float, float, float],
+    rough: np.ndarray,
+    out: dict[str, np.ndarray],
+) -> None:
+    """:func:`shade_directions` for any lights and models, into ``out`` (lobe -> (H, W, 3)):
+    the formulas of the BRDF terms on row strips."""
+    diffuse, specular, shininess, f0, ior, transmission_exponent = models
+    shape = normal.shape[:2]
+    transmission = "transmission" in out
+    lobes = list(out)
 
     def strip(r0: int, r1: int) -> None:
         # the same per-pixel formulas as on whole fields, on row strips that stay in the caches,
@@ -182,7 +229,6 @@ def shade_directions(
                 _put(out["transmission"][r0:r1, x0:x1], t_term, mask, e, first)
 
     run_strips(shape[0], strip, rows=_SHADE_ROWS)
-    return out
 
 
 def _flat_rows(
@@ -205,64 +251,135 @@ def _flat_rows(
 _Rows = tuple[np.ndarray, bool]
 
 
-def _shade_directional(
-    normal: np.ndarray,
-    view: np.ndarray,
-    lights: Sequence[Light],
-    dirs: dict[str, list[np.ndarray]],
-    models: tuple[str, str, float, float, float],
-    out: dict[str, np.ndarray],
-) -> None:
+class Shading:
+    """Each lobe's light of :func:`shade_directions` (lobe -> (H, W, 3) float32), to be read
+    as flat rows of a strip (:meth:`rows`) or as whole arrays (:meth:`arrays`)."""
+
+    lobes: list[str]
+    shape: tuple[int, int]
+
+    def rows(self, r0: int, r1: int) -> dict[str, np.ndarray]:
+        """Rows r0:r1 of each lobe as (r1 − r0, 3W) float32: views of arrays already made, or
+        made now (thread-safe: strips may be made on several threads at once)."""
+        raise NotImplementedError
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Each lobe's light as an (H, W, 3) float32 array."""
+        raise NotImplementedError
+
+
+class Made(Shading):
+    """A shading made already: lobe -> (H, W, 3) float32 arrays."""
+
+    def __init__(self, made: dict[str, np.ndarray], what: str = "shading") -> None:
+        self.lobes = list(made)
+        if not made:
+            raise ValueError(f"{what} needs at least one lobe")
+        first = np.shape(made[self.lobes[0]])
+        if len(first) != 3:
+            raise ValueError(f"{what}[{self.lobes[0]!r}] must be (H, W, 3), got shape {first}")
+        self.shape = (int(first[0]), int(first[1]))
+        self._made = made
+        self._flat = {
+            lobe: _flat_rows(a, (*self.shape, 3), f"{what}[{lobe!r}]")[0]
+            for lobe, a in made.items()
+        }
+
+    def rows(self, r0: int, r1: int) -> dict[str, np.ndarray]:
+        return {lobe: flat[r0:r1] for lobe, flat in self._flat.items()}
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return self._made
+
+
+class _Directional(Shading):
     """:func:`shade_directions` for directional lights, Lambert or half-Lambert, Blinn-Phong or
-    no specular, and transmission where ``out`` has that lobe (``models``: diffuse, specular,
-    shininess, ior, transmission exponent): per light, one compiled pass per strip for the terms
-    (:func:`_terms_rows`, :func:`_transmission_rows`), the powers with cv2.pow on the strip, and
-    one pass adding them times the irradiance."""
-    diffuse, specular, shininess, ior, exponent = models
-    hgt, wid = normal.shape[:2]
-    shape = (hgt, wid, 3)
-    nrm = normal.reshape(hgt, 3 * wid)
-    v, vc = _flat_rows(view, shape, "view", constant=True)
+    no specular, and transmission where ``lobes`` has it (``models``: diffuse, specular,
+    shininess, ior, transmission exponent), made strip by strip: per light, one compiled pass
+    for the terms (:func:`_terms_rows`, :func:`_transmission_rows`), the powers with cv2.pow on
+    the strip, and one pass adding them times the irradiance. Every pixel's numbers are the
+    same whatever the strips."""
 
-    def field(comp: str, i: int, own: np.ndarray) -> _Rows:
-        given = dirs[comp][i] if comp in dirs else own
-        return _flat_rows(given, shape, f"directions[{comp!r}][{i}]", constant=True)
+    def __init__(
+        self,
+        normal: np.ndarray,
+        view: np.ndarray,
+        lights: Sequence[Light],
+        dirs: dict[str, list[np.ndarray]],
+        models: tuple[str, str, float, float, float],
+        lobes: list[str],
+    ) -> None:
+        diffuse, specular, shininess, ior, exponent = models
+        hgt, wid = normal.shape[:2]
+        self.lobes = lobes
+        self.shape = (hgt, wid)
+        shape = (hgt, wid, 3)
+        self._nrm = normal.reshape(hgt, 3 * wid)
+        self._view = _flat_rows(view, shape, "view", constant=True)
 
-    per_light: list[tuple[_Rows, _Rows, _Rows, np.ndarray]] = []
-    for i, light in enumerate(lights):
-        own = np.asarray(light.vector, np.float32)
-        e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
-        ld, ls = field("diffuse", i, own), field("specular", i, own)
-        lt = field("transmission", i, own) if "transmission" in out else ld  # (not read)
-        per_light.append((ld, ls, lt, e.reshape(3)))
-    spec = specular != "none"
-    half = diffuse != "lambert"
-    od = out["diffuse"].reshape(hgt, 3 * wid)
-    os_ = out["specular"].reshape(hgt, 3 * wid) if spec else od[:0]
-    ot = out["transmission"].reshape(hgt, 3 * wid) if "transmission" in out else None
-    eta = np.float32(1.0 / ior)
+        def field(comp: str, i: int, own: np.ndarray) -> _Rows:
+            given = dirs[comp][i] if comp in dirs else own
+            return _flat_rows(given, shape, f"directions[{comp!r}][{i}]", constant=True)
 
-    def rows(a: _Rows, r0: int, r1: int) -> np.ndarray:
-        return a[0] if a[1] else a[0][r0:r1]
+        self._lights: list[tuple[_Rows, _Rows, _Rows, np.ndarray]] = []
+        for i, light in enumerate(lights):
+            own = np.asarray(light.vector, np.float32)
+            e = np.asarray(light_irradiance(light, np.zeros(3, np.float32)), np.float32)
+            ld, ls = field("diffuse", i, own), field("specular", i, own)
+            lt = field("transmission", i, own) if "transmission" in lobes else ld  # (not read)
+            self._lights.append((ld, ls, lt, e.reshape(3)))
+        self._spec = specular != "none"
+        self._half = diffuse != "lambert"
+        self._powers = (float(shininess), float(exponent))
+        self._eta = np.float32(1.0 / ior)
 
-    def strip(r0: int, r1: int) -> None:
+    def rows(self, r0: int, r1: int) -> dict[str, np.ndarray]:
+        out = {lobe: np.empty((r1 - r0, 3 * self.shape[1]), np.float32) for lobe in self.lobes}
+        self._into(r0, r1, out)
+        return out
+
+    def _into(self, r0: int, r1: int, out: dict[str, np.ndarray]) -> None:
+        """Rows r0:r1 of each lobe into ``out`` (lobe -> (r1 − r0, 3W) float32 rows)."""
+        wid = self.shape[1]
         n = r1 - r0
         d_term = np.empty((n, wid), np.float32)
         nh = np.empty((n, wid), np.float32)
         gate = np.empty((n, wid), np.float32)
-        for i, (ld, ls, lt, e) in enumerate(per_light):
-            d_rows, s_rows, v_rows = rows(ld, r0, r1), rows(ls, r0, r1), rows((v, vc), r0, r1)
-            args = (d_rows, ld[1], s_rows, ls[1], v_rows, vc, half, spec, d_term, nh, gate)
-            _terms_rows(nrm[r0:r1], *args)
+        spec, (shininess, exponent) = self._spec, self._powers
+        od = out["diffuse"]
+        os_ = out["specular"] if spec else od[:0]
+        ot = out.get("transmission")
+        nrm = self._nrm[r0:r1]
+        v, vc = self._view
+        v_rows = _rows_of((v, vc), r0, r1)
+        for i, (ld, ls, lt, e) in enumerate(self._lights):
+            d_rows, s_rows = _rows_of(ld, r0, r1), _rows_of(ls, r0, r1)
+            args = (d_rows, ld[1], s_rows, ls[1], v_rows, vc, self._half, spec, d_term, nh, gate)
+            _terms_rows(nrm, *args)
             if spec:
-                cv2.pow(nh, float(shininess), dst=nh)
-            _add_terms(d_term, nh, gate, e, i == 0, spec, od[r0:r1], os_[r0:r1] if spec else os_)
+                cv2.pow(nh, shininess, dst=nh)
+            _add_terms(d_term, nh, gate, e, i == 0, spec, od, os_)
             if ot is not None:  # (nh and gate are free again)
-                _transmission_rows(nrm[r0:r1], rows(lt, r0, r1), lt[1], v_rows, vc, eta, nh, gate)
-                cv2.pow(nh, float(exponent), dst=nh)
-                _add_gated(nh, gate, e, i == 0, ot[r0:r1])
+                lt_rows = _rows_of(lt, r0, r1)
+                _transmission_rows(nrm, lt_rows, lt[1], v_rows, vc, self._eta, nh, gate)
+                cv2.pow(nh, exponent, dst=nh)
+                _add_gated(nh, gate, e, i == 0, ot)
 
-    run_strips(hgt, strip, rows=_SHADE_ROWS)
+    def arrays(self) -> dict[str, np.ndarray]:
+        hgt, wid = self.shape
+        made = {lobe: np.empty((hgt, wid, 3), np.float32) for lobe in self.lobes}
+        flat = {lobe: a.reshape(hgt, 3 * wid) for lobe, a in made.items()}
+        run_strips(
+            hgt,
+            lambda r0, r1: self._into(r0, r1, {k: f[r0:r1] for k, f in flat.items()}),
+            _SHADE_ROWS,
+        )
+        return made
+
+
+def _rows_of(a: _Rows, r0: int, r1: int) -> np.ndarray:
+    """Rows r0:r1 of a field's flat rows, or its one row used for all."""
+    return a[0] if a[1] else a[0][r0:r1]
 
 
 #: Rows per strip of :func:`shade_directions`.

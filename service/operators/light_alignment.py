@@ -38,9 +38,8 @@ from pydantic import Field, model_validator
 
 from gbuffer.frame import LOBES, Frame
 from ops import checks, filtering
-from ops.color import luminance_of_sum
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
-from ops.shading import Light, apply_gain, lobe_radiance, ratio_relight, shade_directions
+from ops.shading import Light, Shading, apply_gain, lobe_radiance, ratio_relight, shading
 from service.operators.base import Context, register
 from service.operators.common import (
     LightsParams,
@@ -252,8 +251,8 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         p.roughness if p.roughness != "frame" else frame.need("roughness", "roughness='frame'")
     )
 
-    def shade(directions: dict[str, Sequence[np.ndarray]] | None) -> dict[str, np.ndarray]:
-        return shade_directions(
+    def shade(directions: dict[str, Sequence[np.ndarray]] | None) -> Shading:
+        return shading(
             normal,
             view,
             position,
@@ -270,7 +269,7 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
 
     directions: dict[str, Sequence[np.ndarray]] = {c: list(v) for c, v in aligned.items()}
     if form == "relight":
-        _relight(frame, p, shade(directions))
+        _relight(frame, p, shade(directions).arrays())
     else:
         _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
     for k in range(len(lights)):
@@ -324,22 +323,22 @@ def _relight(frame: Frame, p: LightAlignmentParams, light: dict[str, np.ndarray]
 def _ratio(
     frame: Frame,
     p: LightAlignmentParams,
-    original: dict[str, np.ndarray],
-    aligned: dict[str, np.ndarray],
+    original: Shading,
+    aligned: Shading,
     power: float,
 ) -> None:
     """Each renderer lobe × (shade(aligned) + ε)/(shade(original) + ε), clamped to ratio_max."""
     eps = cast(float, np.float32(p.ratio_floor * power))  # float32 on purpose, as the lobes
-    lobes = [lobe for lobe in aligned if lobe in frame.buffers]
+    lobes = [lobe for lobe in aligned.lobes if lobe in frame.buffers]
     if not lobes:
         frame.need("diffuse", "form 'ratio' needs a diffuse, specular or transmission lobe")
     beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty")
     given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
-    out, new, new_light = ratio_relight(beauty, given, original, aligned, eps, p.ratio_max)
-    if p.keep_lighting:
-        weights = frame.colorspace.weights
-        before = luminance_of_sum([given[lobe][0] for lobe in lobes], weights)
-        after = luminance_of_sum([new[lobe] for lobe in lobes], weights)
+    weights = frame.colorspace.weights if p.keep_lighting else None
+    out, new, new_light, before, after = ratio_relight(
+        beauty, given, original, aligned, eps, p.ratio_max, weights
+    )
+    if before is not None and after is not None:  # (keep_lighting)
         gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
         apply_gain(out, gain, [new[lobe] for lobe in lobes], list(new_light.values()))
     frame.buffers.update(new)
