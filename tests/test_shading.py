@@ -10,6 +10,7 @@ import pytest
 from ops.color import luminance_of_sum
 from ops.shading import (
     Light,
+    MadeShading,
     ashikhmin_shirley,
     blinn_phong,
     dot,
@@ -22,7 +23,6 @@ from ops.shading import (
     normalize,
     parse_light,
     phong,
-    Made,
     ratio_relight,
     reflect,
     refract,
@@ -403,14 +403,14 @@ def test_a_shading_made_strip_by_strip_is_shade_directions(models: dict[str, obj
     dirs = {"specular": [_unit_field(rng, shape) for _ in LIGHTS_2]}
     whole = shade_directions(normal, view, None, LIGHTS_2, dirs, **models)  # type: ignore[arg-type]
     lazy = shading(normal, view, None, LIGHTS_2, dirs, **models)  # type: ignore[arg-type]
-    assert not isinstance(lazy, Made) and lazy.lobes == list(whole)
+    assert not isinstance(lazy, MadeShading) and lazy.lobes == list(whole)
     for r0, r1 in ((0, 37), (3, 4), (5, 22), (30, 37)):
         rows = lazy.rows(r0, r1)
         for lobe, arr in whole.items():
             np.testing.assert_array_equal(rows[lobe], arr[r0:r1].reshape(r1 - r0, -1))
     point = [parse_light("point:0,0,2")]
     position = np.zeros((*shape, 3), np.float32)
-    assert isinstance(shading(normal, view, position, point), Made)  # made at once
+    assert isinstance(shading(normal, view, position, point), MadeShading)  # made at once
 
 
 def test_ratio_relight_from_shadings_made_in_its_pass_is_the_same() -> None:

@@ -36,7 +36,7 @@ from ops.shading.brdf import (
 from ops.shading.directions import (
     DIFFUSE_MODELS,
     SPECULAR_MODELS,
-    Made,
+    MadeShading,
     Shading,
     shade_directions,
     shading,
@@ -59,7 +59,7 @@ __all__ = [
     "MODELS",
     "SPECULAR_MODELS",
     "Light",
-    "Made",
+    "MadeShading",
     "Model",
     "Relit",
     "Shading",

@@ -14,7 +14,14 @@ from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lamber
 from ops.shading.lights import Light, light_irradiance, light_vectors, need_positions
 from ops.shading.vectors import _dot_rows, _dots, dot
 
-__all__ = ["DIFFUSE_MODELS", "SPECULAR_MODELS", "Made", "Shading", "shade_directions", "shading"]
+__all__ = [
+    "DIFFUSE_MODELS",
+    "SPECULAR_MODELS",
+    "MadeShading",
+    "Shading",
+    "shade_directions",
+    "shading",
+]
 
 # -- shading with per-pixel light directions ----------------------------------------------------
 
@@ -157,7 +164,7 @@ def shading(
     out = {lobe: np.empty((*shape, 3), np.float32) for lobe in lobes}
     models_any = (diffuse, specular, shininess, f0, ior, transmission_exponent)
     _shade_any(normal, view_a, pos, lights, dirs, models_any, rough, out)
-    return Made(out)
+    return MadeShading(out)
 
 
 def _shade_any(
@@ -268,7 +275,7 @@ class Shading:
         raise NotImplementedError
 
 
-class Made(Shading):
+class MadeShading(Shading):
     """A shading made already: lobe -> (H, W, 3) float32 arrays."""
 
     def __init__(self, made: dict[str, np.ndarray], what: str = "shading") -> None:

@@ -9,7 +9,7 @@ import numpy as np
 from ops.color import check_in_place, luminance_of_sum_rows
 from ops.parallel import run_strips
 from ops.shading._kernels import _gain_rows, _radiance_rows, _ratio_rows
-from ops.shading.directions import _SHADE_ROWS, Made, Shading, _flat_rows
+from ops.shading.directions import _SHADE_ROWS, MadeShading, Shading, _flat_rows
 
 __all__ = ["Relit", "apply_gain", "lobe_radiance", "ratio_relight"]
 
@@ -162,7 +162,7 @@ _RATIO_ROWS = 16
 
 def _shading(x: dict[str, np.ndarray] | Shading, shape: tuple[int, int, int], what: str) -> Shading:
     """A shading given as arrays, checked (ValueError naming ``what``), or as it is."""
-    made = x if isinstance(x, Shading) else Made(x, what)
+    made = x if isinstance(x, Shading) else MadeShading(x, what)
     if made.shape != shape[:2]:
         raise ValueError(f"{what} must have shape {shape}, got {(*made.shape, 3)}")
     return made
