@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 
 import cv2
@@ -258,21 +259,21 @@ def _flat_rows(
 _Rows = tuple[np.ndarray, bool]
 
 
-class Shading:
+class Shading(ABC):
     """Each lobe's light of :func:`shade_directions` (lobe -> (H, W, 3) float32), to be read
     as flat rows of a strip (:meth:`rows`) or as whole arrays (:meth:`arrays`)."""
 
     lobes: list[str]
     shape: tuple[int, int]
 
+    @abstractmethod
     def rows(self, r0: int, r1: int) -> dict[str, np.ndarray]:
         """Rows r0:r1 of each lobe as (r1 − r0, 3W) float32: views of arrays already made, or
         made now (thread-safe: strips may be made on several threads at once)."""
-        raise NotImplementedError
 
+    @abstractmethod
     def arrays(self) -> dict[str, np.ndarray]:
         """Each lobe's light as an (H, W, 3) float32 array."""
-        raise NotImplementedError
 
 
 class MadeShading(Shading):
