@@ -427,31 +427,28 @@ def test_ratio_relight_from_shadings_made_in_its_pass_is_the_same() -> None:
     beauty = diffuse + specular + rest
     lobes = {"diffuse": (diffuse, light), "specular": (specular, None)}
     weights = (0.25, 0.6, 0.15)
-    lazy = ratio_relight(
-        beauty,
-        lobes,
-        shading(normal, view, None, LIGHTS_2),
-        shading(normal, view, None, LIGHTS_2, dirs),
-        0.05,
-        2.0,
-        weights,
-    )
-    made = ratio_relight(
-        beauty,
-        lobes,
-        shade_directions(normal, view, None, LIGHTS_2),
-        shade_directions(normal, view, None, LIGHTS_2, dirs),
-        0.05,
-        2.0,
+    lazy, made = (
+        ratio_relight(
+            beauty,
+            lobes,
+            shade(normal, view, None, LIGHTS_2),
+            shade(normal, view, None, LIGHTS_2, dirs),
+            0.05,
+            2.0,
+            weights,
+        )
+        for shade in (shading, shade_directions)  # (the second gives arrays)
     )
     np.testing.assert_array_equal(lazy.beauty, made.beauty)
     for lobe in lobes:
         np.testing.assert_array_equal(lazy.lobes[lobe], made.lobes[lobe])
     np.testing.assert_array_equal(lazy.lights["diffuse"], made.lights["diffuse"])
-    assert lazy.y_before is not None and lazy.y_after is not None
-    np.testing.assert_array_equal(lazy.y_before, luminance_of_sum([diffuse, specular], weights))
     after = luminance_of_sum([made.lobes["diffuse"], made.lobes["specular"]], weights)
-    np.testing.assert_array_equal(lazy.y_after, after)
+    for relit in (lazy, made):
+        assert relit.y_before is not None and relit.y_after is not None
+        before = luminance_of_sum([diffuse, specular], weights)
+        np.testing.assert_array_equal(relit.y_before, before)
+        np.testing.assert_array_equal(relit.y_after, after)
     with pytest.raises(ValueError, match="original"):
         small = shading(normal[1:], view[1:], None, LIGHTS_2)
         ratio_relight(beauty, lobes, small, made.lobes, 0.05, 2.0)

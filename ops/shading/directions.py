@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import ParamSpec
 
 import cv2
 import numpy as np
@@ -14,6 +15,8 @@ from ops.shading._kernels import _add_gated, _add_terms, _terms_rows, _transmiss
 from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lambert
 from ops.shading.lights import Light, light_irradiance, light_vectors, need_positions
 from ops.shading.vectors import _dot_rows, _dots, dot
+
+_P = ParamSpec("_P")
 
 __all__ = [
     "DIFFUSE_MODELS",
@@ -68,7 +71,7 @@ def _positions(
     return np.broadcast_to(np.zeros(3, np.float32), (*shape[:2], 3))
 
 
-def shade_directions(
+def shading(
     normal: np.ndarray,
     view: np.ndarray,
     position: np.ndarray | None,
@@ -83,7 +86,7 @@ def shade_directions(
     transmission: bool = False,
     ior: float = 1.5,
     transmission_exponent: float = 16.0,
-) -> dict[str, np.ndarray]:
+) -> Shading:
     """The light of each lobe, Σ_i E_i term(n, ℓ_{c,i}, v), with a light direction per component.
 
     Deferred shading where component c of light i is lit from its own per-pixel direction
@@ -112,36 +115,13 @@ def shade_directions(
 
     Returns
     -------
-    dict lobe -> (H, W, 3) float32 light without colour: ``"diffuse"``, ``"specular"`` (unless
-    ``specular="none"``) and ``"transmission"`` (when asked); 0 where the normal is 0.
+    A :class:`Shading` of lobes ``"diffuse"``, ``"specular"`` (unless ``specular="none"``) and
+    ``"transmission"`` (when asked), each an (H, W, 3) float32 light without colour, 0 where the
+    normal is 0: made on demand, strip by strip, where every light is directional and the
+    models are Lambert or half-Lambert and Blinn-Phong or none (a consumer then reads it from
+    the caches, never from full-frame arrays); made at once otherwise.
+    :func:`shade_directions` gives the arrays.
     """
-    return shading(
-        normal, view, position, lights, directions,
-        diffuse=diffuse, specular=specular, shininess=shininess, roughness=roughness, f0=f0,
-        transmission=transmission, ior=ior, transmission_exponent=transmission_exponent,
-    ).arrays()  # fmt: skip
-
-
-def shading(
-    normal: np.ndarray,
-    view: np.ndarray,
-    position: np.ndarray | None,
-    lights: Sequence[Light],
-    directions: dict[str, Sequence[np.ndarray]] | None = None,
-    *,
-    diffuse: str = "lambert",
-    specular: str = "blinn_phong",
-    shininess: float = 32.0,
-    roughness: float | np.ndarray = 0.4,
-    f0: float = 0.04,
-    transmission: bool = False,
-    ior: float = 1.5,
-    transmission_exponent: float = 16.0,
-) -> Shading:
-    """:func:`shade_directions` (the same arguments, checked alike) as a :class:`Shading`: made
-    on demand, strip by strip, where every light is directional and the models are Lambert or
-    half-Lambert and Blinn-Phong or none (a consumer then reads it from the caches, never from
-    full-frame arrays); made at once otherwise."""
     rough = _checked_models(diffuse, specular, shininess, transmission_exponent, f0, ior, roughness)
     normal = np.ascontiguousarray(normal, np.float32)
     if normal.ndim != 3 or normal.shape[2] != 3:
@@ -166,6 +146,20 @@ def shading(
     models_any = (diffuse, specular, shininess, f0, ior, transmission_exponent)
     _shade_any(normal, view_a, pos, lights, dirs, models_any, rough, out)
     return MadeShading(out)
+
+
+def _as_arrays(make: Callable[_P, Shading]) -> Callable[_P, dict[str, np.ndarray]]:
+    """A function making a :class:`Shading` as one giving its arrays (the same arguments)."""
+
+    def arrays(*args: _P.args, **kwargs: _P.kwargs) -> dict[str, np.ndarray]:
+        """The lobes of the shading these arguments make, as (H, W, 3) float32 arrays."""
+        return make(*args, **kwargs).arrays()
+
+    return arrays
+
+
+#: :func:`shading`'s lobes as (H, W, 3) float32 arrays, lobe -> light (the same arguments).
+shade_directions = _as_arrays(shading)
 
 
 def _shade_any(
