@@ -19,12 +19,12 @@ _INF = np.float32(np.inf)
 
 
 @kernel
-def _gather_unit(idx, w, x, y, z, out, c0):
-    """out[n, c0 + c] = Σ_t w[t, n] (x, y, z)[c][idx[t, n]] (the weighted samples of
-    :meth:`DepthPyramid.up_sparse` for one unit-vector field given as three flat planes),
-    renormalised as by :func:`normalize_field` (0 where |v|² ≤ 1e-20). One field per call: the
-    kernel has one signature whatever the number of fields upsampled together."""
-    for n in range(out.shape[0]):
+def _gather_unit(idx, w, x, y, z, out, c0, n0, n1):
+    """out[n, c0 + c] = Σ_t w[t, n] (x, y, z)[c][idx[t, n]] for the points n0 ≤ n < n1 (the
+    weighted samples of :meth:`DepthPyramid.up_sparse` for one unit-vector field given as three
+    flat planes), renormalised as by :func:`normalize_field` (0 where |v|² ≤ 1e-20). One field
+    per call: the kernel has one signature whatever the number of fields upsampled together."""
+    for n in range(n0, n1):
         ax = np.float32(0.0)
         ay = np.float32(0.0)
         az = np.float32(0.0)
@@ -36,6 +36,20 @@ def _gather_unit(idx, w, x, y, z, out, c0):
         n2 = ax * ax + ay * ay + az * az
         inv = np.float32(1.0) / np.sqrt(n2) if n2 > np.float32(1e-20) else np.float32(0.0)
         out[n, c0], out[n, c0 + 1], out[n, c0 + 2] = ax * inv, ay * inv, az * inv
+
+
+@kernel
+def _put_points(stack, ys, xs, vals, i0, i1, origin, width):
+    """stack[ch, ys[n] − r0, xs[n] − x0 + c] = vals[n, ch] for the points i0 ≤ n < i1 with
+    0 ≤ xs[n] − x0 < ``width``, ``origin`` = (r0, x0, c): the sparse values of
+    :meth:`DepthPyramid.up_rows_wide` written into its stack of upsampled planes."""
+    r0, x0, c = origin
+    for n in range(i0, i1):
+        xx = xs[n] - x0
+        if xx >= 0 and xx < width:
+            yy = ys[n] - r0
+            for ch in range(stack.shape[0]):
+                stack[ch, yy, xx + c] = vals[n, ch]
 
 
 @kernel

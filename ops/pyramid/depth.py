@@ -18,6 +18,7 @@ from ops.pyramid._depth_kernels import (
     _down_geometry_rows,
     _down_unit_rows,
     _gather_unit,
+    _put_points,
 )
 
 __all__ = ["DepthPyramid", "normalize_field"]
@@ -29,6 +30,8 @@ _DOWN_EXCLUDE = 2.0
 # A log-depth step between covered neighbouring samples larger than this many depth_sigma is
 # treated as a discontinuity by the upsampling even without a second difference.
 _STEP = 3.0
+#: Points per task of :meth:`DepthPyramid.up_sparse`'s gathering (each a fraction of a ms).
+_GATHER_POINTS = 8192
 # Rows per strip for the strip-parallel helpers.
 STRIP_ROWS = 32
 
@@ -397,11 +400,14 @@ class DepthPyramid:
             raise ValueError(f"up_sparse takes unit-vector fields, 3 planes each; got {n_ch}")
         ys, xs, idx, w = self._sparse_taps(k, k_to)
         acc = np.empty((ys.size, n_ch), np.float32)
-        if ys.size:
-            flat = [np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k]
+        flat = [np.ascontiguousarray(plane, np.float32).reshape(-1) for plane in planes_k]
+
+        def points(n0: int, n1: int) -> None:
             for c0 in range(0, n_ch, 3):
                 x, y, z = flat[c0 : c0 + 3]
-                _gather_unit(idx, w, x, y, z, acc, c0)
+                _gather_unit(idx, w, x, y, z, acc, c0, n0, n1)
+
+        run_strips(ys.size, points, _GATHER_POINTS)
         return ys, xs, acc
 
     def _sparse_taps(self, k: int, k_to: int) -> _SparseTaps:
@@ -505,16 +511,15 @@ class DepthPyramid:
                 cv2.resize(plane[s0:s1, t0:t1], size, dst, interpolation=cv2.INTER_LINEAR)
                 planes.append(dst[a:b])
         ys, xs, vals = sparse
-        i0, i1 = np.searchsorted(ys, [r0, r1])
-        if i1 > i0:
+        i0, i1 = (int(i) for i in np.searchsorted(ys, [r0, r1]))
+        if i1 > i0 and stack is not None:
+            _put_points(stack, ys, xs, vals, i0, i1, (r0, x0, c), x1 - x0)
+        elif i1 > i0:
             yy, xx, vv = ys[i0:i1] - r0, xs[i0:i1] - x0, vals[i0:i1]
             inside = (xx >= 0) & (xx < x1 - x0)
             yy, xx, vv = yy[inside], xx[inside] + c, vv[inside]
-            if stack is not None:
-                stack[:, yy, xx] = vv.T
-            else:
-                for ch, plane in enumerate(planes):
-                    plane[yy, xx] = vv[:, ch]
+            for ch, plane in enumerate(planes):
+                plane[yy, xx] = vv[:, ch]
         return planes, c
 
     def _jb_weights(
