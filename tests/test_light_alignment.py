@@ -8,6 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
+import ops.pyramid.depth
 from ops import shading
 from ops.filtering import NormalPyramid, multiscale_normals, normal_pyramid
 from ops.light_alignment import (
@@ -424,3 +425,47 @@ def test_multiscale_normals_list_and_pyramid_agree_on_inputs() -> None:
     a = align_light(light, fields, [0.5, 0.5], mask=s.mask)
     b = align_light(light, fields, [0.5, 0.5])
     np.testing.assert_allclose(a, b, atol=1e-6)
+
+
+@pytest.mark.parametrize("points", [8192, 97])  # points per task of the gathering
+def test_edge_aware_upsampling_by_strips_is_the_whole_image_rule(
+    points: int, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``DepthPyramid.up_rows`` of three unit fields at once, strip by strip (interior strips
+    resize the fields stacked and take the compiled write of the sparse values; the top and
+    bottom strips one field at a time), is the whole image's bilinear resize with the
+    ``up_sparse`` values in place, bit for bit; and those values are the joint bilateral
+    taps' normalised weighted sums (written out in NumPy), gathered in one task or in many on
+    both cores. A sphere before a wall: depth jumps."""
+    monkeypatch.setattr(ops.pyramid.depth, "_GATHER_POINTS", points)
+    s = analytic.sphere(160, radius=0.7)
+    depth = np.where(s.mask, s.depth, np.float32(s.depth[s.mask].max() + 2.0)).astype(np.float32)
+    normal = np.where(s.mask[..., None], s.normal, np.float32([0.0, 0.0, 1.0])).astype(np.float32)
+    geo = normal_pyramid(normal, depth, None, scales=5).geometry
+    k = 2
+    hk, wk = geo.shape(k)
+    rng = np.random.default_rng(4)
+    fields = [rng.standard_normal((hk, wk, 3)).astype(np.float32) for _ in range(3)]
+    planes = [np.ascontiguousarray(f[..., c]) for f in fields for c in range(3)]
+    ys, xs, vals = sparse = geo.up_sparse(planes, k, 0)
+    assert ys.size > 100  # the sphere's outline
+    _, _, idx, w = geo._sparse_taps(k, 0)
+    for c0 in range(0, 9, 3):
+        taps = np.stack([planes[c0 + c].reshape(-1)[idx] for c in range(3)], axis=-1)
+        acc = np.zeros((ys.size, 3), np.float32)
+        for t in range(idx.shape[0]):  # Σ_t in order, in float32, as the kernel
+            acc += w[t][:, None] * taps[t]
+        n2 = (acc * acc).sum(-1, dtype=np.float32)
+        inv = np.where(n2 > 1e-20, 1.0 / np.sqrt(np.maximum(n2, 1e-30)), 0.0).astype(np.float32)
+        # (the kernel fuses multiply-adds: the last bits may differ)
+        np.testing.assert_allclose(vals[:, c0 : c0 + 3], acc * inv[:, None], atol=1e-6)
+    h0, w0 = geo.shape(0)
+    whole = [cv2.resize(p, (w0, h0), interpolation=cv2.INTER_LINEAR) for p in planes]
+    for ref, col in zip(whole, vals.T, strict=True):
+        ref[ys, xs] = col
+    work = _Work((1, 1))
+    for r0 in range(0, h0, 24):
+        r1 = min(h0, r0 + 24)
+        got = geo.up_rows(planes, k, (r0, r1), work.arr, sparse, cols=(5, w0 - 7))
+        for g, ref in zip(got, whole, strict=True):
+            np.testing.assert_array_equal(g, ref[r0:r1, 5 : w0 - 7])
