@@ -12,7 +12,7 @@ from ops.parallel import run_strips, strip_rows
 from ops.unsharp._common import _JUMP, Array
 from ops.unsharp._levels import _block_flags, _Gather, _sub_resize, _touching
 from ops.unsharp._surface import _Level
-from ops.unsharp._taps import MAX_TAPS, apply_taps, fine_fixups, fixup_taps
+from ops.unsharp._taps import MAX_TAPS, apply_taps, fine_fixups, fixup_taps, put_flat
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -107,13 +107,10 @@ class _Upsampler:
                 u.ravel()[self.idx] = v
         elif self.idx is not None:
             assert self.in_order, "strips of rows are read from the image's upsampling only"
-            i0, i1 = np.searchsorted(self.idx, (r.start * wf, r.stop * wf))
+            i0, i1 = (int(i) for i in np.searchsorted(self.idx, (r.start * wf, r.stop * wf)))
             if i1 > i0:  # (re-weighted pixels are on the surface: in the columns)
-                at_r, at_c = np.divmod(self.idx[i0:i1], wf)
-                at_r -= r.start
-                at_c -= c.start
-                for u, v in zip(ups, self.vals, strict=True):
-                    u[at_r, at_c] = v[i0:i1]
+                for u, v in zip(ups, self.vals, strict=True):  # (compiled: without Python's lock)
+                    put_flat(u, self.idx[i0:i1], v[i0:i1], r.start, c.start, wf)
         return ups
 
     def full(self) -> list[Array]:

@@ -1,0 +1,51 @@
+"""The surface pyramid's edge-aware upsampling read by strips of rows (``_Upsampler.rows``, as
+unsharp masking reads it) against the whole image at once (``_Upsampler.full``: the re-weighted
+pixels written through NumPy's flat indexing): the same numbers, bit for bit, whatever the
+strips and column windows (the scene's top-left corner is off the surface, so the first
+strips' windows start further right)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from ops.unsharp._pyramid import _surface_pyramid
+from ops.unsharp._surface import _surface, _valid
+from tests.test_unsharp_front import _scene
+
+
+@pytest.mark.parametrize("pixel_size", ["perspective", "orthographic"])
+def test_strips_of_the_upsampling_are_the_whole_image(pixel_size: str) -> None:
+    shape = (96, 128)
+    sc = _scene(shape, 3, pixel_size)
+    valid, ps_range, _, _ = _valid(sc["depth"], sc["ps"], sc["mask"])
+    sig0, sig1 = sc["sigs"]
+    surf, sub, first = _surface(
+        sc["depth"],
+        sc["ps"],
+        valid,
+        sc["normal"],
+        1.0,
+        (shape[1] / 2.0, shape[0] / 2.0),
+        ps_range,
+        lambda r, out: np.copyto(out, sig0[r]),
+        False,
+        (sig1,),
+    )
+    sigma = 12.0 * float(np.median(sc["ps"][valid > 0]))  # ~12 pixels: a few levels
+    res = _surface_pyramid(surf, [sub, sig1], first, sigma, None, 1.0)
+    assert res is not None
+    up = res[0]
+    assert up.idx is not None and up.idx.size > 50  # pixels re-weighted beside the steps
+    whole = [a.copy() for a in up.full()]
+    shifted = 0
+    for step in (7, 32):
+        for r0 in range(0, shape[0], step):
+            r = slice(r0, min(shape[0], r0 + step))
+            cols = np.flatnonzero(valid[r].any(axis=0))
+            window = slice(int(cols[0]), int(cols[-1]) + 1)  # the strip's surface columns
+            shifted += window.start > 0
+            for c in (slice(0, shape[1]), window):
+                for got, want in zip(up.rows(r, c), whole, strict=True):
+                    np.testing.assert_array_equal(got, want[r, c])
+    assert shifted  # (a window that does not start at column 0)
