@@ -101,6 +101,26 @@ def _scene(shape: tuple[int, int], seed: int, pixel_size: str) -> dict[str, Any]
     return {"depth": depth, "ps": ps, "mask": mask, "normal": normal, "sigs": sigs}
 
 
+def _surface_of(sc: dict[str, Any], squares: bool) -> tuple[_Surface, np.ndarray, _Level | None]:
+    """``_surface`` of a scene: its first signal (and its square, or the second signal) at full
+    resolution and level 1."""
+    valid, ps_range, _, _ = _valid(sc["depth"], sc["ps"], sc["mask"])
+    sig0 = sc["sigs"][0]
+    h, w = sig0.shape
+    return _surface(
+        sc["depth"],
+        sc["ps"],
+        valid,
+        sc["normal"],
+        1.0,
+        (w / 2.0, h / 2.0),
+        ps_range,
+        lambda r, out: np.copyto(out, sig0[r]),
+        squares,
+        () if squares else (sc["sigs"][1],),
+    )
+
+
 @pytest.mark.parametrize("shape", [(96, 128), (97, 131)])
 @pytest.mark.parametrize("pixel_size", ["perspective", "measured", "orthographic"])
 @pytest.mark.parametrize("squares", [False, True])
@@ -108,21 +128,8 @@ def test_front_most_cells_are_the_numpy_rule(
     shape: tuple[int, int], pixel_size: str, squares: bool
 ) -> None:
     sc = _scene(shape, 7, pixel_size)
-    valid, ps_range, _, _ = _valid(sc["depth"], sc["ps"], sc["mask"])
-    sig0 = sc["sigs"][0]
     others = () if squares else (sc["sigs"][1],)
-    surf, sub, first = _surface(
-        sc["depth"],
-        sc["ps"],
-        valid,
-        sc["normal"],
-        1.0,
-        (shape[1] / 2.0, shape[0] / 2.0),
-        ps_range,
-        lambda r, out: np.copyto(out, sig0[r]),
-        squares,
-        others,
-    )
+    surf, sub, first = _surface_of(sc, squares)
     assert first is not None and (surf.lps is None) == (pixel_size != "measured")
     sigs = [sub, *others]
     got, want = copy.deepcopy(first), copy.deepcopy(first)

@@ -10,30 +10,17 @@ import numpy as np
 import pytest
 
 from ops.unsharp._pyramid import _surface_pyramid
-from ops.unsharp._surface import _surface, _valid
-from tests.test_unsharp_front import _scene
+from tests.test_unsharp_front import _scene, _surface_of
 
 
 @pytest.mark.parametrize("pixel_size", ["perspective", "orthographic"])
 def test_strips_of_the_upsampling_are_the_whole_image(pixel_size: str) -> None:
     shape = (96, 128)
     sc = _scene(shape, 3, pixel_size)
-    valid, ps_range, _, _ = _valid(sc["depth"], sc["ps"], sc["mask"])
-    sig0, sig1 = sc["sigs"]
-    surf, sub, first = _surface(
-        sc["depth"],
-        sc["ps"],
-        valid,
-        sc["normal"],
-        1.0,
-        (shape[1] / 2.0, shape[0] / 2.0),
-        ps_range,
-        lambda r, out: np.copyto(out, sig0[r]),
-        False,
-        (sig1,),
-    )
+    surf, sub, first = _surface_of(sc, False)
+    valid = surf.valid
     sigma = 12.0 * float(np.median(sc["ps"][valid > 0]))  # ~12 pixels: a few levels
-    res = _surface_pyramid(surf, [sub, sig1], first, sigma, None, 1.0)
+    res = _surface_pyramid(surf, [sub, sc["sigs"][1]], first, sigma, None, 1.0)
     assert res is not None
     up = res[0]
     assert up.idx is not None and up.idx.size > 50  # pixels re-weighted beside the steps
