@@ -1,11 +1,13 @@
-"""The surface pyramid's edge-aware upsampling read by strips of rows (``_Upsampler.rows``, as
-unsharp masking reads it) against the whole image at once (``_Upsampler.full``: the re-weighted
-pixels written through NumPy's flat indexing): the same numbers, bit for bit, whatever the
-strips and column windows (the scene's top-left corner is off the surface, so the first
+"""The surface pyramid's edge-aware upsampling, whole (``_Upsampler.full``, as the kept lighting
+reads it) and by strips of rows (``_Upsampler.rows``, as unsharp masking reads it), against the
+rule written out here (OpenCV's bilinear resize of the level, the re-weighted pixels' values put
+in by NumPy's flat indexing): the same numbers, bit for bit, whatever the strips and column
+windows (the scene's top-left corner is off the surface, so the first
 strips' windows start further right)."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -24,7 +26,16 @@ def test_strips_of_the_upsampling_are_the_whole_image(pixel_size: str) -> None:
     assert res is not None
     up = res[0]
     assert up.idx is not None and up.idx.size > 50  # pixels re-weighted beside the steps
-    whole = [a.copy() for a in up.full()]
+    # the rule: OpenCV's bilinear resize of each level channel, the re-weighted values put in
+    hc, wc = up.coarse[0].shape
+    whole = []
+    for a, v in zip(up.coarse, up.vals, strict=True):
+        big = cv2.resize(a, (wc * up.f, hc * up.f), interpolation=cv2.INTER_LINEAR)
+        ref = np.ascontiguousarray(big[: shape[0], : shape[1]])
+        ref.ravel()[up.idx] = v
+        whole.append(ref)
+    for got, want in zip(up.full(), whole, strict=True):
+        np.testing.assert_array_equal(got, want)
     shifted = 0
     for step in (7, 32):
         for r0 in range(0, shape[0], step):
