@@ -11,7 +11,9 @@ its error; the tests compare them with NumPy's float64 functions.
 * :func:`sincos_upper`: (sin θ, cos θ) for θ ∈ [0, π], ~1e-8;
 * :func:`dot3_row`: a row of interleaved triples dotted with constant weights (luminance);
 * :func:`finite_quotient`: a plane divided by a number where finite, inf elsewhere (pixel
-  sizes from depth), on row strips.
+  sizes from depth), on row strips;
+* :func:`put_points`: values at scattered pixels written into a window of planes (a strip's
+  sparse upsampled values), without Python's lock, where NumPy's fancy indexing holds it.
 
 Constants are ``np.float32``: a Python float would promote a kernel's arithmetic to float64.
 """
@@ -35,6 +37,7 @@ __all__ = [
     "exp_neg",
     "expf",
     "finite_quotient",
+    "put_points",
     "sincos_upper",
 ]
 
@@ -201,3 +204,18 @@ def _finite_quotient_rows(a, d, out):
         for j in range(out.shape[1]):
             x = a[i, j]
             out[i, j] = (x if abs(x) < inf else inf) / d
+
+
+@kernel
+def put_points(stack, ys, xs, vals, i0, i1, origin, width):
+    """stack[ch, ys[n] − r0, xs[n] − x0 + c] = vals[n, ch] for the points i0 ≤ n < i1 with
+    0 ≤ xs[n] − x0 < ``width``, ``origin`` = (r0, x0, c): values at pixels (ys, xs) of an image
+    written into (channels, rows, columns) planes that hold its rows from r0 and its columns
+    from x0 at column c (for one plane, ``plane[None]`` and ``vals[:, None]``)."""
+    r0, x0, c = origin
+    for n in range(i0, i1):
+        xx = xs[n] - x0
+        if xx >= 0 and xx < width:
+            yy = ys[n] - r0
+            for ch in range(stack.shape[0]):
+                stack[ch, yy, xx + c] = vals[n, ch]

@@ -39,20 +39,6 @@ def _gather_unit(idx, w, x, y, z, out, c0, n0, n1):
 
 
 @kernel
-def _put_points(stack, ys, xs, vals, i0, i1, origin, width):
-    """stack[ch, ys[n] − r0, xs[n] − x0 + c] = vals[n, ch] for the points i0 ≤ n < i1 with
-    0 ≤ xs[n] − x0 < ``width``, ``origin`` = (r0, x0, c): the sparse values of
-    :meth:`DepthPyramid.up_rows_wide` written into its stack of upsampled planes."""
-    r0, x0, c = origin
-    for n in range(i0, i1):
-        xx = xs[n] - x0
-        if xx >= 0 and xx < width:
-            yy = ys[n] - r0
-            for ch in range(stack.shape[0]):
-                stack[ch, yy, xx + c] = vals[n, ch]
-
-
-@kernel
 def _block_row(la, lb, thr, front, ka, kb, cover, low, m_low, lost):
     """One row of 2×2 blocks of :meth:`DepthPyramid._down_geometry` from two rows ``la``,
     ``lb`` of log depth with :data:`BACKGROUND` on background (covered iff below it): the keep

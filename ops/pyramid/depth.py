@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from ops.numerics import put_points
 from ops.parallel import run_strips, strip_rows
 from ops.pyramid._depth_kernels import (
     BACKGROUND,
@@ -18,7 +19,6 @@ from ops.pyramid._depth_kernels import (
     _down_geometry_rows,
     _down_unit_rows,
     _gather_unit,
-    _put_points,
 )
 
 __all__ = ["DepthPyramid", "normalize_field"]
@@ -513,7 +513,7 @@ class DepthPyramid:
         ys, xs, vals = sparse
         i0, i1 = (int(i) for i in np.searchsorted(ys, [r0, r1]))
         if i1 > i0 and stack is not None:
-            _put_points(stack, ys, xs, vals, i0, i1, (r0, x0, c), x1 - x0)
+            put_points(stack, ys, xs, vals, i0, i1, (r0, x0, c), x1 - x0)
         elif i1 > i0:
             yy, xx, vv = ys[i0:i1] - r0, xs[i0:i1] - x0, vals[i0:i1]
             inside = (xx >= 0) & (xx < x1 - x0)

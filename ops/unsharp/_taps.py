@@ -116,13 +116,3 @@ def fine_fixups(blocks, fine_valid, fine_iz, iz_c, f, thr, r0, r1, out):  # type
                 out[n] = y * wf + x
                 n += 1
     return n
-
-
-@kernel
-def put_flat(out, idx, vals, r0, c0, w):  # type: ignore[no-untyped-def]
-    """out[idx[n] // w − r0, idx[n] % w − c0] = vals[n] for every n: values at flat indices of a
-    ``w``-wide image written into the window of it that ``out`` holds (rows from r0, columns from
-    c0; every index inside it)."""
-    for n in range(idx.shape[0]):
-        i = idx[n]
-        out[i // w - r0, i % w - c0] = vals[n]

@@ -8,11 +8,12 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ops.numerics import put_points
 from ops.parallel import run_strips, strip_rows
 from ops.unsharp._common import _JUMP, Array
 from ops.unsharp._levels import _block_flags, _Gather, _sub_resize, _touching
 from ops.unsharp._surface import _Level
-from ops.unsharp._taps import MAX_TAPS, apply_taps, fine_fixups, fixup_taps, put_flat
+from ops.unsharp._taps import MAX_TAPS, apply_taps, fine_fixups, fixup_taps
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -54,6 +55,7 @@ class _Upsampler:
         blocks = _block_flags(lv, thr)
         # flat fine indices of the re-weighted pixels (ascending where ``fine_k`` is 0)
         self.idx: Array | None = None
+        self.at: tuple[Array, Array] | None = None  # their rows and columns (in the same order)
         self.taps: _FixupTaps | None = None  # their taps and weights (in the order of idx)
         self.vals: list[Array] = []  # their values, per channel (once bound)
         if f == 2:
@@ -81,6 +83,7 @@ class _Upsampler:
             order = np.argsort(idx, kind="stable")
             idx, xx, yy = idx[order], xx[order], yy[order]
         self.idx = idx
+        self.at = (yy, xx)
         self.taps = _FixupTaps(xx, yy, f, lv, fine_iz.ravel()[idx], thr)
 
     def bind(self, coarse: list[Array]) -> _Upsampler:
@@ -109,8 +112,11 @@ class _Upsampler:
             assert self.in_order, "strips of rows are read from the image's upsampling only"
             i0, i1 = (int(i) for i in np.searchsorted(self.idx, (r.start * wf, r.stop * wf)))
             if i1 > i0:  # (re-weighted pixels are on the surface: in the columns)
+                assert self.at is not None
+                yy, xx = self.at
+                origin, width = (r.start, c.start, 0), c.stop - c.start
                 for u, v in zip(ups, self.vals, strict=True):  # (compiled: without Python's lock)
-                    put_flat(u, self.idx[i0:i1], v[i0:i1], r.start, c.start, wf)
+                    put_points(u[None], yy, xx, v[:, None], i0, i1, origin, width)
         return ups
 
     def full(self) -> list[Array]:
