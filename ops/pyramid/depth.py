@@ -20,6 +20,7 @@ from ops.pyramid._depth_kernels import (
     _down_unit_rows,
     _gather_unit,
 )
+from ops.pyramid._jb import jb_weights_fast
 
 __all__ = ["DepthPyramid", "normalize_field"]
 
@@ -283,9 +284,9 @@ class DepthPyramid:
     def up(self, values: np.ndarray, k: int, k_to: int = 0) -> F32:
         """Edge-aware upsampling of unit-vector fields (h_k, w_k, 3n), 0 on background, from
         level k to level ``k_to``: bilinear, except near depth jumps and where a block lost
-        pixels to another surface, where the joint bilateral weights of :meth:`_jb_weights`
-        apply (Kopf et al. 2007; :meth:`up_sparse`); then renormalised, background 0.
-        Strip-parallel."""
+        pixels to another surface, where the joint bilateral weights of
+        :func:`~ops.pyramid._jb.jb_weights` apply (Kopf et al. 2007; :meth:`up_sparse`); then
+        renormalised, background 0. Strip-parallel."""
         vals = np.asarray(values, np.float32)
         if k == k_to:
             return vals
@@ -393,8 +394,8 @@ class DepthPyramid:
         pixels whose parent sample is within one sample of a depth jump or of a block that lost
         pixels to another surface (:meth:`_dirty`, a sparse set), and their values from the
         level-k ``planes_k`` (unit-vector fields, 3 planes each) by the weights of
-        :meth:`_jb_weights` (bilinear where the footprint is on the pixel's own surface), each
-        vector renormalised. Returns (ys, xs, values (N, C)), sorted by row."""
+        :func:`~ops.pyramid._jb.jb_weights` (bilinear where the footprint is on the pixel's own
+        surface), each vector renormalised. Returns (ys, xs, values (N, C)), sorted by row."""
         n_ch = len(planes_k)
         if n_ch % 3:
             raise ValueError(f"up_sparse takes unit-vector fields, 3 planes each; got {n_ch}")
@@ -412,9 +413,10 @@ class DepthPyramid:
 
     def _sparse_taps(self, k: int, k_to: int) -> _SparseTaps:
         """The pixels of :meth:`up_sparse` from level k to level ``k_to`` (rows, columns, sorted
-        by row) and their samples and weights (:meth:`_jb_weights`): the geometry's alone, so
-        kept for every later upsampling between the two levels (each light of Light Alignment
-        upsamples the same levels)."""
+        by row) and their samples and weights (:func:`~ops.pyramid._jb.jb_weights`, made by
+        :func:`~ops.pyramid._jb.jb_weights_fast`): the geometry's alone, so kept for every later
+        upsampling between the two levels (each light of Light Alignment upsamples the same
+        levels)."""
         got = self._taps.get((k, k_to))
         if got is not None:
             return got
@@ -437,7 +439,8 @@ class DepthPyramid:
             order = np.argsort(ys, kind="stable")
             ys, xs = ys[order], xs[order]
         if ys.size:
-            idx, w = self._jb_weights(k, f, ys, xs, self.logd[k_to][ys, xs])
+            logd = self.logd[k_to][ys, xs]
+            idx, w = jb_weights_fast(self.logd[k], self.mask[k], self.depth_sigma, f, ys, xs, logd)
             got = (ys, xs, idx, np.ascontiguousarray(w, np.float32))
         else:
             got = (empty, empty, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
@@ -521,48 +524,3 @@ class DepthPyramid:
             for ch, plane in enumerate(planes):
                 plane[yy, xx] = vv[:, ch]
         return planes, c
-
-    def _jb_weights(
-        self, k: int, f: int, ys: np.ndarray, xs: np.ndarray, logd: np.ndarray
-    ) -> tuple[NDArray[np.int64], F32]:
-        """Joint bilateral upsampling weights (Kopf et al. 2007) of level-k samples for the
-        level-(k − log2 f) pixels (ys, xs) of log depth ``logd``: the bilinear (tent) weights of
-        the 2×2 footprint times a range term of the log-depth difference Δ over covered
-        samples, exp(−max(|Δ| − 2σ, 0)² / 2σ²) with σ = ``depth_sigma``, renormalised — plain
-        bilinear where all four are on the pixel's surface. Where none is, the 3×3 nearest
-        samples with a Gaussian spatial weight (σ one sample) and a softmax on the depth term,
-        so the sample closest in depth wins.
-        Returns flat sample indices and weights, (9, N).
-        """
-        h_k, w_k = self.shape(k)
-        sy = (ys.astype(np.float32) + 0.5) / f - 0.5
-        sx = (xs.astype(np.float32) + 0.5) / f - 0.5
-        cy = np.rint(sy).astype(np.int64)
-        cx = np.rint(sx).astype(np.int64)
-        offs = np.array([-1, 0, 1], np.int64)
-        uy = cy[None, :] + offs[:, None]  # (3, N), unclipped
-        ux = cx[None, :] + offs[:, None]
-        ny = np.minimum(np.maximum(uy, 0), h_k - 1)
-        nx = np.minimum(np.maximum(ux, 0), w_k - 1)
-        idx = (ny[:, None, :] * w_k + nx[None, :, :]).reshape(9, -1)
-        ddy, ddx = np.abs(uy - sy), np.abs(ux - sx)
-        tent = np.maximum(1.0 - ddy, 0.0)[:, None, :] * np.maximum(1.0 - ddx, 0.0)[None, :, :]
-        spatial = (ddy[:, None, :] ** 2 + ddx[None, :, :] ** 2).reshape(9, -1)
-        # range term flat within 2 depth_sigma (samples of the pixel's own surface keep their
-        # bilinear weights, as next to background), Gaussian beyond
-        dl = np.abs(self.logd[k].reshape(-1)[idx] - logd)
-        dl = np.maximum(dl - np.float32(2.0 * self.depth_sigma), np.float32(0.0))
-        inv_r = np.float32(0.5 / (self.depth_sigma * self.depth_sigma))
-        range_log = -inv_r * dl * dl
-        covered = self.mask[k].reshape(-1)[idx] > 0
-        range_log[~covered] = -np.inf
-        wts = (tent.reshape(9, -1) * np.exp(range_log)).astype(np.float32)
-        total = wts.sum(axis=0)
-        far = total < 1e-4
-        if np.any(far):
-            logw = np.float32(-0.5) * spatial[:, far] + range_log[:, far]
-            logw -= logw.max(axis=0, keepdims=True)
-            wts[:, far] = np.exp(logw)
-            total[far] = wts[:, far].sum(axis=0)
-        wts /= total
-        return idx, wts
