@@ -66,9 +66,9 @@ def jb_weights(
 
 
 @exact_kernel
-def _footprint(ys, xs, f, h_k, w_k):  # type: ignore[no-untyped-def]
+def _footprint(ys, xs, f):  # type: ignore[no-untyped-def]
     """The point's position on the level (sy, sx: float32, as :func:`jb_weights` makes them)
-    and its 3×3 nearest samples' rows and columns, unclipped."""
+    and the first row and column of its 3×3 nearest samples (unclipped)."""
     sy = (np.float32(ys) + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
     sx = (np.float32(xs) + np.float32(0.5)) / np.float32(f) - np.float32(0.5)
     return sy, sx, np.int64(np.rint(sy)) - 1, np.int64(np.rint(sx)) - 1
@@ -80,7 +80,7 @@ def _range_logs(ys, xs, logd, logd_k, mask_k, f, h_k, w_k, par, idx, range_log):
     (2σ, 1/2σ²) as float32."""
     two_sigma, inv_r = par
     for n in range(ys.shape[0]):
-        _, _, y0, x0 = _footprint(ys[n], xs[n], f, h_k, w_k)
+        _, _, y0, x0 = _footprint(ys[n], xs[n], f)
         for a in range(3):
             ny = min(max(y0 + a, 0), h_k - 1)
             for b in range(3):
@@ -93,12 +93,12 @@ def _range_logs(ys, xs, logd, logd_k, mask_k, f, h_k, w_k, par, idx, range_log):
 
 
 @exact_kernel
-def _weigh(ys, xs, f, h_k, w_k, ranges, wts, far):  # type: ignore[no-untyped-def]
+def _weigh(ys, xs, f, ranges, wts, far):  # type: ignore[no-untyped-def]
     """:func:`jb_weights`' weights of each point from the exponentials of its range terms
     (``ranges``): the tent (float64, as NumPy promotes it) times each, their sum in tap order,
     each divided by it; ``far`` 1 where the sum is below _FAR (left to :func:`jb_weights`)."""
     for n in range(ys.shape[0]):
-        sy, sx, y0, x0 = _footprint(ys[n], xs[n], f, h_k, w_k)
+        sy, sx, y0, x0 = _footprint(ys[n], xs[n], f)
         total = np.float32(0.0)
         for a in range(3):
             ty = max(1.0 - abs(np.float64(y0 + a) - np.float64(sy)), 0.0)
@@ -131,7 +131,7 @@ def jb_weights_fast(
         ranges = np.empty((9, n1 - n0), np.float32)
         _range_logs(ys[at], xs[at], logd[at], flat_d, flat_m, f, h_k, w_k, par, idx[:, at], ranges)
         np.exp(ranges, out=ranges)
-        _weigh(ys[at], xs[at], f, h_k, w_k, ranges, wts[:, at], far[at])
+        _weigh(ys[at], xs[at], f, ranges, wts[:, at], far[at])
 
     run_strips(n, points, _POINTS)
     if far.any():
