@@ -441,7 +441,7 @@ class DepthPyramid:
         if ys.size:
             logd = self.logd[k_to][ys, xs]
             idx, w = jb_weights_fast(self.logd[k], self.mask[k], self.depth_sigma, f, ys, xs, logd)
-            got = (ys, xs, idx, np.ascontiguousarray(w, np.float32))
+            got = (ys, xs, idx, w)  # (jb_weights_fast: contiguous float32)
         else:
             got = (empty, empty, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
         self._taps[(k, k_to)] = got
