@@ -116,6 +116,59 @@ def _crop(valid: Array) -> tuple[slice, slice] | None:
     return slice(y, y + h), slice(x, x + w)
 
 
+@dataclass(frozen=True)
+class _Guide:
+    """How the depth guide I is made from the depth (see :func:`_surface`)."""
+
+    iz_scale: float  # I = iz_scale · ln z (perspective) or iz_scale · z (orthographic)
+    lps_from: tuple[float, float]  # ln(pixel_size) = a · I + b where it is not measured
+    focal: float | None  # perspective focal length in pixels (None: orthographic)
+    measure_lps: bool  # pixel_size is not z / focal: measure ln(pixel_size)
+
+    @staticmethod
+    def of(
+        depth: Array,
+        pixel_size: Array,
+        valid: Array,
+        ps_range: tuple[float, float],
+        depth_sigma: float,
+    ) -> _Guide:
+        """The guide of a surface, from every 7th row and column of its pixels (all of them
+        where those hold none)."""
+        sub_v = valid[::7, ::7].view(bool)
+        sub_z = depth[::7, ::7][sub_v]
+        sub_ps = pixel_size[::7, ::7][sub_v]
+        if sub_z.size == 0:
+            vb = valid.view(bool)
+            sub_z, sub_ps = depth[vb], pixel_size[vb]
+        ps_min, ps_max = ps_range
+        if ps_max <= 1.001 * ps_min:  # orthographic: constant footprint
+            p0 = float(np.median(sub_ps))
+            return _Guide(1.0 / (p0 * depth_sigma), (0.0, math.log(p0)), None, False)
+        # perspective: footprint ∝ depth (also the fallback for anything else)
+        ratio = sub_z / sub_ps
+        f = float(np.median(ratio))
+        # not pixel_size = z / f: measure
+        measure = float(ratio.max()) > 1.001 * float(ratio.min())
+        return _Guide(f / depth_sigma, (depth_sigma / f, -math.log(f)), f, measure)
+
+    def rows(self, depth: Array, valid: Array, out: Array) -> None:
+        """I of rows of ``depth`` into ``out`` (0 off the surface, ``valid`` 0)."""
+        if self.focal is None:  # 0 off the surface
+            masked_rows(depth, valid, 0.0, out)
+        else:  # ln 1 = 0 off the surface
+            masked_rows(depth, valid, 1.0, out)
+            _write(_cv.log(out, dst=out), out, slice(None))
+        # × iz_scale: OpenCV multiplies by a scalar in double precision (and rounds once), 5x
+        # slower than NumPy's float32 product, which is the same number when the factor is a
+        # float32 (as f = median(z / pixel_size) is when depth_sigma is 1)
+        factor32 = np.float32(self.iz_scale)
+        if float(factor32) == self.iz_scale:
+            np.multiply(out, factor32, out=out)
+        else:
+            _write(_cv.multiply(out, self.iz_scale, dst=out), out, slice(None))
+
+
 def _surface(
     depth: Array,
     pixel_size: Array,
@@ -149,42 +202,11 @@ def _surface(
     the cell's coverage, and the guide's slopes (``_guide_gradient``); ``_finish_first_level``
     does the rest. Level 1 is None where the image is too small for a level.
     """
-    sub_v = valid[::7, ::7].view(bool)
-    sub_z = depth[::7, ::7][sub_v]
-    sub_ps = pixel_size[::7, ::7][sub_v]
-    if sub_z.size == 0:
-        vb = valid.view(bool)
-        sub_z, sub_ps = depth[vb], pixel_size[vb]
     ps_min, ps_max = ps_range  # of pixel_size where valid (from _valid)
     h, w = valid.shape
-    ratio = sub_z / sub_ps
-    measure_lps = False
-    focal: float | None = None
-    if ps_max <= 1.001 * ps_min:  # orthographic: constant footprint
-        p0 = float(np.median(sub_ps))
-        iz_scale = 1.0 / (p0 * depth_sigma)
-        lps_from = (0.0, math.log(p0))
-    else:  # perspective: footprint ∝ depth (also the fallback for anything else)
-        f = float(np.median(ratio))
-        focal = f
-        iz_scale = f / depth_sigma
-        lps_from = (depth_sigma / f, -math.log(f))
-        # not pixel_size = z / f: measure
-        measure_lps = float(ratio.max()) > 1.001 * float(ratio.min())
-    # I = iz_scale · (z or ln z): OpenCV multiplies by a scalar in double precision (and
-    # rounds once), 5x slower than NumPy's float32 product, which is the same number when the
-    # factor is a float32 (as f = median(z / pixel_size) is when depth_sigma is 1)
-    exact32 = float(np.float32(iz_scale)) == iz_scale
-    iz_scale32 = np.float32(iz_scale)
-
-    def scale_iz(a: Array) -> None:
-        if exact32:
-            np.multiply(a, iz_scale32, out=a)
-        else:
-            _write(_cv.multiply(a, iz_scale, dst=a), a, slice(None))
-
+    guide = _Guide.of(depth, pixel_size, valid, ps_range, depth_sigma)
     iz = np.empty((h, w), np.float32)
-    lps = np.empty((h, w), np.float32) if measure_lps else None
+    lps = np.empty((h, w), np.float32) if guide.measure_lps else None
     sig = np.empty((h, w), np.float32)
     first = min(h, w) // 2 >= _MIN_LEVEL_SIDE
     hc, wc = (h + 1) // 2, (w + 1) // 2
@@ -195,17 +217,17 @@ def _surface(
 
     cov, iz1 = cells(), cells()
     sig1 = [cells() for _ in range(nsig)]
-    lps1 = cells() if measure_lps else None
+    lps1 = cells() if guide.measure_lps else None
     nrm1 = None if normal is None else [cells() for _ in range(3)]
     surf = _Surface(
         valid,
         iz,
         lps,
-        lps_from,
+        guide.lps_from,
         normal,
         float(ps_min),
         float(ps_max),
-        focal,
+        guide.focal,
         depth_sigma,
         centre,
     )
@@ -215,12 +237,7 @@ def _surface(
         r0 = r.start
         v = valid[r]
         iz_r = iz[r]
-        if focal is None:  # 0 off the surface
-            masked_rows(depth[r], v, 0.0, iz_r)
-        else:  # ln 1 = 0 off the surface
-            masked_rows(depth[r], v, 1.0, iz_r)
-            _write(_cv.log(iz_r, dst=iz_r), iz, r)
-        scale_iz(iz_r)
+        guide.rows(depth[r], v, iz_r)
         if lps is not None:
             masked_rows(pixel_size[r], v, 1.0, lps[r])
             _write(_cv.log(lps[r], dst=lps[r]), lps, r)
@@ -252,7 +269,7 @@ def _surface(
     if not first:
         return surf, sig, None
     if lps1 is None:
-        a, b = lps_from
+        a, b = guide.lps_from
         lps1 = _cv.addWeighted(iz1, a, iz1, 0.0, b)
     lv = _Level(1, cov, sig1, iz1, lps1, nrm1)
     # the guide's slopes at the cells, after the pass (element-wise: fewer, larger calls)
