@@ -87,13 +87,7 @@ def _surface_pyramid(
     if kmax == 0:
         return None
     m_lo, m_hi = _level_span(sigma, surf, kmax)
-    v_lo, v_hi = (kmax + 1, 0)
-    if var_sigma is not None:
-        v_lo, v_hi = _level_span(var_sigma, surf, kmax)
-        # the variance is a gain modulator: it starts at level 2 (σ ≈ 8 pixels), whose cells
-        # already hold the 4×4-pixel means of L and L², so no half-resolution filtering for it
-        v_lo = min(max(v_lo, 2), kmax)
-        v_hi = max(v_hi, v_lo)
+    v_lo, v_hi = _variance_span(var_sigma, surf, kmax)
     k_lo, k_hi = min(m_lo, v_lo), max(m_hi, v_hi)
 
     assert first is not None and len(first.sig) == (n if var_sigma is None else 2)
@@ -167,13 +161,27 @@ def _surface_pyramid(
             var = _blend(up_v, sm[:2], lv, var_sigma, box) if run_v else [sm[0].copy(), sm[1]]
     assert main is not None
     full.bind(main)
-    var_out = None
-    if var is not None:
-        v = _cv.subtract(var[1], _cv.multiply(var[0], var[0]))
-        _cv.max(v, 0.0, dst=v)
-        v[~levels[v_lo].valid] = 0.0
-        var_out = (v_lo, v)
-    return full, var_out
+    return full, None if var is None else (v_lo, _variance(var, levels[v_lo]))
+
+
+def _variance_span(var_sigma: float | None, surf: _Surface, kmax: int) -> tuple[int, int]:
+    """The levels of the variance's chain (:func:`_level_span`; none: (kmax + 1, 0))."""
+    if var_sigma is None:
+        return kmax + 1, 0
+    v_lo, v_hi = _level_span(var_sigma, surf, kmax)
+    # the variance is a gain modulator: it starts at level 2 (σ ≈ 8 pixels), whose cells
+    # already hold the 4×4-pixel means of L and L², so no half-resolution filtering for it
+    v_lo = min(max(v_lo, 2), kmax)
+    return v_lo, max(v_hi, v_lo)
+
+
+def _variance(means: list[Array], lv: _Level) -> Array:
+    """Var = E[L²] − E[L]² from the smoothed ``means`` (E[L], E[L²]) of level ``lv``, ≥ 0, and 0
+    in its empty cells."""
+    v = _cv.subtract(means[1], _cv.multiply(means[0], means[0]))
+    _cv.max(v, 0.0, dst=v)
+    v[~lv.valid] = 0.0
+    return v
 
 
 def _need_box(lv: _Level, sigmas: list[float]) -> tuple[slice, slice] | None:
