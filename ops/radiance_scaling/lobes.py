@@ -249,19 +249,7 @@ def scale_lobes(
             raise ValueError(f"kappa must have shape (H, W), got {grid.shape}")
         hgt, wid = grid.shape
     names = list(lobes)
-    alphas = {
-        n: ALPHA.check(v, f"alpha[{n!r}]") for n, v in _per_lobe(alpha, names, "alpha").items()
-    }
-    gammas = {
-        n: GAMMA.check(v, f"gamma[{n!r}]") for n, v in _per_lobe(gamma, names, "gamma").items()
-    }
-    whites = _per_lobe(white, names, "white")
-    for n, w in whites.items():
-        if isinstance(w, str):
-            if w != "auto":
-                raise ValueError(f"white[{n!r}]={w!r} must be a number > 0 or 'auto'")
-        else:
-            WHITE.check(w, f"white[{n!r}]")
+    alphas, gammas, whites = _lobe_parameters(names, alpha, gamma, white)
 
     def rgb(x: np.ndarray, what: str) -> np.ndarray:
         x = np.ascontiguousarray(x, dtype=np.float32)
@@ -328,6 +316,30 @@ def scale_lobes(
         return out, sigmas
     run_strips(hgt, strip, _STRIP_ROWS)
     return out, sigmas
+
+
+def _lobe_parameters(
+    names: list[str],
+    alpha: Mapping[str, float] | float,
+    gamma: Mapping[str, float] | float,
+    white: Mapping[str, float | str] | float | str,
+) -> tuple[dict[str, float], dict[str, float], dict[str, object]]:
+    """:func:`scale_lobes`' α, γ and white level per lobe, checked (ValueError naming the lobe
+    and the value)."""
+    alphas = {
+        n: ALPHA.check(v, f"alpha[{n!r}]") for n, v in _per_lobe(alpha, names, "alpha").items()
+    }
+    gammas = {
+        n: GAMMA.check(v, f"gamma[{n!r}]") for n, v in _per_lobe(gamma, names, "gamma").items()
+    }
+    whites = _per_lobe(white, names, "white")
+    for n, w in whites.items():
+        if isinstance(w, str):
+            if w != "auto":
+                raise ValueError(f"white[{n!r}]={w!r} must be a number > 0 or 'auto'")
+        else:
+            WHITE.check(w, f"white[{n!r}]")
+    return alphas, gammas, whites
 
 
 def _delta_inputs(
