@@ -118,20 +118,7 @@ def shade_lobes(
         lv = dot(l_vec, view_a)
         if lv.ndim == 0:
             lv = np.full(shape, lv, np.float32)
-        s_term: np.ndarray | None = None
-        if model == "ashikhmin_shirley":
-            d_term, s_term = _ashikhmin_shirley(nl, nv, lv, shininess, min(f0, 1.0))
-            s_term *= np.float32(1.0 / max(f0, 1e-4))
-        else:
-            d_term = np.maximum(nl, np.float32(0.0))
-            if model == "blinn_phong":
-                s_term = _blinn_phong(nl, nv, lv, shininess)
-            elif model == "phong":
-                s_term = _phong(nl, nv, lv, shininess)
-            elif model == "ggx":
-                rough = (2.0 / (shininess + 2.0)) ** 0.25
-                s_term = _ggx(nl, nv, lv, rough, min(f0, 1.0))
-                s_term *= np.float32(1.0 / max(f0, 1e-4))
+        d_term, s_term = _model_terms(model, nl, nv, lv, shininess, f0)
         _accumulate(diff_light, d_term, e)
         if s_term is not None:
             _accumulate(spec_light, s_term, e)
@@ -160,6 +147,29 @@ def shade_lobes(
         out[f"{name}.color"] = color
         out[name] = np.asarray(cv2.multiply(light_f, color), np.float32).reshape(light_f.shape)
     return out
+
+
+def _model_terms(
+    model: str, nl: np.ndarray, nv: np.ndarray, lv: np.ndarray, shininess: float, f0: float
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """One light's diffuse and specular terms under ``model`` (see :func:`shade_lobes`) from
+    n·ℓ, n·v and ℓ·v; the specular term None for ``"lambert"``, divided by f0 where the model's
+    Fresnel term holds it."""
+    if model == "ashikhmin_shirley":
+        d_term, s_term = _ashikhmin_shirley(nl, nv, lv, shininess, min(f0, 1.0))
+        s_term *= np.float32(1.0 / max(f0, 1e-4))
+        return d_term, s_term
+    d_term = np.maximum(nl, np.float32(0.0))
+    if model == "blinn_phong":
+        return d_term, _blinn_phong(nl, nv, lv, shininess)
+    if model == "phong":
+        return d_term, _phong(nl, nv, lv, shininess)
+    if model == "ggx":
+        rough = (2.0 / (shininess + 2.0)) ** 0.25
+        s_term = _ggx(nl, nv, lv, rough, min(f0, 1.0))
+        s_term *= np.float32(1.0 / max(f0, 1e-4))
+        return d_term, s_term
+    return d_term, None
 
 
 def _accumulate(acc: np.ndarray, term: np.ndarray, irradiance: np.ndarray) -> None:
