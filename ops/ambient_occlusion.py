@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
+from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -145,6 +146,18 @@ def ssao(
 _CHUNK = 16384  # cv2.remap wants maps narrower than 32767
 
 
+class _Pixels(NamedTuple):
+    """Pixels of :meth:`_Marcher.occlusion`, each field one row (1, N) float32."""
+
+    gx: np.ndarray  # column
+    gy: np.ndarray  # row
+    z: np.ndarray  # depth
+    normal: tuple[np.ndarray, np.ndarray, np.ndarray]  # camera-space x, y, z
+    pattern: np.ndarray  # place in the 4×4 rotation and jitter pattern (int)
+    at: tuple[np.ndarray, np.ndarray]  # camera-space x, y of the surface point
+    rstep: np.ndarray  # the march's step, pixels
+
+
 class _Marcher:
     """The per-image inputs of :func:`ssao` and its inner loop over a set of pixels."""
 
@@ -191,30 +204,33 @@ class _Marcher:
         self.jitter = np.ascontiguousarray(_BAYER.T)
         self.norm = np.float32(1.0 / ((1.0 - sin_bias) * directions))
 
-    def occlusion(self, index: np.ndarray) -> np.ndarray:
-        """Occlusion in [0, 1] (before 1 − ·) of the flat pixel indices ``index``."""
-        n_px = index.size
-        shape = (1, n_px)  # cv2.remap wants 2-D maps: one row of pixels
+    def _pixels(self, index: np.ndarray) -> _Pixels:
+        """What :meth:`occlusion` needs of the pixels ``index``, each as one row."""
+        shape = (1, index.size)
         gy_i, gx_i = np.divmod(index, self.width)
         gx = gx_i.astype(np.float32).reshape(shape)
         gy = gy_i.astype(np.float32).reshape(shape)
         z = self.z.reshape(-1)[index].reshape(shape)
         nrm = self.normal[index]
-        nx = np.ascontiguousarray(nrm[:, 0]).reshape(shape)
-        ny = np.ascontiguousarray(nrm[:, 1]).reshape(shape)
-        nz = np.ascontiguousarray(nrm[:, 2]).reshape(shape)
+        nx, ny, nz = (np.ascontiguousarray(nrm[:, i]).reshape(shape) for i in range(3))
         pattern = ((gy_i % 4) * 4 + gx_i % 4).reshape(shape)
         scale = self.scale
         ox, oy = self.offset
         if self.ortho:
             rstep = np.full(shape, min(self.radius_px, self.cap), np.float32)
-            px = gx * scale + ox
-            py = -(gy * scale + oy)
+            at = (gx * scale + ox, -(gy * scale + oy))
         else:
             rstep = np.minimum(self.radius_px / z, self.cap)
-            px = (gx * scale + ox) * z
-            py = -(gy * scale + oy) * z
+            at = ((gx * scale + ox) * z, -(gy * scale + oy) * z)
         rstep *= np.float32(1.0 / self.steps)
+        return _Pixels(gx, gy, z, (nx, ny, nz), pattern, at, rstep)
+
+    def occlusion(self, index: np.ndarray) -> np.ndarray:
+        """Occlusion in [0, 1] (before 1 − ·) of the flat pixel indices ``index``."""
+        shape = (1, index.size)  # cv2.remap wants 2-D maps: one row of pixels
+        gx, gy, z, (nx, ny, nz), pattern, (px, py), rstep = self._pixels(index)
+        scale = self.scale
+        ox, oy = self.offset
         jitter = self.jitter.reshape(-1)[pattern]
         occ = np.zeros(shape, np.float32)
         horizon = np.empty(shape, np.float32)
