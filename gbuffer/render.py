@@ -497,16 +497,7 @@ def render(
     view = camera.view_vectors((height, width), display)
     if ao == "ssao":
         radius = 0.2 * bounding_sphere(mesh)[1] if ao_radius is None else ao_radius
-        ortho = camera.projection == "orthographic"
-        ao_buf = ssao(
-            geo["depth"],
-            geo["normal"],
-            radius=radius,
-            focal_px=None if ortho else camera.focal_px(height),
-            pixel_size=camera.ortho_height / height if ortho and camera.ortho_height else None,
-            directions=ao_directions,
-            steps=ao_steps,
-        )
+        ao_buf = _ssao(geo, camera, radius, ao_directions, ao_steps)
     else:
         ao_buf = np.ones((height, width), np.float32)
     lobes = shade_lobes(
@@ -538,6 +529,23 @@ def render(
         sources={name: source for name in buffers},
         outputs=canonical_outputs(buffers) if outputs else {},
         attributes=camera.to_header(display),
+    )
+
+
+def _ssao(
+    geo: dict[str, np.ndarray], camera: Camera, radius: float, directions: int, steps: int
+) -> np.ndarray:
+    """:func:`ops.ambient_occlusion.ssao` of rasterised geometry seen by ``camera``."""
+    height = geo["depth"].shape[0]
+    ortho = camera.projection == "orthographic"
+    return ssao(
+        geo["depth"],
+        geo["normal"],
+        radius=radius,
+        focal_px=None if ortho else camera.focal_px(height),
+        pixel_size=camera.ortho_height / height if ortho and camera.ortho_height else None,
+        directions=directions,
+        steps=steps,
     )
 
 
