@@ -295,37 +295,8 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
         else:
             encoded, chunks, order, notes = _encode_part(header, channels, kind, where, i)
             warnings += notes
-        # Attribute values: what the chunks need from the encoding, original bytes where the
-        # value did not change, else the binding's serialisation of the new value.
-        final: dict[str, RawAttribute] = {}
-        fresh: dict[str, Any] = {}
-        for key, value in header.items():
-            if key in ("channels", "chunkCount"):
-                continue
-            if key in _CHUNK_ATTRIBUTES and key in encoded:
-                final[key] = encoded[key]
-            elif key in orig and key in snap and _same_value(value, snap[key]):
-                final[key] = orig[key]
-            else:
-                fresh[key] = _plain(value)
-        final.update(_binding_attributes(fresh, where))
-        for key, raw in encoded.items():
-            if key == "channels" or (key in _REQUIRED and key not in final):
-                final[key] = raw
-            elif key == "tiles" and kind == "tiledimage":
-                final[key] = raw
-        if multipart:
-            name = header.get("name") or f"part{i}"
-            final["name"] = RawAttribute("string", str(name).encode())
-            final["type"] = RawAttribute("string", kind.encode())
-            final["chunkCount"] = RawAttribute("int", struct.pack("<i", len(chunks)))
-        else:
-            final.pop("chunkCount", None)
-            if "type" not in header and "type" not in orig:
-                final.pop("type", None)
-        rank = {k: n for n, k in enumerate(orig)}
-        keys = sorted(final, key=lambda k: (rank.get(k, len(rank)), k))
-        headers.append({k: final[k] for k in keys})
+        part = _Part(header, orig, snap, kind, f"part{i}")
+        headers.append(part.attributes(encoded, len(chunks) if multipart else None, where))
         all_chunks.append(chunks)
         orders.append(order)
         storages.append(kind)
@@ -336,6 +307,57 @@ def write_parts(passthrough: Passthrough, path: str | Path) -> list[str]:
     except OSError as exc:
         raise FrameError(f"{where}: cannot write ({exc.strerror or exc})") from None
     return warnings
+
+
+@dataclass(frozen=True)
+class _Part:
+    """What a part's header is made of: its ``header`` (Python values), the attributes it was
+    read with (``orig``: raw bytes, ``snap``: their values as read; empty for a new part), its
+    storage ``kind`` and the name it gets in a multi-part file without one."""
+
+    header: dict[str, Any]
+    orig: dict[str, RawAttribute]
+    snap: dict[str, Any]
+    kind: str
+    default_name: str
+
+    def attributes(
+        self, encoded: dict[str, RawAttribute], chunk_count: int | None, where: str
+    ) -> dict[str, RawAttribute]:
+        """The raw attributes to write: what the chunks need from the ``encoded`` part, the
+        original bytes where a value did not change, else the binding's serialisation of the
+        new value; with a ``chunk_count``, a multi-part file's name, type and chunkCount. In the
+        order the part was read with, new ones after."""
+        header, orig, kind = self.header, self.orig, self.kind
+        final: dict[str, RawAttribute] = {}
+        fresh: dict[str, Any] = {}
+        for key, value in header.items():
+            if key in ("channels", "chunkCount"):
+                continue
+            if key in _CHUNK_ATTRIBUTES and key in encoded:
+                final[key] = encoded[key]
+            elif key in orig and key in self.snap and _same_value(value, self.snap[key]):
+                final[key] = orig[key]
+            else:
+                fresh[key] = _plain(value)
+        final.update(_binding_attributes(fresh, where))
+        for key, raw in encoded.items():
+            if key == "channels" or (key in _REQUIRED and key not in final):
+                final[key] = raw
+            elif key == "tiles" and kind == "tiledimage":
+                final[key] = raw
+        if chunk_count is not None:
+            name = header.get("name") or self.default_name
+            final["name"] = RawAttribute("string", str(name).encode())
+            final["type"] = RawAttribute("string", kind.encode())
+            final["chunkCount"] = RawAttribute("int", struct.pack("<i", chunk_count))
+        else:
+            final.pop("chunkCount", None)
+            if "type" not in header and "type" not in orig:
+                final.pop("type", None)
+        rank = {k: n for n, k in enumerate(orig)}
+        keys = sorted(final, key=lambda k: (rank.get(k, len(rank)), k))
+        return {k: final[k] for k in keys}
 
 
 def _assemble(
