@@ -90,6 +90,20 @@ def _eq2(
     return smap, score
 
 
+def _integrated(prods: list[np.ndarray], sigma: float) -> tuple[list[np.ndarray], np.ndarray]:
+    """The tensor products blurred by the integration Gaussian (one per task on the shared
+    pool), and 1 / their weight (the last product; 0 where it is below 1e-4)."""
+    tens = list(prods)
+
+    def integrate(a: int, b: int) -> None:
+        for i in range(a, b):
+            tens[i] = _f32(cv2.GaussianBlur(prods[i], (0, 0), sigma))
+
+    run_strips(len(tens), integrate, 1)
+    wsum = tens[6]
+    return tens, np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 1e-4)
+
+
 def congruence(
     image: NDArray[np.floating],
     depth: NDArray[np.floating],
@@ -197,18 +211,9 @@ def congruence(
         return CongruenceResult(0.0, (size2[1], size2[0]), shading_norm or 0.0, (h, w), low)
     (y0, y1, x0, x1), (v0, v1, u0, u1) = win
     crop = [np.ascontiguousarray(c[y0:y1, x0:x1]) for c in level]
-    jump = 0.5 * float(depth_jump)
-    prods = _tensor_products(crop, s1, jump, f2, (u1 - u0, v1 - v0))
+    prods = _tensor_products(crop, s1, 0.5 * float(depth_jump), f2, (u1 - u0, v1 - v0))
     area = prods[6]  # fraction of each analysis pixel with valid gradients
-    tens = list(prods)
-
-    def integrate(a: int, b: int) -> None:
-        for i in range(a, b):
-            tens[i] = _f32(cv2.GaussianBlur(prods[i], (0, 0), s2))
-
-    run_strips(len(tens), integrate, 1)
-    wsum = tens[6]
-    invw = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 1e-4)
+    tens, invw = _integrated(prods, s2)
 
     inside = area > 0.5
     outside = ~inside
