@@ -37,6 +37,7 @@ __all__ = [
     "exp_neg",
     "expf",
     "finite_quotient",
+    "magnitude",
     "put_points",
     "sincos_upper",
 ]
@@ -204,6 +205,42 @@ def _finite_quotient_rows(a, d, out):
         for j in range(out.shape[1]):
             x = a[i, j]
             out[i, j] = (x if abs(x) < inf else inf) / d
+
+
+def magnitude(*planes: np.ndarray) -> np.ndarray:
+    """√(x² + y² [+ z²]) per element of two or three planes of one shape (float32): each square,
+    sum and root rounded on its own (as NumPy rounds them), in one compiled pass over row
+    strips. Every element gets the same value wherever the arrays lie in memory, which
+    ``cv2.magnitude`` does not give: its vectorised loop rounds some elements differently
+    depending on the alignment of the array it allocates for the result, so a frame's result
+    could change from one run to the next."""
+    if len(planes) not in (2, 3):
+        raise ValueError(f"magnitude takes two or three planes, got {len(planes)}")
+    ins = [np.ascontiguousarray(a, np.float32) for a in planes]
+    shape = ins[0].shape
+    if any(a.shape != shape for a in ins):
+        raise ValueError(f"magnitude needs planes of one shape, got {[a.shape for a in ins]}")
+    out = np.empty(shape, np.float32)
+    rows = [a.reshape(shape[0] if len(shape) > 1 else 1, -1) for a in (*ins, out)]
+    z = rows[2] if len(ins) == 3 else rows[0][:0]
+    run_strips(
+        rows[0].shape[0],
+        lambda r0, r1: _magnitude_rows(rows[0][r0:r1], rows[1][r0:r1], z[r0:r1], rows[-1][r0:r1]),
+        strip_rows(rows[0].shape[1]),
+    )
+    return out
+
+
+@exact_kernel
+def _magnitude_rows(x, y, z, out):
+    """out = √(x² + y² + z²), z left out where it has no rows."""
+    with_z = z.shape[0] > 0
+    for i in range(out.shape[0]):
+        for j in range(out.shape[1]):
+            s = x[i, j] * x[i, j] + y[i, j] * y[i, j]
+            if with_z:
+                s += z[i, j] * z[i, j]
+            out[i, j] = np.sqrt(s)
 
 
 @kernel

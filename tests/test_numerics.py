@@ -14,6 +14,7 @@ from ops.numerics import (
     exp_neg,
     expf,
     finite_quotient,
+    magnitude,
     sincos_upper,
 )
 
@@ -124,3 +125,34 @@ def test_finite_quotient_is_numpys_where_and_division(shape: tuple[int, int]) ->
     assert np.array_equal(
         finite_quotient(view, 7.0), np.where(np.isfinite(view), view, np.inf) / np.float32(7.0)
     )
+
+
+def _at_offset(a: np.ndarray, floats: int) -> np.ndarray:
+    """A copy of ``a`` starting ``floats`` float32 after a 64-byte boundary."""
+    buf = np.empty(a.size + 32, np.float32)
+    start = (-buf.ctypes.data % 64) // 4 + floats
+    out = buf[start : start + a.size].reshape(a.shape)
+    out[...] = a
+    return out
+
+
+@pytest.mark.parametrize("shape", [(270, 480), (7, 5), (3,)])
+def test_magnitude_is_numpys_squares_sum_and_root_wherever_the_planes_lie(
+    shape: tuple[int, ...],
+) -> None:
+    rng = np.random.default_rng(4)
+    x, y, z = (rng.standard_normal(shape).astype(np.float32) * 1e-3 for _ in range(3))
+    two, three = np.sqrt(x * x + y * y), np.sqrt(x * x + y * y + z * z)
+    for floats in range(16):  # every alignment of the inputs (and so of the work) in a cache line
+        xs, ys, zs = (_at_offset(a, floats) for a in (x, y, z))
+        got2, got3 = magnitude(xs, ys), magnitude(xs, ys, zs)
+        assert got2.dtype == np.float32 and got2.shape == shape
+        np.testing.assert_array_equal(got2, two)
+        np.testing.assert_array_equal(got3, three)
+
+
+def test_magnitude_refuses_planes_that_do_not_match() -> None:
+    with pytest.raises(ValueError, match="one shape"):
+        magnitude(np.zeros((2, 3), np.float32), np.zeros((3, 2), np.float32))
+    with pytest.raises(ValueError, match="two or three"):
+        magnitude(np.zeros((2, 3), np.float32))

@@ -8,6 +8,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.congruence._common import _LUMA, _REL_FLOOR, F32
+from ops.numerics import magnitude
 from ops.parallel import run_strips
 
 
@@ -239,7 +240,7 @@ def _flow(
     a = np.subtract(jxx, jyy, out=jxx)
     b = np.asarray(cv2.multiply(txy, invw, scale=-2.0))  # 2 jxy, y up
     floor = _REL_FLOOR * ref * ref
-    mag = np.asarray(cv2.magnitude(a, b))
+    mag = magnitude(a, b)
     defined = mag > e * np.float32(1e-6)
     defined &= e > floor
     defined &= inside

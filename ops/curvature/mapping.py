@@ -14,7 +14,7 @@ from ops.curvature import _common
 from ops.curvature._common import DEFAULT_GAIN
 from ops.curvature.result import _FIELDS, Curvature, half_angle_row
 from ops.jit import kernel
-from ops.numerics import expf
+from ops.numerics import expf, magnitude
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled, upsample_row
 
@@ -131,7 +131,7 @@ def anisotropic(
         proj = cv2.addWeighted(c2, cx, s2, cy, 0.0)
     elif ell.shape == (*curv.k1.shape, 3):
         ex, ey, ez = cv2.split(np.ascontiguousarray(ell))
-        inv = cv2.magnitude(cv2.magnitude(ex, ey), ez)
+        inv = magnitude(ex, ey, ez)
         np.maximum(inv, np.float32(1e-20), out=inv)
         np.divide(np.float32(1.0), inv, out=inv)
         lu = cv2.add(cv2.multiply(ex, curv.dir_x), cv2.multiply(ey, curv.dir_y))

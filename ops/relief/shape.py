@@ -14,6 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from ops.checks import CURVEDNESS_NORM, PERCENTILE
 from ops.curvature import Curvature
+from ops.numerics import magnitude
 from ops.parallel import run_strips, strip_rows
 from ops.relief._common import (
     _PERCENTILE_SAMPLES,
@@ -46,7 +47,7 @@ def curvedness(curv: Curvature) -> F32:
     Per unit image height, (H, W) float32, 0 where the curvature weight is 0 (background, depth
     discontinuities). This is the unnormalised length of the descriptor S.
     """
-    mag = cv2.magnitude(curv.k1, curv.k2)
+    mag = magnitude(curv.k1, curv.k2)
     return np.asarray(cv2.multiply(mag, curv.weight, scale=_SQRT1_2), np.float32)
 
 
@@ -56,9 +57,7 @@ def _auto_norm(k1: np.ndarray, k2: np.ndarray, weight: np.ndarray, percentile: f
     only), floored at AUTO_NORM_FLOOR."""
     step = max(1, math.ceil(math.sqrt(k1.size / _PERCENTILE_SAMPLES)))
     sub_w = weight[::step, ::step]
-    mag = cv2.magnitude(
-        np.ascontiguousarray(k1[::step, ::step]), np.ascontiguousarray(k2[::step, ::step])
-    )
+    mag = magnitude(k1[::step, ::step], k2[::step, ::step])
     sel = (mag * sub_w)[sub_w > 0.5] * np.float32(_SQRT1_2)
     if sel.size == 0 or np.isnan(sel).any():
         return AUTO_NORM_FLOOR
@@ -206,7 +205,7 @@ def _polar(s: F32) -> tuple[F32, F32]:
     """(|S| clipped to 1, t) with t in [0, 180] degrees the *folded* shape angle: 0 cap, 45 convex,
     90 saddle, 135 concave, 180 cup; the unreached half (S2 > S1) is mirrored onto the other."""
     s1, s2 = cv2.split(np.ascontiguousarray(s, dtype=np.float32))
-    rho = np.minimum(cv2.magnitude(s1, s2), np.float32(1.0))
+    rho = np.minimum(magnitude(s1, s2), np.float32(1.0))
     phase = np.asarray(cv2.phase(s1, s2, angleInDegrees=True), np.float32)  # [0, 360)
     phase += np.float32(135.0)
     np.subtract(phase, np.float32(360.0), out=phase, where=phase >= 360.0)
