@@ -271,7 +271,7 @@ class Summary:
 def _load_pinned(path: Path) -> dict[str, float]:
     try:
         data = json.loads(path.read_text())
-    except (OSError, json.JSONDecodeError) as exc:
+    except (OSError, ValueError) as exc:  # (not UTF-8, not JSON, a number too long)
         raise BatchError(f"cannot read pinned statistics {path}: {exc}") from None
     if not isinstance(data, dict) or not all(isinstance(v, int | float) for v in data.values()):
         raise BatchError(f"pinned statistics {path} must be a JSON object of numbers")

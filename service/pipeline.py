@@ -76,6 +76,8 @@ def loads(text: str, what: str, max_chars: int = MAX_CHARS) -> Any:
         return json.loads(text)
     except json.JSONDecodeError as exc:
         raise PipelineError(f"{what} is not valid JSON: {exc}") from None
+    except ValueError:  # Python's limit on the digits of an integer it converts
+        raise PipelineError(f"{what} holds a number with more digits than can be read") from None
 
 
 class Step(BaseModel):

@@ -211,6 +211,8 @@ def test_not_an_exr_400(client: Any) -> None:
     ("data", "words"),
     [
         ({"pipeline": "{"}, "not valid JSON"),
+        ({"pipeline": "9" * 5000}, "more digits than can be read"),
+        ({"camera": '{"focal_px": ' + "9" * 5000 + "}"}, "'camera' holds a number with more"),
         ({"pipeline": '{"steps": []}'}, "steps"),
         ({"pipeline": '[{"op": "nope"}]'}, "unknown operator 'nope'"),
         ({"camera": "[1, 2]"}, "'camera' must be a JSON object"),

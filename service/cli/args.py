@@ -72,7 +72,7 @@ def parse_value(text: str) -> Any:
     values (``1,0.5,0.25``), else the plain string."""
     try:
         return json.loads(text)
-    except json.JSONDecodeError:
+    except ValueError:  # not JSON, or a number with more digits than Python converts
         pass
     if "," in text:
         return [parse_value(part) for part in text.split(",")]
