@@ -11,6 +11,7 @@ cannot write (double attributes, bad pixel types, ...).
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import struct
@@ -160,6 +161,14 @@ def make_scene(h: int = 48, w: int = 64, fov_y_deg: float = 40.0, radius: float 
         transmission_color=rgb(np.array([0.1, 0.2, 0.3])),
         emission=rgb(np.array([0.05, 0.0, 0.02])),
         ao=np.where(hit, 0.5 + 0.5 * n[..., 2], 0.0).astype(f32),
+    )
+
+
+def cropped(s: Scene, rows: slice, cols: slice) -> Scene:
+    """The scene's pixels in ``rows`` and ``cols`` (its camera as it is)."""
+    arrays = {f.name: getattr(s, f.name) for f in dataclasses.fields(s)}
+    return dataclasses.replace(
+        s, **{k: a[rows, cols] for k, a in arrays.items() if isinstance(a, np.ndarray)}
     )
 
 

@@ -25,6 +25,7 @@ from service.metrics import Metrics
 from service.openapi import DEFAULT_PATH, dumps
 from service.registry import PipelineError, operators
 from service.settings import Settings
+from tests.exr_factory import cropped, make_scene, write_canonical
 
 pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
 
@@ -334,3 +335,13 @@ def test_json_log_lines() -> None:
     line = json.loads(JsonFormatter().format(record))
     assert line["msg"] == "request" and line["status"] == 200 and line["level"] == "info"
     assert "request_id" in line and line["ts"].endswith("Z")
+
+
+def test_a_frame_of_one_pixel_422_and_the_worker_stays(client: Any, tmp_path: Any) -> None:
+    """(It used to fail inside OpenCV: a 500 and a worker retired for every such request.)"""
+    px = cropped(make_scene(48, 64), slice(24, 25), slice(32, 33))
+    data = write_canonical(tmp_path / "px.exr", px).read_bytes()
+    for _ in range(2):
+        r = client.post("/v1/enhance", headers=AUTH, files={"file": ("px.exr", data)})
+        problem(r, 422, "the frame is 1x1 pixels")
+    assert client.get("/readyz").status_code == 200

@@ -84,7 +84,7 @@ def _valid(
             return None
         x0, y0 = min(q[0] for q in rs) + xs.start, min(q[1] for q in rs) + ys.start
         x1, y1 = max(q[2] for q in rs) + xs.start, max(q[3] for q in rs) + ys.start
-        return slice(y0, y1), slice(x0, x1)
+        return _box(y0, y1, x0, x1, valid.shape)
 
     lo, hi = min(f[0] for f in found), max(f[1] for f in found)
     return valid, (lo, hi), union(rects[0]), union(rects[1])
@@ -109,11 +109,25 @@ def _outside(img: Array, box: tuple[slice, slice]) -> Array:
 
 
 def _crop(valid: Array) -> tuple[slice, slice] | None:
-    """The bounding box of the surface (None: nothing visible)."""
+    """The bounding box of the surface (None: nothing visible), as :func:`_box` makes it."""
     x, y, w, h = _cv.boundingRect(valid)
     if w == 0 or h == 0:
         return None
-    return slice(y, y + h), slice(x, x + w)
+    return _box(y, y + h, x, x + w, valid.shape)
+
+
+def _box(y0: int, y1: int, x0: int, x1: int, shape: tuple[int, ...]) -> tuple[slice, slice]:
+    """Rows y0:y1 and columns x0:x1 of an image of ``shape``, widened to 2 where they are 1 and
+    the image allows: OpenCV's Python binding takes an array of one element for a scalar, so
+    the crop of a single pixel (the one pixel of a surface) would fail its arithmetic. Widening
+    a box only adds pixels off the surface, which keep their input."""
+    if y1 - y0 < 2 <= shape[0]:
+        y0 = min(y0, shape[0] - 2)
+        y1 = y0 + 2
+    if x1 - x0 < 2 <= shape[1]:
+        x0 = min(x0, shape[1] - 2)
+        x1 = x0 + 2
+    return slice(y0, y1), slice(x0, x1)
 
 
 @dataclass(frozen=True)
