@@ -51,6 +51,27 @@ BUFFERS: dict[str, tuple[int, str]] = {
     "remainder": (3, "beauty minus the sum of lobes (emission, environment, ...)"),
 }
 
+#: The buffers of a frame Depict renders (:func:`gbuffer.render.render`).
+RENDER_BUFFERS: tuple[str, ...] = (
+    "beauty",
+    "alpha",
+    "coverage",
+    "normal",
+    "depth",
+    "position",
+    "albedo",
+    "ao",
+    "ambient",
+    "diffuse",
+    "specular",
+    "ambient.light",
+    "diffuse.light",
+    "specular.light",
+    "ambient.color",
+    "diffuse.color",
+    "specular.color",
+)
+
 #: Radiance lobes, in the order the beauty is rebuilt from them.
 LOBES: tuple[str, ...] = ("ambient", "diffuse", "specular", "transmission")
 

@@ -100,6 +100,30 @@ class Limits:
                 "(DEPICT_MAX_DECODED_MB); refused before decoding"
             )
 
+    def check_render(self, width: int, height: int, where: str) -> None:
+        """:class:`LimitError` when a render of ``width`` x ``height`` pixels is over the
+        pixels or the decoded size an EXR may claim (its buffers, :data:`gbuffer.frame.
+        RENDER_BUFFERS`, as float32): a render is refused before it starts, as a file is before
+        it is decoded."""
+        from gbuffer.frame import BUFFERS, RENDER_BUFFERS
+
+        pixels = width * height
+        max_pixels = self.max_pixels or HARD_MAX_PIXELS
+        if pixels > max_pixels:
+            raise LimitError(
+                f"{where}: {width}x{height} = {pixels} pixels, over the limit of {max_pixels} "
+                "pixels (DEPICT_MAX_PIXELS); ask for a smaller size"
+            )
+        channels = sum(BUFFERS[name][0] for name in RENDER_BUFFERS)
+        size = pixels * channels * 4
+        max_bytes = self.max_bytes or _physical_memory()
+        if size > max_bytes:
+            raise LimitError(
+                f"{where}: {width}x{height} pixels render {channels} float channels, "
+                f"{size / 2**20:.0f} MiB, over the limit of {max_bytes / 2**20:.0f} MiB "
+                "(DEPICT_MAX_DECODED_MB); ask for a smaller size"
+            )
+
 
 def decoded_bytes(layout: Layout) -> int:
     """Bytes the pixels of every channel of every part take once decoded."""

@@ -53,27 +53,6 @@ from ops.shading import MODELS, Light, shade_lobes
 
 MAX_SIZE = 16384  # llvmpipe's GL_MAX_RENDERBUFFER_SIZE
 
-#: Buffers a render produces (canonical names, see gbuffer.frame.BUFFERS).
-RENDER_BUFFERS: tuple[str, ...] = (
-    "beauty",
-    "alpha",
-    "coverage",
-    "normal",
-    "depth",
-    "position",
-    "albedo",
-    "ao",
-    "ambient",
-    "diffuse",
-    "specular",
-    "ambient.light",
-    "diffuse.light",
-    "specular.light",
-    "ambient.color",
-    "diffuse.color",
-    "specular.color",
-)
-
 _CHUNK = 1 << 18  # pixels per float64 batch in the exact-geometry pass
 
 
@@ -470,9 +449,9 @@ def render(
 
     Returns
     -------
-    Frame with ``preset="canonical"``, buffers :data:`RENDER_BUFFERS` (beauty = ambient +
-    diffuse + specular; alpha = coverage, 1 covered / 0 background), ``outputs`` filled by
-    :func:`canonical_outputs` and ``attributes`` by ``camera.to_header``.
+    Frame with ``preset="canonical"``, buffers :data:`gbuffer.frame.RENDER_BUFFERS` (beauty =
+    ambient + diffuse + specular; alpha = coverage, 1 covered / 0 background), ``outputs``
+    filled by :func:`canonical_outputs` and ``attributes`` by ``camera.to_header``.
     """
     if not isinstance(mesh, trimesh.Trimesh):
         mesh = load_mesh(mesh)

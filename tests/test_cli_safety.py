@@ -20,6 +20,8 @@ from gbuffer.render import render
 from service.cli import main
 from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
 
+SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+
 
 def depict(*argv: str | Path) -> int:
     try:
@@ -178,6 +180,18 @@ def test_decode_bomb_is_refused_on_the_header(
     monkeypatch.setenv("DEPICT_MAX_DECODED_MB", "1024")
     assert depict("enhance", bomb, "-o", tmp_path / "o.exr") == 2
     one_error(capfd, "decode to 1266 MiB, over the limit of 1024 MiB (DEPICT_MAX_DECODED_MB)")
+
+
+def test_a_render_too_large_for_memory_is_refused_before_it_starts(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Over DEPICT_MAX_DECODED_MB (without it: the machine's memory). It used to start
+    rendering whatever the size: 4096² took 10 GB, and 16384², the largest, 40 or more."""
+    out = tmp_path / "big.exr"
+    monkeypatch.setenv("DEPICT_MAX_DECODED_MB", "100")
+    assert depict("render", SPOT, "-o", out, "--width", "2048", "--height", "2048") == 2
+    one_error(capfd, "688 MiB, over the limit of 100 MiB (DEPICT_MAX_DECODED_MB)")
+    assert not out.exists()
 
 
 def test_deep_pipeline_file_is_one_line(

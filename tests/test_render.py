@@ -13,10 +13,9 @@ from PIL import Image
 
 from gbuffer.camera import Camera
 from gbuffer.errors import FrameError
-from gbuffer.frame import BUFFERS
+from gbuffer.frame import BUFFERS, RENDER_BUFFERS
 from gbuffer.mesh import FILE_NORMALS
 from gbuffer.render import (
-    RENDER_BUFFERS,
     Rasterizer,
     auto_camera,
     canonical_outputs,

@@ -19,7 +19,7 @@ from service.http import forms, worker
 from service.http.deps import Server, Work
 from service.http.uploads import EXR_MEDIA_TYPE, mesh_suffix, receive_exr, save, scrubbed
 from service.output import LAYER_PATTERN
-from service.problems import Problem, openapi_responses
+from service.problems import openapi_responses
 from service.scene import RenderRequest
 
 router = APIRouter(tags=["frames"])
@@ -165,14 +165,7 @@ async def render(
         request = _render_request(Scene.model_validate_json(scene or "{}"))
     except ValidationError as exc:
         raise forms.invalid(exc, "scene") from None
-    pixels = request.width * request.height
-    max_pixels = server.settings.max_pixels
-    if pixels > max_pixels:
-        raise Problem(
-            "limit",
-            f"render of {request.width}x{request.height} = {pixels} pixels is over "
-            f"DEPICT_MAX_PIXELS={max_pixels}; ask for a smaller size",
-        )
+    server.settings.limits.check_render(request.width, request.height, "render")
     src = work.path / f"mesh{suffix}"
     out = work.path / "render.exr"
     with scrubbed(work.path, {src: mesh.filename or "mesh"}):
