@@ -4,6 +4,7 @@ and never destroy what an output path names: an input, a special file, a symboli
 from __future__ import annotations
 
 import contextlib
+import glob
 import os
 import stat
 import tempfile
@@ -95,7 +96,7 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         target.parent.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(
             prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-        )
+        )  # (named as :func:`partial_files` finds them)
         os.close(fd)
         tmp_path = Path(tmp)
         try:
@@ -110,3 +111,11 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     finally:
         if tmp_path is not None:
             tmp_path.unlink(missing_ok=True)
+
+
+def partial_files(path: str | Path) -> list[Path]:
+    """The temporary files :func:`atomic_path` made beside ``path`` and did not get to remove
+    (a process stopped while it wrote: e.g. a batch's worker ended with the batch)."""
+    target = Path(path)
+    pattern = f".{glob.escape(target.stem)}.*.tmp{glob.escape(target.suffix)}"
+    return sorted(target.parent.glob(pattern)) if target.parent.is_dir() else []

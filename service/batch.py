@@ -60,7 +60,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from gbuffer.atomic import atomic_path, output_target
+from gbuffer.atomic import atomic_path, output_target, partial_files
 from gbuffer.errors import OutputError
 from gbuffer.frame import Frame
 from service import allocator
@@ -268,6 +268,13 @@ class Summary:
             self.failed[result["frame"]] = result.get("error", "failed")
 
 
+def _close(client: Any, cluster: Any) -> None:
+    """Close the client, and the cluster when it is this run's own."""
+    client.close()
+    if cluster is not None:
+        cluster.close()
+
+
 def _load_pinned(path: Path) -> dict[str, float]:
     try:
         data = json.loads(path.read_text())
@@ -461,10 +468,14 @@ def run_batch(
         try:
             with _progress(progress) as bar:
                 pinned = run.frames(todo, pinned, pinned_path, bar)
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+        except BaseException:  # stopped (Ctrl-C, a signal): frames being written stay unwritten
+            _close(client, cluster)
+            if cluster is not None:  # (our workers are gone: what they were writing is partial)
+                for f in todo:
+                    for partial in partial_files(expand(out_pattern, f)):
+                        partial.unlink(missing_ok=True)
+            raise
+        _close(client, cluster)
     summary.done.sort()
     summary.failed = dict(sorted(summary.failed.items()))
     summary.pinned = pinned or {}

@@ -10,6 +10,7 @@ import os
 import stat
 from pathlib import Path
 
+import cv2
 import numpy as np
 import OpenEXR
 import pytest
@@ -18,6 +19,7 @@ import trimesh
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from service.cli import main
+from service.cli.args import error_line
 from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
@@ -267,3 +269,12 @@ def test_nan_in_normals_is_refused_by_enhance_but_described_by_inspect(
     assert depict("inspect", src) == 0
     out = capfd.readouterr().out
     assert "warning: NaN/Inf in data channels on covered pixels (N.X: 1): masked here" in out
+
+
+def test_out_of_memory_is_one_line_naming_the_limits() -> None:
+    """NumPy's and OpenCV's failures to allocate (a frame too large for the free memory)."""
+    for exc in (MemoryError(), cv2.error("Insufficient memory) Failed to allocate 452984832")):
+        line = error_line(exc)
+        assert line is not None and line.startswith("out of memory: the frame is too large")
+        assert "DEPICT_MAX_DECODED_MB" in line
+    assert error_line(cv2.error("Sizes of input arguments do not match")) is None  # a bug

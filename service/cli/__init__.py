@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import signal
+import threading
 from collections.abc import Callable, Sequence
+from typing import Any
 
 from service import allocator
 from service.cli.args import error_line, fail
@@ -35,18 +38,48 @@ def command(args: argparse.Namespace) -> Callable[[argparse.Namespace], int]:
     return found
 
 
+class _Stopped(BaseException):
+    """SIGTERM or SIGHUP, raised where the command is, so that it ends as Ctrl-C does: a file
+    being written is removed on the way out (:func:`gbuffer.atomic.atomic_path`), never left
+    half-written beside its output."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _stop(signum: int, _frame: object) -> None:
+    raise _Stopped(signum)
+
+
+def _catch_stops(args: argparse.Namespace) -> dict[int, Any]:
+    """Install :func:`_stop` for SIGTERM and SIGHUP (not for ``serve``, whose server handles
+    them, nor off the main thread); the handlers it replaced."""
+    serving = args.command.startswith("service.cli.serving:")
+    if serving or threading.current_thread() is not threading.main_thread():
+        return {}
+    stops = [s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s]
+    return {s: signal.signal(s, _stop) for s in stops}
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     allocator.tune()
     args = build_parser().parse_args(argv)
+    replaced = _catch_stops(args)
     try:
         return int(command(args)(args))
     except KeyboardInterrupt:
         return 130
+    except _Stopped as stop:
+        return 128 + stop.signum
     except Exception as exc:  # bad input, a server that refused or is down: one line
         line = error_line(exc)
         if line is None:
             raise
         return fail(line)
+    finally:
+        for signum, handler in replaced.items():
+            signal.signal(signum, handler)
 
 
 def run() -> None:

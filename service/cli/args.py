@@ -43,6 +43,13 @@ def error_line(exc: BaseException) -> str | None:
         return f"{where}{exc.strerror or exc}"
     if isinstance(exc, RecursionError):
         return "input nested too deeply"
+    if isinstance(exc, MemoryError) or (
+        type(exc).__module__ == "cv2" and "Insufficient memory" in str(exc)
+    ):
+        return (
+            "out of memory: the frame is too large for this machine's free memory "
+            "(DEPICT_MAX_PIXELS and DEPICT_MAX_DECODED_MB refuse such files before decoding)"
+        )
     return None
 
 

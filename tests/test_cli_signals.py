@@ -1,0 +1,81 @@
+"""The command line stopped by a real signal while it writes: SIGTERM and SIGHUP end it as
+Ctrl-C does (exit 128 + the signal), the file it was writing is removed and the output it was to
+replace is left as it was; a batch stopped so leaves no partial frame behind. Real ``depict``
+processes, real signals, real files."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import trimesh
+
+from gbuffer.atomic import partial_files
+from gbuffer.io import write as write_exr
+from gbuffer.render import render
+
+SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
+DEPICT = [sys.executable, "-c", "from service.cli import run; run()"]
+KEEP = b"the output before this run\n"
+
+
+@pytest.fixture(scope="module")
+def frame(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 1080p render of spot: writing it takes long enough to be caught in the act."""
+    path = tmp_path_factory.mktemp("frame") / "spot.exr"
+    write_exr(render(trimesh.load(SPOT, force="mesh"), 1920, 1080), path)
+    return path
+
+
+def _stop_while_writing(argv: list[str], out: Path, signum: int, group: bool) -> int:
+    """Run ``depict argv``; as soon as a temporary file appears beside ``out``, send
+    ``signum`` (to the whole process group with ``group``, as a terminal or a farm does);
+    the exit code."""
+    env = dict(os.environ, PYOPENGL_PLATFORM="osmesa")
+    proc = subprocess.Popen(
+        [*DEPICT, *argv], env=env, start_new_session=True, stderr=subprocess.PIPE, text=True
+    )
+    deadline = time.monotonic() + 300
+    try:
+        while not partial_files(out):
+            assert proc.poll() is None, f"ended before writing: {proc.stderr.read()}"  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "no temporary file appeared"
+            time.sleep(0.001)
+        if group:
+            os.killpg(proc.pid, signum)
+        else:
+            proc.send_signal(signum)
+        return proc.wait(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_during_the_write_leaves_the_output_as_it_was(
+    frame: Path, tmp_path: Path, signum: int
+) -> None:
+    out = tmp_path / "out.exr"
+    out.write_bytes(KEEP)
+    argv = ["enhance", str(frame), "-o", str(out), "--layout", "same"]
+    assert _stop_while_writing(argv, out, signum, group=False) == 128 + signum
+    assert partial_files(out) == []
+    assert out.read_bytes() == KEEP
+
+
+def test_a_batch_stopped_by_sigterm_leaves_no_partial_frame(frame: Path, tmp_path: Path) -> None:
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    for i in (1, 2):
+        (shots / f"shot.{i:04d}.exr").symlink_to(frame)
+    outs = tmp_path / "out"
+    argv = ["batch", str(shots / "shot.####.exr"), "-o", str(outs / "o.####.exr")]
+    argv += ["--workers", "1", "--no-progress"]
+    first = outs / "o.0001.exr"
+    assert _stop_while_writing(argv, first, signal.SIGTERM, group=True) == 128 + signal.SIGTERM
+    assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
