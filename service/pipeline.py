@@ -200,7 +200,9 @@ def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:
     except FrameError:
         raise
     except ValueError as exc:  # ops/ names a bad value in a ValueError
-        raise PipelineError(f"{op.name}: {exc}") from None
+        said = str(exc)  # (prefixed with the operator's name once)
+        named = said if said.startswith(f"{op.name}: ") else f"{op.name}: {said}"
+        raise PipelineError(named) from None
     frame.history.append({"op": op.name, "params": step.params.model_dump(mode="json")})
 
 

@@ -191,6 +191,9 @@ def test_ops_lists_every_registered_operator(capsys: pytest.CaptureFixture[str])
     for name in ("light_alignment", "unsharp_masking", "depth_unsharp_masking", "apparent_relief"):
         assert name in listed
     assert re.search(r"^    sigmas\s+", text, re.M)  # parameters are listed under each
+    # defaults made by a factory are shown as values (lists as JSON), not as pydantic's marker
+    assert "Undefined" not in text
+    assert re.search(r'^    lights\s+= \["-0.4,0.6,0.7", "0.6,0.2,0.5\*0.35"\]', text, re.M)
     assert depict("ops", "--json") == 0
     schemas = json.loads(capsys.readouterr().out)
     assert [s["name"] for s in schemas] == list(operators())
@@ -235,6 +238,28 @@ def test_enhance_with_op_set_debug_layers_and_output_layer(
     for name in ("lla_light.diffuse.X", "lla_light.specular.Z", "lla_light2.diffuse.Y"):
         assert not made.outputs[name].flags.c_contiguous
         np.testing.assert_allclose(got[name], made.outputs[name], atol=2e-3)
+
+
+@pytest.mark.parametrize(
+    ("value", "lights"),
+    [
+        ("-0.4,0.6,0.7", ["-0.4,0.6,0.7"]),  # one light as ``depict ops`` writes it
+        ("point:0,2,1@1,0.9,0.8*4", ["point:0,2,1@1,0.9,0.8*4"]),
+        ("-1,1,1@1,0.9,0.8*2", ["-1,1,1@1,0.9,0.8*2"]),  # (a comma list of numbers and text)
+        ('["-1,1,1", "1,0,1*0.5"]', ["-1,1,1", "1,0,1*0.5"]),  # several: a JSON list
+    ],
+)
+def test_set_lights_takes_one_light_as_written(
+    exr: Path, tmp_path: Path, value: str, lights: list[str]
+) -> None:
+    out = tmp_path / "lit.exr"
+    argv = ["enhance", exr, "-o", out, "--output-layer", "lit"]
+    argv += ["--op", "radiance_scaling", "--set", "scenario=phong", "--set", f"lights={value}"]
+    assert depict(*argv) == 0
+    spec = [{"op": "radiance_scaling", "params": {"scenario": "phong", "lights": lights}}]
+    made = pipeline.run(gbuffer.read(exr), spec).buffers["beauty"]
+    got = channels(out)
+    np.testing.assert_allclose(np.dstack([got[f"lit.{c}"] for c in "RGB"]), made, atol=2e-3)
 
 
 def test_enhance_with_a_pipeline_file(
@@ -420,6 +445,7 @@ def not_exr(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
+SHADOWS_OF_NOPE = ("--set", "signal=shadows", "--set", "unlit=nope")
 ERRORS: dict[str, tuple[list[str], str]] = {
     "not an EXR": (["inspect", "{bad}"], "not an OpenEXR file"),
     "not an EXR (score)": (["score", "{bad}"], "not an OpenEXR file"),
@@ -438,6 +464,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "alpha=2",
     ),
     "--set without --op": (["enhance", "{exr}", "-o", "{out}", "--set", "amount=1"], "--set"),
+    "an operator's own error, named once": (
+        ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", *SHADOWS_OF_NOPE],
+        "error: unsharp_masking: no RGB layer 'nope' (unlit)",
+    ),
     "missing pipeline file": (
         ["enhance", "{exr}", "-o", "{out}", "--pipeline", "{missing}"],
         "pipeline",

@@ -68,6 +68,9 @@ def cmd_ops(args: argparse.Namespace) -> int:
         print(f"{op.name}: {op.summary}")
         print(f"  needs: {', '.join(op.needs) or '-'}; writes: {', '.join(op.writes)}")
         for name, field in op.params.model_fields.items():
-            default = field.default if field.default is not None else "-"
-            print(f"    {name:<22s} = {default!s:<12s} {field.description or ''}")
+            default = field.get_default(call_default_factory=True)
+            shown = "-" if default is None else default
+            if isinstance(default, list | dict):
+                shown = json.dumps(default, ensure_ascii=False)
+            print(f"    {name:<22s} = {shown!s:<12s} {field.description or ''}")
     return 0

@@ -43,6 +43,20 @@ class LightsParams(Params):
         "(towards it), 'point:X,Y,Z' a point light",
     )
 
+    @field_validator("lights", mode="before")
+    @classmethod
+    def _one_light(cls, value: Any) -> Any:
+        """One light given as its text, or as what ``--set lights=X,Y,Z`` makes of it (a list
+        of its comma-separated numbers and pieces): a list of that one light."""
+        if isinstance(value, str):
+            return [value]
+        pieces = isinstance(value, list) and all(
+            isinstance(v, int | float | str) and not isinstance(v, bool) for v in value
+        )
+        if pieces and not all(isinstance(v, str) for v in value):
+            return [",".join(str(v) for v in value)]
+        return value
+
     @field_validator("lights")
     @classmethod
     def _lights(cls, value: list[str]) -> list[str]:
