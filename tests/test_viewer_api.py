@@ -20,6 +20,7 @@ import pytest
 from PIL import Image
 
 from service.cli import main as cli
+from tests.exr_factory import make_scene, write_canonical
 from tests.live_server import Server, live_server
 
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
@@ -198,3 +199,22 @@ def test_superseded_previews_are_dropped_and_a_full_pool_is_busy(api: httpx.Clie
     statuses = sorted(r.status_code for r in waiting)
     assert statuses == [200, 409], [r.text for r in waiting]
     problem(next(r for r in waiting if r.status_code == 409), 409, "newer preview")
+
+
+def test_a_kept_frames_errors_name_the_upload_not_the_servers_files(
+    api: httpx.Client, tmp_path: Path
+) -> None:
+    """(The preview and the layer pictures named the server's temporary copy of the file.)"""
+    s = make_scene(48, 64)
+    s.normal[...] = np.nan
+    path = write_canonical(tmp_path / "my shot.exr", s)
+    with open(path, "rb") as f:
+        r = api.post("/v1/frames", files={"file": (path.name, f)})
+    assert r.status_code == 200, r.text
+    fid = r.json()["id"]
+    for answer in (
+        api.post(f"/v1/frames/{fid}/preview", json={"pipeline": RS, "height": 48}),
+        api.get(f"/v1/frames/{fid}/layers/depth.png"),
+    ):
+        body = problem(answer, 400, "my shot.exr: channel 'N.X'")
+        assert "/tmp" not in body["detail"] and "in.exr" not in body["detail"]

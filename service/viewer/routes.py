@@ -215,9 +215,10 @@ async def layer_png(
         raise Problem("not-found", f"the frame has no layer {layer!r}; layers: {have}")
     out = work.path / "layer.png"
     factor = jobs.shrink_factor(frame.info["size"][1], height)
-    await server.run(
-        "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
-    )
+    with scrubbed(frame.folder, {frame.source: frame.name}):
+        await server.run(
+            "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
+        )
     return FileResponse(out, media_type="image/png")
 
 
@@ -252,7 +253,8 @@ async def preview(
     try:
         folder, work_dir = str(frame.folder), str(work.path)
         args = (folder, factor, steps, frame.read, work_dir, body.exposure, body.score_map)
-        return await server.run("preview", jobs.preview_job, *args)
+        with scrubbed(frame.folder, {frame.source: frame.name}):
+            return await server.run("preview", jobs.preview_job, *args)
     finally:
         lock.release()
 
