@@ -195,7 +195,8 @@ def _normalisation(
     cong = dict(congruence)
     if shading_norm == "reference":
         reference = score(render("lambert", frontal), cong)
-        cong["shading_norm"] = reference.shading_norm
+        # (0: the reference has no shading to measure, e.g. no usable normals: none pinned)
+        cong["shading_norm"] = reference.shading_norm or None
         return cong, {"mode": "reference", "value": reference.shading_norm}
     if shading_norm == "per_image":
         return cong, {"mode": "per_image", "value": None}

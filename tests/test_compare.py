@@ -289,3 +289,13 @@ def test_bench_script_on_a_real_mesh(tmp_path: Path) -> None:
     assert len(data["scores"]["lambert"]) == 3
     summary = json.loads((out / "summary.json").read_text())
     assert set(summary["meshes"]) == {"spot"}
+
+
+def test_a_frame_without_usable_normals_scores_zero_instead_of_failing(frame: Frame) -> None:
+    """(The reference rendering's shading scale was 0 and was passed on as a parameter out of
+    range: "shading_norm=0.0 is outside the allowed range".)"""
+    flat = frame.copy()
+    flat.buffers = {**frame.buffers, "normal": np.zeros_like(frame.buffers["normal"])}
+    res = compare(flat, ["lambert", "radiance_scaling"], directions=[1], keep_images=False)
+    assert np.all(res.scores == 0.0)
+    assert res.shading_norm["mode"] == "reference"

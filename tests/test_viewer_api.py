@@ -218,3 +218,17 @@ def test_a_kept_frames_errors_name_the_upload_not_the_servers_files(
     ):
         body = problem(answer, 400, "my shot.exr: channel 'N.X'")
         assert "/tmp" not in body["detail"] and "in.exr" not in body["detail"]
+
+
+def test_a_frame_without_usable_normals_previews_with_a_score_of_zero(
+    api: httpx.Client, tmp_path: Path
+) -> None:
+    """(The input's shading scale, 0, was passed on as a parameter out of range: a 422.)"""
+    s = make_scene(48, 64)
+    s.normal[...] = 0.0
+    path = write_canonical(tmp_path / "flat.exr", s)
+    with open(path, "rb") as f:
+        fid = api.post("/v1/frames", files={"file": (path.name, f)}).json()["id"]
+    r = api.post(f"/v1/frames/{fid}/preview", json={"pipeline": RS, "height": 48})
+    assert r.status_code == 200, r.text
+    assert r.json()["score"] == {"before": 0.0, "after": 0.0}

@@ -238,7 +238,8 @@ def preview_job(
         "pipeline": json.loads(steps.spec.model_dump_json()),
     }
     if before is not None:
-        after = score_frame(out, maps=score_map, shading_norm=before["shading_norm"])
+        norm = before["shading_norm"] or None  # (0: the input has no shading to measure)
+        after = score_frame(out, maps=score_map, shading_norm=norm)
         answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
         if score_map:
             answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
