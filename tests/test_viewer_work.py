@@ -55,8 +55,19 @@ def cow() -> Frame:
     ("height", "asked", "factor"), [(1080, 540, 2), (960, 540, 2), (720, 540, 1), (2160, 540, 4)]
 )
 def test_shrink_factor_is_the_nearest_whole_number(height: int, asked: int, factor: int) -> None:
-    assert shrink_factor(height, asked) == factor
-    assert shrink_factor(height, 10 * height) == 1
+    assert shrink_factor((1920, height), asked) == factor
+    assert shrink_factor((1920, height), 10 * height) == 1
+
+
+@pytest.mark.parametrize(("size", "factor"), [((1, 144), 1), ((3, 1080), 3), ((1920, 1080), 15)])
+def test_shrink_factor_is_no_more_than_the_narrower_side(
+    size: tuple[int, int], factor: int
+) -> None:
+    """(A column of 144 pixels shrunk by 2 had no block left: numpy's reshape error.)"""
+    assert shrink_factor(size, 72) == factor
+    frame = Frame(buffers={"beauty": np.ones((size[1], size[0], 3), np.float32)}, display_size=size)
+    small = downscale(frame, shrink_factor(size, 72))
+    assert small.buffers["beauty"].size > 0
 
 
 @pytest.mark.parametrize("op", ["radiance_scaling", "light_alignment", "unsharp_masking"])

@@ -214,7 +214,7 @@ async def layer_png(
         have = ", ".join(frame.info.get("layers", []))
         raise Problem("not-found", f"the frame has no layer {layer!r}; layers: {have}")
     out = work.path / "layer.png"
-    factor = jobs.shrink_factor(frame.info["size"][1], height)
+    factor = jobs.shrink_factor(frame.info["size"], height)
     with scrubbed(frame.folder, {frame.source: frame.name}):
         await server.run(
             "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
@@ -248,7 +248,7 @@ async def preview(
 ) -> dict[str, Any]:
     frame = store(server).get(frame_id)
     steps = await anyio.to_thread.run_sync(pipelines.compile, body.pipeline)
-    factor = jobs.shrink_factor(frame.info["size"][1], body.height)
+    factor = jobs.shrink_factor(frame.info["size"], body.height)
     lock = await _latest(request, frame)
     try:
         folder, work_dir = str(frame.folder), str(work.path)

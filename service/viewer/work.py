@@ -15,6 +15,7 @@ from __future__ import annotations
 import base64
 import json
 import pickle
+from collections.abc import Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -52,12 +53,14 @@ def reads_file_layers(steps: pipeline.Pipeline) -> bool:
     return any(FILE_PARAMETERS & set(step.params) for step in steps.spec.steps)
 
 
-def shrink_factor(frame_height: int, height: int) -> int:
-    """The whole number the frame's height is divided by for a preview about ``height`` rows
-    high: the nearest to the ratio (a whole number, so that the geometry is sampled at the same
-    place of every block: a fractional step would alternate between two spacings, and the
-    operators' derivatives would show the pattern)."""
-    return max(1, round(frame_height / max(1, height)))
+def shrink_factor(size: Sequence[int], height: int) -> int:
+    """The whole number a frame of ``size`` (width, height) is divided by for a preview about
+    ``height`` rows high: the nearest to the ratio (a whole number, so that the geometry is
+    sampled at the same place of every block: a fractional step would alternate between two
+    spacings, and the operators' derivatives would show the pattern), and no more than its
+    narrower side (a block of the preview holds pixels of the frame)."""
+    width, frame_height = size
+    return max(1, min(round(frame_height / max(1, height)), width, frame_height))
 
 
 def _centres(pixels: np.ndarray, factor: int) -> np.ndarray:
