@@ -183,6 +183,9 @@ def test_content_type_415(client: Any) -> None:
     problem(r, 415, "multipart/form-data")
     r = client.post("/v1/render", headers=AUTH, json={"mesh": 1})
     problem(r, 415, "application/json")
+    # the viewer's upload too (it answered 422 "file: Field required")
+    r = client.post("/v1/frames", headers={**AUTH, "Content-Type": "image/x-exr"}, content=b"x")
+    problem(r, 415, "/v1/frames takes multipart/form-data")
 
 
 def test_body_limit_413(gate: Any) -> None:

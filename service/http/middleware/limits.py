@@ -17,7 +17,14 @@ from service.problems import Problem
 from service.settings import Settings
 
 #: Routes that take an upload: multipart/form-data only.
-UPLOAD_PATHS = ("/v1/enhance", "/v1/render", "/v1/score", "/v1/compare", "/v1/relief/pick")
+UPLOAD_PATHS = (
+    "/v1/enhance",
+    "/v1/render",
+    "/v1/score",
+    "/v1/compare",
+    "/v1/relief/pick",
+    "/v1/frames",
+)
 #: Most bytes of a refused body read (within 2 s) so that the client reads the answer.
 DRAIN_BYTES = 32 * 2**20
 
