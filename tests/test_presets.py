@@ -339,6 +339,9 @@ def test_bad_options(tmp_path: Path, scene: F.Scene) -> None:
     path = F.write_vray(tmp_path / "v.exr", scene)
     with pytest.raises(FrameError, match="mapping key 'normals' is not a buffer; valid keys: "):
         read(path, options={"mapping": {"normals": "x"}})
+    for empty in ("", " ", ",", [], [""]):  # (an empty --map value read the beauty's R,G,B)
+        with pytest.raises(FrameError, match="mapping of 'normal' names no channel"):
+            read(path, options={"mapping": {"normal": empty}})
     with pytest.raises(FrameError, match="normal_space='screen' must be one of world, camera"):
         read(path, options={"normal_space": "screen"})
     with pytest.raises(FrameError, match="preset='maya' is not known; valid: auto, blender"):

@@ -55,10 +55,16 @@ class ReadOptions:
     colorspace: str | None = None
 
     def __post_init__(self) -> None:
-        for key in self.mapping:
+        for key, channels in self.mapping.items():
             if key not in _MAPPABLE:
                 raise OptionError(
                     f"mapping key '{key}' is not a buffer; valid keys: {', '.join(_MAPPABLE)}"
+                )
+            listed = [channels] if isinstance(channels, str) else list(channels)
+            if not listed or any(not str(c).strip(" ,") for c in listed):
+                raise OptionError(
+                    f"mapping of '{key}' names no channel ({channels!r}); give a layer or "
+                    "channels, e.g. normal=MyLayer.N or normal=n.x,n.y,n.z"
                 )
         for name in ("normal_space", "position_space"):
             value = getattr(self, name)
