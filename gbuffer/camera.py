@@ -181,9 +181,13 @@ class Camera:
     @classmethod
     def from_json_file(cls, path: str | Path) -> Camera:
         try:
-            data = json.loads(Path(path).read_text())
-        except (OSError, json.JSONDecodeError) as exc:
+            data = json.loads(Path(path).read_text(encoding="utf-8"))
+        except UnicodeDecodeError:
+            raise FrameError(f"cannot read camera file {path}: it is not UTF-8 text") from None
+        except (OSError, ValueError) as exc:  # (not JSON, a number of too many digits)
             raise FrameError(f"cannot read camera file {path}: {exc}") from exc
+        except RecursionError:
+            raise FrameError(f"cannot read camera file {path}: nested too deeply") from None
         if not isinstance(data, dict):
             raise FrameError(f"camera file {path} must hold a JSON object")
         return cls.from_dict(data)

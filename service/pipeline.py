@@ -125,9 +125,11 @@ def parse(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> Pipeline
 def load(path: str | Path) -> PipelineSpec:
     """Read a pipeline JSON file."""
     try:
-        text = Path(path).read_text()
+        text = Path(path).read_text(encoding="utf-8")
     except OSError as exc:
         raise PipelineError(f"cannot read pipeline {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise PipelineError(f"cannot read pipeline {path}: it is not UTF-8 text") from None
     return parse(text)
 
 

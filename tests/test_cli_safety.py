@@ -278,3 +278,25 @@ def test_out_of_memory_is_one_line_naming_the_limits() -> None:
         assert line is not None and line.startswith("out of memory: the frame is too large")
         assert "DEPICT_MAX_DECODED_MB" in line
     assert error_line(cv2.error("Sizes of input arguments do not match")) is None  # a bug
+
+
+@pytest.mark.parametrize(
+    ("flag", "content", "words"),
+    [
+        ("--pipeline", b"\xff\xfe\x00binary", "cannot read pipeline {path}: it is not UTF-8 text"),
+        ("--camera", b"\xff\xfe\x00binary", "cannot read camera file {path}: it is not UTF-8"),
+        ("--camera", b'{"a": ' * 100_000 + b"1" + b"}" * 100_000, "{path}: nested too deeply"),
+    ],
+)
+def test_unreadable_pipeline_and_camera_files_are_named(
+    copy: Path,
+    tmp_path: Path,
+    capfd: pytest.CaptureFixture[str],
+    flag: str,
+    content: bytes,
+    words: str,
+) -> None:
+    path = tmp_path / "given.json"
+    path.write_bytes(content)
+    assert depict("enhance", copy, "-o", tmp_path / "o.exr", flag, path) == 2
+    one_error(capfd, words.format(path=path))
