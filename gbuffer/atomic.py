@@ -41,12 +41,18 @@ def output_target(path: str | Path) -> Path:
         return target
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
-    for test, kind in _KINDS:
-        if test(mode):
-            raise OutputError(
-                f"cannot write {path}: it is {kind}, not a regular file; choose a file name"
-            )
+    kind = special_kind(mode)
+    if kind is not None:
+        raise OutputError(
+            f"cannot write {path}: it is {kind}, not a regular file; choose a file name"
+        )
     return target
+
+
+def special_kind(mode: int) -> str | None:
+    """What a file of ``mode`` (``os.stat``) is when it is not a regular file ("a FIFO (named
+    pipe)", "a directory", ...), else None."""
+    return next((kind for test, kind in _KINDS if test(mode)), None)
 
 
 def same_file(a: str | Path, b: str | Path) -> bool:

@@ -300,3 +300,16 @@ def test_unreadable_pipeline_and_camera_files_are_named(
     path.write_bytes(content)
     assert depict("enhance", copy, "-o", tmp_path / "o.exr", flag, path) == 2
     one_error(capfd, words.format(path=path))
+
+
+def test_a_fifo_or_a_folder_as_input_is_refused_without_waiting(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """(A FIFO with no writer blocked the command; fed an EXR, it was read twice and its
+    second reading found no magic number: "not an OpenEXR file".)"""
+    fifo = tmp_path / "pipe.exr"
+    os.mkfifo(fifo)
+    assert depict("inspect", fifo) == 2  # returns at once: nothing opens the FIFO
+    one_error(capfd, f"{fifo}: it is a FIFO (named pipe), not a regular file; an EXR is read")
+    assert depict("enhance", tmp_path, "-o", tmp_path / "o.exr") == 2
+    one_error(capfd, f"{tmp_path}: it is a directory, not a regular file")

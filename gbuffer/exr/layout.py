@@ -12,6 +12,7 @@ from typing import Any, BinaryIO
 import numpy as np
 import OpenEXR
 
+from gbuffer.atomic import special_kind
 from gbuffer.errors import FrameError
 
 MAGIC = b"\x76\x2f\x31\x01"
@@ -317,6 +318,10 @@ def read_layout(path: str | Path) -> FileLayout:
     """The container of an EXR file (headers as raw attributes, offset tables); no pixels."""
     where = str(path)
     try:
+        kind = special_kind(os.stat(path).st_mode)  # (before opening: a FIFO would block)
+        if kind is not None:
+            why = "" if kind == "a directory" else "; an EXR is read in several passes"
+            raise FrameError(f"{where}: it is {kind}, not a regular file{why}")
         with open(path, "rb") as f:
             size = os.fstat(f.fileno()).st_size
             layout = _read_layout(f, size, where)
