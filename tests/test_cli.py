@@ -464,6 +464,8 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "alpha=2",
     ),
     "--set without --op": (["enhance", "{exr}", "-o", "{out}", "--set", "amount=1"], "--set"),
+    "empty output": (["enhance", "{exr}", "-o", ""], "-o/--output: is empty; give a file name"),
+    "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
     "an operator's own error, named once": (
         ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", *SHADOWS_OF_NOPE],
         "error: unsharp_masking: no RGB layer 'nope' (unlit)",

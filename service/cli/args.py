@@ -59,6 +59,14 @@ def printable(text: str) -> str:
     return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
+def named_path(text: str) -> str:
+    """An argparse ``type`` for a file to write: any name but an empty one (which would
+    name the current folder)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("is empty; give a file name")
+    return text
+
+
 def bounded(kind: type, low: float, high: float) -> Any:
     """An argparse ``type``: a number of ``kind`` within [low, high], or a one-line error."""
 

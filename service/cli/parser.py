@@ -15,6 +15,7 @@ from service.cli.args import (
     add_server_option,
     add_write_options,
     bounded,
+    named_path,
 )
 from service.version import version
 
@@ -55,7 +56,7 @@ def build_parser() -> argparse.ArgumentParser:
 def add_frame_commands(sub: Any) -> None:
     p = sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR")
     p.add_argument("mesh", help="OBJ, PLY, STL, GLB or GLTF")
-    p.add_argument("-o", "--output", required=True, help="output EXR")
+    p.add_argument("-o", "--output", required=True, type=named_path, help="output EXR")
     p.add_argument("--width", type=int, default=960)
     p.add_argument("--height", type=int, default=720)
     p.add_argument("--camera", metavar="CAM.json", help="camera JSON (default: auto framing)")
@@ -91,7 +92,7 @@ def add_frame_commands(sub: Any) -> None:
         "preview", help="an 8-bit PNG of any layer, through an OCIO display and view"
     )
     p.add_argument("file")
-    p.add_argument("-o", "--output", required=True, help="output PNG")
+    p.add_argument("-o", "--output", required=True, type=named_path, help="output PNG")
     p.add_argument(
         "--layer",
         default="beauty",
@@ -119,7 +120,9 @@ def add_frame_commands(sub: Any) -> None:
     p = sub.add_parser("mask", help="write the matte of a step's mask as a PNG, to check it")
     p.add_argument("file")
     p.add_argument("spec", help="cryptomatte:NAME, index:LAYER=V, a layer; ! inverts (--help)")
-    p.add_argument("-o", "--output", required=True, help="output PNG (white: m = 1)")
+    p.add_argument(
+        "-o", "--output", required=True, type=named_path, help="output PNG (white: m = 1)"
+    )
     p.add_argument("--feather", type=bounded(float, 0.0, 0.5), default=0.0, help="σ / image height")
     p.add_argument("--amount", type=bounded(float, 0.0, 1.0), default=1.0, help="m times this")
     add_read_options(p)
@@ -145,6 +148,7 @@ def add_frame_commands(sub: Any) -> None:
         "-o",
         "--output",
         required=True,
+        type=named_path,
         help="output EXR, or an existing folder for outputs named as their inputs (several inputs)",
     )
     add_pipeline_options(p)
@@ -245,7 +249,7 @@ def _compare_arguments(p: argparse.ArgumentParser) -> None:
 def _arm_arguments(p: argparse.ArgumentParser) -> None:
     from service.arm import SHIPPED_ARMS
 
-    p.add_argument("-o", "--output", required=True, help="output PNG")
+    p.add_argument("-o", "--output", required=True, type=named_path, help="output PNG")
     p.add_argument("--size", type=int, default=256, help="side in pixels (64-4096)")
     p.add_argument(
         "--paint",
@@ -271,7 +275,9 @@ def add_service_commands(sub: Any) -> None:
 
     p = sub.add_parser("batch", help="enhance a frame sequence on a Dask cluster")
     p.add_argument("input", help="input pattern: shot.####.exr, shot.%%04d.exr or shot.@.exr")
-    p.add_argument("-o", "--output", required=True, help="output pattern, same tokens")
+    p.add_argument(
+        "-o", "--output", required=True, type=named_path, help="output pattern, same tokens"
+    )
     p.add_argument("--frames", help="frames: 1-100, 1-100x2, 1,5,9 (default: existing inputs)")
     add_pipeline_options(p)
     p.add_argument(
