@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
 
+import numpy as np
+
 from gbuffer.camera import Camera
 from gbuffer.colorspace import View
 from gbuffer.frame import Frame
@@ -149,6 +151,7 @@ def enhance_frame(
     from service.registry import Context
 
     context = Context(debug_layers=write.debug_layers, pinned=dict(pinned or {}), files=files)
+    uncovered = _nothing_covered(frame)
     ran, op_s = pipeline.run_timed(frame, steps, context)
     out = pipeline.finish(ran, write.output_layer, write.input_name, write.layout)
     h, w = out.shape
@@ -164,6 +167,19 @@ def enhance_frame(
         "op_s": op_s,
         "size": [w, h],
         "measured": dict(context.measured),
-        "warnings": warnings,
+        "warnings": uncovered + warnings,
         "read_warnings": list(getattr(frame.passthrough, "warnings", [])),
     }
+
+
+def _nothing_covered(frame: Frame) -> list[str]:
+    """A warning when no pixel of ``frame`` is covered (depth everywhere 0, negative or
+    infinite, no surface in the coverage): the operators can change nothing."""
+    if "depth" not in frame.buffers and "coverage" not in frame.buffers:
+        return []
+    if bool(np.any(frame.mask > 0)):
+        return []
+    return [
+        "no pixel is covered (no finite, positive depth on a surface): the operators changed "
+        "nothing; check the depth channel (--map depth=...) and its background value"
+    ]

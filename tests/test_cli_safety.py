@@ -20,7 +20,13 @@ from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from service.cli import main
 from service.cli.args import error_line
-from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
+from tests.exr_factory import (
+    make_scene,
+    write_canonical,
+    write_corrupt,
+    write_decode_bomb,
+    write_raw_exr,
+)
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -313,3 +319,25 @@ def test_a_fifo_or_a_folder_as_input_is_refused_without_waiting(
     one_error(capfd, f"{fifo}: it is a FIFO (named pipe), not a regular file; an EXR is read")
     assert depict("enhance", tmp_path, "-o", tmp_path / "o.exr") == 2
     one_error(capfd, f"{tmp_path}: it is a directory, not a regular file")
+
+
+def test_a_frame_with_no_covered_pixel_is_written_with_a_warning(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """(Depth all 0, negative or infinite: the result was the input, without a word.)"""
+    s = make_scene(48, 64)
+    s.depth[...] = 0.0
+    src = write_canonical(tmp_path / "flat.exr", s)
+    out = tmp_path / "o.exr"
+    assert depict("enhance", src, "-o", out) == 0
+    err = capfd.readouterr().err.splitlines()
+    assert err == [
+        "depict: warning: no pixel is covered (no finite, positive depth on a surface): the "
+        "operators changed nothing; check the depth channel (--map depth=...) and its "
+        "background value"
+    ]
+    assert out.exists()
+    capfd.readouterr()
+    covered = write_canonical(tmp_path / "ok.exr", make_scene(48, 64))
+    assert depict("enhance", covered, "-o", out) == 0
+    assert "warning" not in capfd.readouterr().err
