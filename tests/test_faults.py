@@ -25,7 +25,7 @@ import trimesh
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
-from tests.live_server import Server, live_servers, wait_ready
+from tests.live_server import Server, live_server, live_servers, wait_ready
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -375,3 +375,21 @@ def test_slow_clients_are_answered_408_or_closed(server: Server) -> None:
         else:  # headers trickling: closed without an answer
             assert reply == b"", reply[:200]
     json_log_only(server)
+
+
+def test_a_job_still_running_when_the_server_stops_is_answered_503() -> None:
+    """SIGTERM: uvicorn lets requests finish for 10 s, then cancels them; a cancelled request
+    got a plain-text 500 and the log a traceback. Now a 503 problem with Retry-After, and the
+    log stays JSON."""
+    with live_server({"DEPICT_WORKERS": "1", "DEPICT_TIMEOUT_S": "300"}) as server:
+        answer: dict[str, httpx.Response] = {}
+        client = threading.Thread(target=lambda: answer.update(r=slow_compare(server, 2048)))
+        client.start()
+        wait_for("the job to run", lambda: metric(server, "depict_jobs_running ") >= 1)
+        server.process.send_signal(signal.SIGTERM)
+        client.join(timeout=120)
+        body = assert_problem(answer["r"], 503, "the server is stopping")
+        assert body["type"] == "urn:depict:problem:unavailable"
+        assert answer["r"].headers["retry-after"] == "5"
+        assert server.process.wait(timeout=60) in (0, -signal.SIGTERM)
+        json_log_only(server)

@@ -3,11 +3,14 @@
 Every answer carries ``X-Request-ID`` (the client's, when it sent a valid one, else a fresh one),
 set in :data:`service.logs.REQUEST_ID` for every log line of the request; one JSON log line and
 the Prometheus metrics (:class:`service.metrics.Metrics`) are written per request, whoever
-answered it. An exception no handler took becomes a 500 problem carrying the request id.
+answered it. An exception no handler took becomes a 500 problem carrying the request id; a
+request still running when the stopping server's grace period ends, a 503 problem.
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
 import re
 import time
@@ -23,6 +26,13 @@ from service.metrics import Metrics
 from service.problems import Problem
 
 log = logging.getLogger("depict.http")
+
+#: The answer to a request still running when the server stops (its grace period over).
+_STOPPING = Problem(
+    "unavailable",
+    "the server is stopping and this request did not finish in time; send it again",
+    headers={"Retry-After": "5"},
+)
 
 _REQUEST_ID_RE = re.compile(r"^[A-Za-z0-9._:/+=-]{1,128}$")
 
@@ -104,6 +114,14 @@ class Observe:
     ) -> None:
         try:
             await self.app(scope, receive, send)
+        except asyncio.CancelledError:  # the server stopping, its grace period over: a 503
+            if seen.started:
+                raise
+            log.warning("stopping: %s answered 503 before its job finished", scope["path"])
+            with contextlib.suppress(Exception):  # (the connection may be gone)
+                await _STOPPING.response(scope["path"], rid)(scope, receive, send)
+            # answered: the task ends here (uvicorn cancels it only to end it; re-raising
+            # would add its plain-text traceback to the JSON log)
         except Exception as exc:  # a bug: 500 problem with the request id, logged
             log.error("unhandled error on %s", scope["path"], exc_info=exc)
             if seen.started:
