@@ -465,6 +465,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
     ),
     "--set without --op": (["enhance", "{exr}", "-o", "{out}", "--set", "amount=1"], "--set"),
     "empty output": (["enhance", "{exr}", "-o", ""], "-o/--output: is empty; give a file name"),
+    "NaN parameter": (  # (it said "Input should be less than or equal to 10000")
+        ["enhance", "{exr}", "-o", "{out}", "--op", "radiance_scaling", "--set", "gamma=NaN"],
+        "gamma=nan: Input should be a finite number",
+    ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
     "an operator's own error, named once": (
         ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", *SHADOWS_OF_NOPE],

@@ -28,7 +28,7 @@ class Params(BaseModel):
     ``preset`` fills in every parameter the step does not give itself.
     """
 
-    model_config = ConfigDict(extra="forbid", validate_assignment=True)
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, allow_inf_nan=False)
     PRESETS: ClassVar[dict[str, dict[str, Any]]] = {}
 
     mask: str | None = Field(
