@@ -6,8 +6,8 @@ from __future__ import annotations
 import contextlib
 import glob
 import os
+import secrets
 import stat
-import tempfile
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -100,11 +100,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     tmp_path: Path | None = None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(
-            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent
-        )  # (named as :func:`partial_files` finds them)
-        os.close(fd)
-        tmp_path = Path(tmp)
+        while True:  # (named before it exists: a signal as it is made cannot orphan it)
+            tmp_path = target.parent / f".{target.stem}.{secrets.token_hex(4)}.tmp{target.suffix}"
+            try:  # (named as :func:`partial_files` finds it)
+                os.close(os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+                break
+            except FileExistsError:  # (someone else's: never ours to remove)
+                tmp_path = None
         try:
             mode = target.stat().st_mode & 0o777
         except OSError:

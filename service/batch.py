@@ -40,12 +40,15 @@ retries failed chunks; ``--skip-existing`` makes the retry cheap.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import os
 import re
+import signal
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -293,15 +296,32 @@ def _cluster(scheduler: str | None, workers: int | None) -> tuple[Client, LocalC
         except OSError as exc:
             raise BatchError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
     n = workers or os.cpu_count() or 1
-    cluster = LocalCluster(
-        n_workers=n,
-        threads_per_worker=1,
-        processes=True,
-        dashboard_address=None,
-        scheduler_kwargs={"dashboard_address": ":0"},  # its health routes: any free port
-        silence_logs=40,  # logging.ERROR
-    )
+    with _sigint_ignored():  # (what the worker processes start with: Ctrl-C is ours to handle)
+        cluster = LocalCluster(
+            n_workers=n,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": ":0"},  # its health routes: any free port
+            silence_logs=40,  # logging.ERROR
+        )
     return Client(cluster), cluster
+
+
+@contextlib.contextmanager
+def _sigint_ignored() -> Iterator[None]:
+    """SIGINT ignored while the local cluster starts its processes, which keep that (Python
+    does not install its Ctrl-C handler where SIGINT is ignored): Ctrl-C in a terminal, sent to
+    every process of the group, stops the batch through this process, which closes the
+    cluster, instead of printing each worker's KeyboardInterrupt traceback."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @dataclass

@@ -32,10 +32,12 @@ def frame(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return path
 
 
-def _stop_while_writing(argv: list[str], out: Path, signum: int, group: bool) -> int:
+def _stop_while_writing(
+    argv: list[str], out: Path, signum: int, group: bool
+) -> subprocess.CompletedProcess[str]:
     """Run ``depict argv``; as soon as a temporary file appears beside ``out``, send
     ``signum`` (to the whole process group with ``group``, as a terminal or a farm does);
-    the exit code."""
+    the exit code and what it printed on stderr."""
     env = dict(os.environ, PYOPENGL_PLATFORM="osmesa")
     proc = subprocess.Popen(
         [*DEPICT, *argv], env=env, start_new_session=True, stderr=subprocess.PIPE, text=True
@@ -50,7 +52,8 @@ def _stop_while_writing(argv: list[str], out: Path, signum: int, group: bool) ->
             os.killpg(proc.pid, signum)
         else:
             proc.send_signal(signum)
-        return proc.wait(timeout=120)
+        _, err = proc.communicate(timeout=120)
+        return subprocess.CompletedProcess(argv, proc.returncode, "", err)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -63,12 +66,17 @@ def test_a_signal_during_the_write_leaves_the_output_as_it_was(
     out = tmp_path / "out.exr"
     out.write_bytes(KEEP)
     argv = ["enhance", str(frame), "-o", str(out), "--layout", "same"]
-    assert _stop_while_writing(argv, out, signum, group=False) == 128 + signum
+    assert _stop_while_writing(argv, out, signum, group=False).returncode == 128 + signum
     assert partial_files(out) == []
     assert out.read_bytes() == KEEP
 
 
-def test_a_batch_stopped_by_sigterm_leaves_no_partial_frame(frame: Path, tmp_path: Path) -> None:
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
+    frame: Path, tmp_path: Path, signum: int
+) -> None:
+    """To the whole process group, as a farm's SIGTERM or a terminal's Ctrl-C: no partial
+    frame, and one line at most (the Dask workers printed KeyboardInterrupt tracebacks)."""
     shots = tmp_path / "shots"
     shots.mkdir()
     for i in (1, 2):
@@ -76,6 +84,7 @@ def test_a_batch_stopped_by_sigterm_leaves_no_partial_frame(frame: Path, tmp_pat
     outs = tmp_path / "out"
     argv = ["batch", str(shots / "shot.####.exr"), "-o", str(outs / "o.####.exr")]
     argv += ["--workers", "1", "--no-progress"]
-    first = outs / "o.0001.exr"
-    assert _stop_while_writing(argv, first, signal.SIGTERM, group=True) == 128 + signal.SIGTERM
+    done = _stop_while_writing(argv, outs / "o.0001.exr", signum, group=True)
+    assert done.returncode == 128 + signum, done.stderr
     assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
+    assert "Traceback" not in done.stderr, done.stderr
