@@ -54,31 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def add_frame_commands(sub: Any) -> None:
-    p = sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR")
-    p.add_argument("mesh", help="OBJ, PLY, STL, GLB or GLTF")
-    p.add_argument("-o", "--output", required=True, type=named_path, help="output EXR")
-    p.add_argument("--width", type=int, default=960)
-    p.add_argument("--height", type=int, default=720)
-    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (default: auto framing)")
-    p.add_argument("--azimuth", type=float, default=30.0, help="auto framing azimuth, degrees")
-    p.add_argument("--elevation", type=float, default=20.0, help="auto framing elevation, deg")
-    p.add_argument(
-        "--light",
-        action="append",
-        default=[],
-        metavar="SPEC",
-        help="light, camera space: X,Y,Z (directional, towards the light) or point:X,Y,Z; "
-        "repeat for several",
-    )
-    p.add_argument(
-        "--shading",
-        choices=("auto", "smooth", "flat"),
-        default="auto",
-        help="normals: smooth across UV seams, flat facets, or auto (the file's normals, else "
-        "smooth, with the creases of a creased mesh such as a box)",
-    )
-    add_server_option(p)
-    p.set_defaults(command="service.cli.render:cmd_render", remote="service.cli.remote:render")
+    _render_arguments(sub.add_parser("render", help="render a mesh to a canonical G-buffer EXR"))
 
     p = sub.add_parser(
         "inspect", help="what Depict sees in an EXR: preset, buffers, camera, colour space"
@@ -88,34 +64,8 @@ def add_frame_commands(sub: Any) -> None:
     add_read_options(p)
     p.set_defaults(command="service.cli.inspection:cmd_inspect")
 
-    p = sub.add_parser(
-        "preview", help="an 8-bit PNG of any layer, through an OCIO display and view"
-    )
-    p.add_argument("file")
-    p.add_argument("-o", "--output", required=True, type=named_path, help="output PNG")
-    p.add_argument(
-        "--layer",
-        default="beauty",
-        help="buffer or layer (beauty, normal, ...); cryptomatte[/LAYER]: the Cryptomatte ids",
-    )
-    p.add_argument(
-        "--exposure",
-        type=bounded(float, -20.0, 20.0),
-        default=0.0,
-        help="exposure in stops (radiance), -20 to 20",
-    )
-    p.add_argument(
-        "--display",
-        help="display of the OpenColorIO config to show radiance on (default: the config's, "
-        "sRGB for the built-in config)",
-    )
-    p.add_argument(
-        "--view",
-        help="view of that display (default: the display's default, ACES 2.0 SDR for the "
-        "built-in config); raw: exposure and a hard clip of the sRGB curve",
-    )
-    add_read_options(p)
-    p.set_defaults(command="service.cli.frames:cmd_preview")
+    preview = "an 8-bit PNG of any layer, through an OCIO display and view"
+    _preview_arguments(sub.add_parser("preview", help=preview))
 
     p = sub.add_parser("mask", help="write the matte of a step's mask as a PNG, to check it")
     p.add_argument("file")
@@ -156,6 +106,61 @@ def add_frame_commands(sub: Any) -> None:
     add_read_options(p)
     add_server_option(p)
     p.set_defaults(command="service.cli.frames:cmd_enhance", remote="service.cli.remote:enhance")
+
+
+def _render_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("mesh", help="OBJ, PLY, STL, GLB or GLTF")
+    p.add_argument("-o", "--output", required=True, type=named_path, help="output EXR")
+    p.add_argument("--width", type=int, default=960)
+    p.add_argument("--height", type=int, default=720)
+    p.add_argument("--camera", metavar="CAM.json", help="camera JSON (default: auto framing)")
+    p.add_argument("--azimuth", type=float, default=30.0, help="auto framing azimuth, degrees")
+    p.add_argument("--elevation", type=float, default=20.0, help="auto framing elevation, deg")
+    p.add_argument(
+        "--light",
+        action="append",
+        default=[],
+        metavar="SPEC",
+        help="light, camera space: X,Y,Z (directional, towards the light) or point:X,Y,Z; "
+        "repeat for several",
+    )
+    p.add_argument(
+        "--shading",
+        choices=("auto", "smooth", "flat"),
+        default="auto",
+        help="normals: smooth across UV seams, flat facets, or auto (the file's normals, else "
+        "smooth, with the creases of a creased mesh such as a box)",
+    )
+    add_server_option(p)
+    p.set_defaults(command="service.cli.render:cmd_render", remote="service.cli.remote:render")
+
+
+def _preview_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("file")
+    p.add_argument("-o", "--output", required=True, type=named_path, help="output PNG")
+    p.add_argument(
+        "--layer",
+        default="beauty",
+        help="buffer or layer (beauty, normal, ...); cryptomatte[/LAYER]: the Cryptomatte ids",
+    )
+    p.add_argument(
+        "--exposure",
+        type=bounded(float, -20.0, 20.0),
+        default=0.0,
+        help="exposure in stops (radiance), -20 to 20",
+    )
+    p.add_argument(
+        "--display",
+        help="display of the OpenColorIO config to show radiance on (default: the config's, "
+        "sRGB for the built-in config)",
+    )
+    p.add_argument(
+        "--view",
+        help="view of that display (default: the display's default, ACES 2.0 SDR for the "
+        "built-in config); raw: exposure and a hard clip of the sRGB curve",
+    )
+    add_read_options(p)
+    p.set_defaults(command="service.cli.frames:cmd_preview")
 
 
 def add_analysis_commands(sub: Any) -> None:
