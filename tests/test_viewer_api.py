@@ -20,7 +20,7 @@ import pytest
 from PIL import Image
 
 from service.cli import main as cli
-from tests.exr_factory import make_scene, write_canonical
+from tests.exr_factory import cropped, make_scene, write_canonical
 from tests.live_server import Server, live_server
 
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
@@ -232,3 +232,21 @@ def test_a_frame_without_usable_normals_previews_with_a_score_of_zero(
     r = api.post(f"/v1/frames/{fid}/preview", json={"pipeline": RS, "height": 48})
     assert r.status_code == 200, r.text
     assert r.json()["score"] == {"before": 0.0, "after": 0.0}
+
+
+def test_a_frame_too_small_to_score_shows_its_layers(api: httpx.Client, tmp_path: Path) -> None:
+    """(Its pictures were refused with the score's "depth must be at least 3x3".)"""
+    path = write_canonical(tmp_path / "tiny.exr", cropped(make_scene(48, 64), *TINY))
+    with open(path, "rb") as f:
+        fid = api.post("/v1/frames", files={"file": (path.name, f)}).json()["id"]
+    for layer in ("normal", "depth", "beauty"):
+        r = api.get(f"/v1/frames/{fid}/layers/{layer}.png")
+        assert r.status_code == 200, r.text
+        assert png(r.content).shape[:2] == (2, 2)
+    r = api.post(f"/v1/frames/{fid}/preview", json={"pipeline": RS, "height": 16})
+    assert r.status_code == 200, r.text
+    assert r.json()["score"] is None
+
+
+#: Two rows and two columns on the test sphere.
+TINY = (slice(23, 25), slice(31, 33))

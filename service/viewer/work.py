@@ -184,7 +184,10 @@ def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
 
 
 def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | None:
-    """:func:`analysis.score.score_frame`, or None when the frame has no depth to score against."""
+    """:func:`analysis.score.score_frame`, or None when the frame has no depth to score against
+    or is too small to score (under 3 x 3 pixels: its layers are still shown)."""
+    if min(frame.shape) < 3:
+        return None
     try:
         return score_frame(frame, maps=maps, **params)
     except FrameError:
