@@ -13,6 +13,7 @@ import pytest
 
 import service.operators  # noqa: F401  (registers the operators)
 from gbuffer.io import read
+from ops.unsharp import unsharp_masking
 from service import pipeline
 from service.cli import main
 from service.errors import PipelineError
@@ -42,18 +43,24 @@ def one_covered(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     out = tmp_path_factory.mktemp("one")
     y, x = np.argwhere(np.isfinite(s.depth))[len(np.argwhere(np.isfinite(s.depth))) // 2]
     corner = cropped(s, slice(0, int(y) + 1), slice(0, int(x) + 1))
+    row = cropped(s, slice(int(y), int(y) + 1), slice(0, 64))
     return {
         "middle": write_canonical(out / "middle.exr", _one_covered_pixel(s, int(y), int(x))),
         "corner": write_canonical(out / "corner.exr", _one_covered_pixel(corner, int(y), int(x))),
+        "row": write_canonical(out / "row.exr", _one_covered_pixel(row, 0, int(x))),
     }
 
 
-@pytest.mark.parametrize("where", ["middle", "corner"])
+@pytest.mark.parametrize("where", ["middle", "corner", "row"])
 @pytest.mark.parametrize("op", sorted(REGISTRY))
 def test_every_operator_runs_on_a_surface_of_one_pixel(
     one_covered: dict[str, Path], where: str, op: str
 ) -> None:
     frame = read(one_covered[where])
+    if op == "congruence" and where == "row":  # (its structure tensor needs 3 x 3 pixels)
+        with pytest.raises(PipelineError, match="depth must be at least 3x3"):
+            pipeline.run(frame, pipeline.compile([{"op": op}]))
+        return
     out = pipeline.run(frame, pipeline.compile([{"op": op}]))
     background = frame.mask <= 0
     assert background.sum() == background.size - 1
@@ -91,3 +98,18 @@ def test_depict_enhance_refuses_a_frame_of_one_pixel_in_one_line(
     lines = capfd.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "the frame is 1x1 pixels" in lines[0], lines
     assert not out.exists()
+
+
+@pytest.mark.parametrize("alone", [1, 2])
+def test_unsharp_masking_with_one_pixel_alone_in_a_strip_of_one_row(alone: int) -> None:
+    """1024 columns make strips of 128 rows: a surface of 128 full rows and ``alone`` pixels
+    in the next has a strip of one row holding them (one pixel failed inside OpenCV)."""
+    rng = np.random.default_rng(0)
+    img = (0.5 + 0.2 * rng.random((140, 1024, 3))).astype(np.float32)
+    mask = np.zeros((140, 1024), bool)
+    mask[:128] = True
+    mask[128, 5 : 5 + alone] = True
+    depth = np.where(mask, 5.0, np.inf).astype(np.float32)
+    out = unsharp_masking(img, depth, None, mask, sigma_scene=0.05, pixel_size=depth / 1000)
+    np.testing.assert_array_equal(out[~mask], img[~mask])
+    assert np.isfinite(out).all() and not np.array_equal(out[mask], img[mask])

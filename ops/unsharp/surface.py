@@ -27,7 +27,7 @@ from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import _L_EPS, _LEVEL_SIGMA, _ONE, Array, _mask, _normals, _plane, _rgb
 from ops.unsharp._levels import _sub_resize
 from ops.unsharp._pyramid import _fade, _surface_pyramid
-from ops.unsharp._surface import _outside, _Surface, _surface, _valid, _write
+from ops.unsharp._surface import _box, _outside, _Surface, _surface, _valid, _write
 from ops.unsharp._upsample import _Upsampler
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -222,9 +222,11 @@ class _LightnessRows:
 
     def __call__(self, r: slice) -> color.KRows:
         x, _, n, _ = _cv.boundingRect(self.surf.valid[r])
-        c = slice(x, x + n)
         if n == 0:
-            return np.empty((r.stop - r.start, 0), np.float32), None, c
+            return np.empty((r.stop - r.start, 0), np.float32), None, slice(x, x)
+        # (a pixel alone in a strip of one row: two columns, for OpenCV takes one element for a
+        # scalar; the other column is off the surface or on it, and kept or sharpened alike)
+        c = _box(r.start, r.stop, x, x + n, self.surf.valid.shape)[1]
         rc = (r, c)
         valid_r = self.surf.valid[rc]
         # λ g α: 0 off the surface
