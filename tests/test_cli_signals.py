@@ -20,7 +20,14 @@ from gbuffer.io import write as write_exr
 from gbuffer.render import render
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
-DEPICT = [sys.executable, "-c", "from service.cli import run; run()"]
+#: The same, with each file's rename into place 2 s late: the temporary file a signal must
+#: remove is there long enough to be seen (the encoded bytes take milliseconds to copy).
+SLOW_RENAME = """
+import os, time
+rename = os.replace
+os.replace = lambda a, b: (time.sleep(2), rename(a, b))[1]
+from service.cli import run; run()
+"""
 KEEP = b"the output before this run\n"
 
 
@@ -33,18 +40,24 @@ def frame(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _stop_while_writing(
-    argv: list[str], out: Path, signum: int, group: bool
+    argv: list[str], folder: Path, signum: int, group: bool, ignore: int | None = None
 ) -> subprocess.CompletedProcess[str]:
-    """Run ``depict argv``; as soon as a temporary file appears beside ``out``, send
-    ``signum`` (to the whole process group with ``group``, as a terminal or a farm does);
-    the exit code and what it printed on stderr."""
+    """Run ``depict argv`` (its renames slowed, :data:`SLOW_RENAME`); as soon as a temporary
+    output appears in ``folder``, send ``signum`` (to the whole process group with ``group``,
+    as a terminal or a farm does; ``ignore``: a signal the command starts with ignored, as
+    ``nohup`` starts it); the exit code and what it printed on stderr."""
     env = dict(os.environ, PYOPENGL_PLATFORM="osmesa")
     proc = subprocess.Popen(
-        [*DEPICT, *argv], env=env, start_new_session=True, stderr=subprocess.PIPE, text=True
+        [sys.executable, "-c", SLOW_RENAME, *argv],
+        env=env,
+        start_new_session=True,
+        stderr=subprocess.PIPE,
+        text=True,
+        preexec_fn=None if ignore is None else lambda: signal.signal(ignore, signal.SIG_IGN),
     )
     deadline = time.monotonic() + 300
     try:
-        while not partial_files(out):
+        while not (folder.is_dir() and any(folder.glob(".*.tmp.exr"))):
             assert proc.poll() is None, f"ended before writing: {proc.stderr.read()}"  # type: ignore[union-attr]
             assert time.monotonic() < deadline, "no temporary file appeared"
             time.sleep(0.001)
@@ -66,9 +79,19 @@ def test_a_signal_during_the_write_leaves_the_output_as_it_was(
     out = tmp_path / "out.exr"
     out.write_bytes(KEEP)
     argv = ["enhance", str(frame), "-o", str(out), "--layout", "same"]
-    assert _stop_while_writing(argv, out, signum, group=False).returncode == 128 + signum
+    assert _stop_while_writing(argv, tmp_path, signum, group=False).returncode == 128 + signum
     assert partial_files(out) == []
     assert out.read_bytes() == KEEP
+
+
+def test_a_hangup_the_command_started_ignoring_is_ignored(frame: Path, tmp_path: Path) -> None:
+    """As under ``nohup``: the command finishes and writes its output."""
+    out = tmp_path / "out.exr"
+    out.write_bytes(KEEP)
+    argv = ["enhance", str(frame), "-o", str(out)]
+    hup = signal.SIGHUP
+    assert _stop_while_writing(argv, tmp_path, hup, group=False, ignore=hup).returncode == 0
+    assert partial_files(out) == [] and out.read_bytes() != KEEP
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
@@ -79,12 +102,12 @@ def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
     frame, and one line at most (the Dask workers printed KeyboardInterrupt tracebacks)."""
     shots = tmp_path / "shots"
     shots.mkdir()
-    for i in (1, 2):
+    for i in range(1, 5):  # (each frame's write a moment to catch)
         (shots / f"shot.{i:04d}.exr").symlink_to(frame)
     outs = tmp_path / "out"
     argv = ["batch", str(shots / "shot.####.exr"), "-o", str(outs / "o.####.exr")]
     argv += ["--workers", "1", "--no-progress"]
-    done = _stop_while_writing(argv, outs / "o.0001.exr", signum, group=True)
+    done = _stop_while_writing(argv, outs, signum, group=True)
     assert done.returncode == 128 + signum, done.stderr
     assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
     assert "Traceback" not in done.stderr, done.stderr

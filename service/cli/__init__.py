@@ -49,24 +49,33 @@ class _Stopped(BaseException):
 
 
 def _stop(signum: int, _frame: object) -> None:
+    for each in _stops():  # once: a second signal must not interrupt the cleanup
+        signal.signal(each, signal.SIG_IGN)
     raise _Stopped(signum)
 
 
-def _catch_stops(args: argparse.Namespace) -> dict[int, Any]:
-    """Install :func:`_stop` for SIGTERM and SIGHUP (not for ``serve``, whose server handles
-    them, nor off the main thread); the handlers it replaced."""
+def _stops() -> list[int]:
+    return [s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s]
+
+
+def _catch_stops(args: argparse.Namespace, replaced: dict[int, Any]) -> None:
+    """Install :func:`_stop` for SIGTERM and SIGHUP where they have their default action (not
+    where they are ignored, as ``nohup`` leaves SIGHUP; not for ``serve``, whose server
+    handles them; not off the main thread); the handlers it replaced go into ``replaced``."""
     serving = args.command.startswith("service.cli.serving:")
     if serving or threading.current_thread() is not threading.main_thread():
-        return {}
-    stops = [s for s in (getattr(signal, "SIGTERM", None), getattr(signal, "SIGHUP", None)) if s]
-    return {s: signal.signal(s, _stop) for s in stops}
+        return
+    for each in _stops():
+        if signal.getsignal(each) is signal.SIG_DFL:
+            replaced[each] = signal.signal(each, _stop)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     allocator.tune()
     args = build_parser().parse_args(argv)
-    replaced = _catch_stops(args)
+    replaced: dict[int, Any] = {}
     try:
+        _catch_stops(args, replaced)
         return int(command(args)(args))
     except KeyboardInterrupt:
         return 130
