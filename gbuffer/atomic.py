@@ -4,8 +4,8 @@ and never destroy what an output path names: an input, a special file, a symboli
 from __future__ import annotations
 
 import contextlib
-import glob
 import os
+import re
 import secrets
 import stat
 from collections.abc import Iterable, Iterator
@@ -121,9 +121,24 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             tmp_path.unlink(missing_ok=True)
 
 
-def partial_files(path: str | Path) -> list[Path]:
-    """The temporary files :func:`atomic_path` made beside ``path`` and did not get to remove
-    (a process stopped while it wrote: e.g. a batch's worker ended with the batch)."""
-    target = Path(path)
-    pattern = f".{glob.escape(target.stem)}.*.tmp{glob.escape(target.suffix)}"
-    return sorted(target.parent.glob(pattern)) if target.parent.is_dir() else []
+def partial_files(paths: Iterable[str | Path]) -> list[Path]:
+    """The temporary files :func:`atomic_path` made beside any of the outputs ``paths`` and did
+    not get to remove (a process stopped while it wrote: e.g. a batch's worker ended with the
+    batch); each folder listed once, names matched exactly (a user's ``.out.old.tmp.exr`` or
+    another output's temporary file are not among them)."""
+    wanted: dict[Path, set[str]] = {}
+    for path in paths:
+        target = Path(path)
+        wanted.setdefault(target.parent, set()).add(target.name)
+    found = []
+    for folder, names in wanted.items():
+        with contextlib.suppress(OSError), os.scandir(folder) as entries:
+            for entry in entries:
+                made = _TEMPORARY.match(entry.name)
+                if made is not None and made["stem"] + made["suffix"] in names:
+                    found.append(folder / entry.name)
+    return sorted(found)
+
+
+#: The name :func:`atomic_path` gives an output's temporary file: ``.{stem}.{8 hex}.tmp{suffix}``.
+_TEMPORARY = re.compile(r"^\.(?P<stem>.+)\.[0-9a-f]{8}\.tmp(?P<suffix>.*)$", re.S)

@@ -489,10 +489,11 @@ def run_batch(
             with _progress(progress) as bar:
                 pinned = run.frames(todo, pinned, pinned_path, bar)
         except BaseException:  # stopped (Ctrl-C, a signal): frames being written stay unwritten
-            _close(client, cluster)
-            if cluster is not None:  # (our workers are gone: what they were writing is partial)
-                for f in todo:
-                    for partial in partial_files(expand(out_pattern, f)):
+            try:
+                _close(client, cluster)
+            finally:
+                if cluster is not None:  # (our workers are gone: what they wrote is partial)
+                    for partial in partial_files(expand(out_pattern, f) for f in todo):
                         partial.unlink(missing_ok=True)
             raise
         _close(client, cluster)

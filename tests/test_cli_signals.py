@@ -80,7 +80,7 @@ def test_a_signal_during_the_write_leaves_the_output_as_it_was(
     out.write_bytes(KEEP)
     argv = ["enhance", str(frame), "-o", str(out), "--layout", "same"]
     assert _stop_while_writing(argv, tmp_path, signum, group=False).returncode == 128 + signum
-    assert partial_files(out) == []
+    assert partial_files([out]) == []
     assert out.read_bytes() == KEEP
 
 
@@ -91,7 +91,7 @@ def test_a_hangup_the_command_started_ignoring_is_ignored(frame: Path, tmp_path:
     argv = ["enhance", str(frame), "-o", str(out)]
     hup = signal.SIGHUP
     assert _stop_while_writing(argv, tmp_path, hup, group=False, ignore=hup).returncode == 0
-    assert partial_files(out) == [] and out.read_bytes() != KEEP
+    assert partial_files([out]) == [] and out.read_bytes() != KEEP
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
@@ -111,3 +111,18 @@ def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
     assert done.returncode == 128 + signum, done.stderr
     assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
     assert "Traceback" not in done.stderr, done.stderr
+
+
+def test_partial_files_are_exactly_the_temporary_outputs(tmp_path: Path) -> None:
+    names = [
+        ".o.0001.0a1b2c3d.tmp.exr",  # o.0001.exr's
+        ".o.5e6f7a8b.tmp.exr",  # o.exr's
+        ".o.mybackup.tmp.exr",  # a user's
+        ".o.0001.exr",
+        "o.0001.exr",
+        ".o.0002.0a1b2c3d.tmp.exr",  # another output's
+    ]
+    for name in names:
+        (tmp_path / name).write_bytes(b"")
+    found = partial_files([tmp_path / "o.0001.exr", tmp_path / "o.exr", tmp_path / "gone/x.exr"])
+    assert [p.name for p in found] == [".o.0001.0a1b2c3d.tmp.exr", ".o.5e6f7a8b.tmp.exr"]
