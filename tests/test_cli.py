@@ -244,6 +244,8 @@ def test_enhance_with_op_set_debug_layers_and_output_layer(
     ("value", "lights"),
     [
         ("-0.4,0.6,0.7", ["-0.4,0.6,0.7"]),  # one light as ``depict ops`` writes it
+        ("-.4,.6,.7", ["-.4,.6,.7"]),  # (numbers that are not JSON's)
+        ("dir:.5,.5,.5", ["dir:.5,.5,.5"]),
         ("point:0,2,1@1,0.9,0.8*4", ["point:0,2,1@1,0.9,0.8*4"]),
         ("-1,1,1@1,0.9,0.8*2", ["-1,1,1@1,0.9,0.8*2"]),  # (a comma list of numbers and text)
         ('["-1,1,1", "1,0,1*0.5"]', ["-1,1,1", "1,0,1*0.5"]),  # several: a JSON list

@@ -46,15 +46,19 @@ class LightsParams(Params):
     @field_validator("lights", mode="before")
     @classmethod
     def _one_light(cls, value: Any) -> Any:
-        """One light given as its text, or as what ``--set lights=X,Y,Z`` makes of it (a list
-        of its comma-separated numbers and pieces): a list of that one light."""
+        """One light given as its text, or as what ``--set lights=X,Y,Z`` makes of it (its
+        comma-separated pieces, numbers or not): a list of that one light. Pieces that are
+        lights each stay several lights."""
         if isinstance(value, str):
             return [value]
-        pieces = isinstance(value, list) and all(
-            isinstance(v, int | float | str) and not isinstance(v, bool) for v in value
-        )
-        if pieces and not all(isinstance(v, str) for v in value):
-            return [",".join(str(v) for v in value)]
+        if not isinstance(value, list) or not value:
+            return value
+        if not all(isinstance(v, int | float | str) and not isinstance(v, bool) for v in value):
+            return value
+        pieces = [str(v) for v in value]
+        joined = ",".join(pieces)
+        if not all(_is_light(p) for p in pieces) and _is_light(joined):
+            return [joined]
         return value
 
     @field_validator("lights")
@@ -66,6 +70,14 @@ class LightsParams(Params):
 
     def parsed_lights(self) -> list[Light]:
         return [parse_light(text) for text in self.lights]
+
+
+def _is_light(text: str) -> bool:
+    try:
+        parse_light(text)
+    except ValueError:
+        return False
+    return True
 
 
 def statistic(ctx: Context, key: str, value: float | str, compute: Callable[[], float]) -> float:
