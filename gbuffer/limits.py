@@ -19,6 +19,9 @@ from gbuffer.errors import FrameError, LimitError
 HARD_MAX_PIXELS = 1 << 30
 #: Without a configured limit, at most this many channels (all parts together).
 HARD_MAX_CHANNELS = 4096
+#: A render's peak memory over its buffers' size (measured: about 640 bytes a pixel at 256²
+#: and 1024², against 43 float channels, 172 bytes).
+RENDER_WORKING = 4
 #: Bytes per sample of the EXR pixel types (UINT, HALF, FLOAT).
 _SAMPLE_BYTES = {0: 4, 1: 2, 2: 4}
 
@@ -103,8 +106,9 @@ class Limits:
     def check_render(self, width: int, height: int, where: str) -> None:
         """:class:`LimitError` when a render of ``width`` x ``height`` pixels is over the
         pixels or the decoded size an EXR may claim (its buffers, :data:`gbuffer.frame.
-        RENDER_BUFFERS`, as float32): a render is refused before it starts, as a file is before
-        it is decoded."""
+        RENDER_BUFFERS`, as float32), or, without a configured size, when rendering it would
+        take more than the machine's memory (about :data:`RENDER_WORKING` times its buffers):
+        a render is refused before it starts, as a file is before it is decoded."""
         from gbuffer.frame import BUFFERS, RENDER_BUFFERS
 
         pixels = width * height
@@ -116,12 +120,18 @@ class Limits:
             )
         channels = sum(BUFFERS[name][0] for name in RENDER_BUFFERS)
         size = pixels * channels * 4
-        max_bytes = self.max_bytes or _physical_memory()
-        if size > max_bytes:
+        if self.max_bytes is not None and size > self.max_bytes:
             raise LimitError(
                 f"{where}: {width}x{height} pixels render {channels} float channels, "
-                f"{size / 2**20:.0f} MiB, over the limit of {max_bytes / 2**20:.0f} MiB "
+                f"{size / 2**20:.0f} MiB, over the limit of {self.max_bytes / 2**20:.0f} MiB "
                 "(DEPICT_MAX_DECODED_MB); ask for a smaller size"
+            )
+        memory = _physical_memory()
+        if size * RENDER_WORKING > memory:
+            raise LimitError(
+                f"{where}: {width}x{height} pixels would take about "
+                f"{size * RENDER_WORKING / 2**30:.1f} GiB to render, more than this machine's "
+                f"{memory / 2**30:.1f} GiB of memory; ask for a smaller size"
             )
 
 

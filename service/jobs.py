@@ -21,7 +21,6 @@ from analysis.compare import compare, frame_from_mesh
 from analysis.methods import METHODS
 from analysis.pictures import SHEET_DIRECTIONS, contact_sheet
 from analysis.score import score_frame
-from gbuffer.errors import LimitError
 from gbuffer.limits import Limits
 from ops import relief as rl
 from service import pipeline
@@ -72,11 +71,7 @@ def compare_job(
     opts = dict(options)
     if read is None:
         width, height = int(opts.pop("width", 512)), int(opts.pop("height", 512))
-        max_pixels = limits.max_pixels if limits is not None else None
-        if max_pixels is not None and width * height > max_pixels:
-            raise LimitError(
-                f"{width}x{height} is over the limit of {max_pixels} pixels (DEPICT_MAX_PIXELS)"
-            )
+        (limits or Limits.from_env()).check_render(width, height, "compare")
         frame = frame_from_mesh(
             in_path,
             width,

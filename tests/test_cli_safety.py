@@ -16,7 +16,9 @@ import OpenEXR
 import pytest
 import trimesh
 
+from gbuffer.errors import LimitError
 from gbuffer.io import write as write_exr
+from gbuffer.limits import RENDER_WORKING, Limits, _physical_memory
 from gbuffer.render import render
 from service.cli import main
 from service.cli.args import error_line
@@ -200,6 +202,9 @@ def test_a_render_too_large_for_memory_is_refused_before_it_starts(
     assert depict("render", SPOT, "-o", out, "--width", "2048", "--height", "2048") == 2
     one_error(capfd, "688 MiB, over the limit of 100 MiB (DEPICT_MAX_DECODED_MB)")
     assert not out.exists()
+    # the bench's renders too (it rendered whatever size it was given)
+    assert depict("compare", SPOT, "--width", "2048", "--height", "2048") == 2
+    one_error(capfd, "compare: 2048x2048 pixels render 43 float channels, 688 MiB, over")
 
 
 def test_deep_pipeline_file_is_one_line(
@@ -341,3 +346,12 @@ def test_a_frame_with_no_covered_pixel_is_written_with_a_warning(
     covered = write_canonical(tmp_path / "ok.exr", make_scene(48, 64))
     assert depict("enhance", covered, "-o", out) == 0
     assert "warning" not in capfd.readouterr().err
+
+
+def test_without_a_size_limit_a_render_is_held_to_the_machines_memory() -> None:
+    """About four times its buffers: 16384² (the largest size) needs 172 GiB."""
+    if _physical_memory() >= 16384**2 * 172 * RENDER_WORKING:
+        pytest.skip("this machine has the memory for the largest render")
+    with pytest.raises(LimitError, match=r"16384x16384 pixels would take about 172\.0 GiB"):
+        Limits().check_render(16384, 16384, "render")
+    Limits().check_render(1024, 1024, "render")
