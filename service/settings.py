@@ -24,6 +24,8 @@ variable                       default        meaning
 ``DEPICT_QUEUE``               ``8``          jobs waiting for a worker; one more answers 429
 ``DEPICT_TIMEOUT_S``           ``120``        time limit of a job, queue wait included (504
                                               after)
+``DEPICT_SHUTDOWN_GRACE_S``    ``10``         on SIGTERM, how long running requests may finish
+                                              (503 after)
 ``DEPICT_VIEWER_TTL_S``        ``3600``       how long the web viewer keeps an uploaded frame after
                                               its last use, seconds
 ``DEPICT_VIEWER_MAX_MB``       ``2048``       the viewer's frames on disk, all together, MiB (the
@@ -74,6 +76,9 @@ class Settings(BaseSettings):
     queue: int = Field(default=8, ge=0, le=10_000, description="jobs waiting for a worker")
     timeout_s: float = Field(
         default=120.0, gt=0, description="time limit of a job, queue wait included"
+    )
+    shutdown_grace_s: int = Field(
+        default=10, ge=0, description="on SIGTERM, seconds running requests may finish"
     )
     viewer_ttl_s: float = Field(
         default=3600.0, gt=0, description="seconds the viewer keeps a frame after its last use"

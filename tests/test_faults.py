@@ -378,12 +378,13 @@ def test_slow_clients_are_answered_408_or_closed(server: Server) -> None:
 
 
 def test_a_job_still_running_when_the_server_stops_is_answered_503() -> None:
-    """SIGTERM: uvicorn lets requests finish for 10 s, then cancels them; a cancelled request
-    got a plain-text 500 and the log a traceback. Now a 503 problem with Retry-After, and the
-    log stays JSON."""
-    with live_server({"DEPICT_WORKERS": "1", "DEPICT_TIMEOUT_S": "300"}) as server:
+    """SIGTERM: uvicorn lets requests finish for DEPICT_SHUTDOWN_GRACE_S, then cancels them;
+    a cancelled request got a plain-text 500 and the log a traceback. Now a 503 problem with
+    Retry-After, and the log stays JSON."""
+    env = {"DEPICT_WORKERS": "1", "DEPICT_TIMEOUT_S": "300", "DEPICT_SHUTDOWN_GRACE_S": "1"}
+    with live_server(env) as server:
         answer: dict[str, httpx.Response] = {}
-        client = threading.Thread(target=lambda: answer.update(r=slow_compare(server, 2048)))
+        client = threading.Thread(target=lambda: answer.update(r=slow_compare(server, 1024)))
         client.start()
         wait_for("the job to run", lambda: metric(server, "depict_jobs_running ") >= 1)
         server.process.send_signal(signal.SIGTERM)

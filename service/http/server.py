@@ -66,5 +66,5 @@ def serve(settings: Settings | None = None) -> None:
         http=slow_client_guard(settings.upload_timeout_s),
         log_config=None,
         access_log=False,
-        timeout_graceful_shutdown=10,
+        timeout_graceful_shutdown=settings.shutdown_grace_s,
     )
