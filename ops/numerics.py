@@ -216,12 +216,16 @@ def magnitude(*planes: np.ndarray) -> np.ndarray:
     could change from one run to the next."""
     if len(planes) not in (2, 3):
         raise ValueError(f"magnitude takes two or three planes, got {len(planes)}")
-    ins = [np.ascontiguousarray(a, np.float32) for a in planes]
-    shape = ins[0].shape
-    if any(a.shape != shape for a in ins):
-        raise ValueError(f"magnitude needs planes of one shape, got {[a.shape for a in ins]}")
+    shapes = [np.shape(a) for a in planes]
+    shape = shapes[0]
+    if any(other != shape for other in shapes):
+        raise ValueError(f"magnitude needs planes of one shape, got {shapes}")
     out = np.empty(shape, np.float32)
-    rows = [a.reshape(shape[0] if len(shape) > 1 else 1, -1) for a in (*ins, out)]
+    if out.size == 0:
+        return out
+    lead = shape[0] if len(shape) > 1 else 1  # (rows of the strips; one for 0-d and 1-d)
+    ins = [np.ascontiguousarray(a, np.float32).reshape(lead, -1) for a in planes]
+    rows = [*ins, out.reshape(lead, -1)]
     z = rows[2] if len(ins) == 3 else rows[0][:0]
     run_strips(
         rows[0].shape[0],

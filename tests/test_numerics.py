@@ -156,3 +156,11 @@ def test_magnitude_refuses_planes_that_do_not_match() -> None:
         magnitude(np.zeros((2, 3), np.float32), np.zeros((3, 2), np.float32))
     with pytest.raises(ValueError, match="two or three"):
         magnitude(np.zeros((2, 3), np.float32))
+
+
+@pytest.mark.parametrize("shape", [(), (0,), (0, 4), (4, 0), (3, 0, 2)])
+def test_magnitude_keeps_empty_and_scalar_shapes(shape: tuple[int, ...]) -> None:
+    x, y = np.full(shape, 3.0, np.float32), np.full(shape, 4.0, np.float32)
+    got = magnitude(x, y)
+    assert got.shape == shape and got.dtype == np.float32
+    np.testing.assert_array_equal(got, np.full(shape, 5.0, np.float32))
