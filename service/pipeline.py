@@ -179,7 +179,7 @@ def run_timed(
     """Apply ``pipeline`` to a copy of ``frame``: the result and the seconds of each step."""
     hgt, wid = frame.shape
     if hgt * wid < 2:
-        raise PipelineError(f"the frame is {wid}x{hgt} pixels; the operators need at least 2")
+        raise PipelineError(f"the frame is {wid}x{hgt} pixels; the operators need 2 or more")
     out = frame.copy()
     op_s: list[tuple[str, float]] = []
     holes.fill(out)  # pixels of NaN/Inf radiance: uncovered for the operators (gbuffer.holes)

@@ -286,7 +286,7 @@ def test_out_of_memory_is_one_line_naming_the_limits() -> None:
     """NumPy's and OpenCV's failures to allocate (a frame too large for the free memory)."""
     for exc in (MemoryError(), cv2.error("Insufficient memory) Failed to allocate 452984832")):
         line = error_line(exc)
-        assert line is not None and line.startswith("out of memory: the frame is too large")
+        assert line is not None and line.startswith("out of memory: this run needs more")
         assert "DEPICT_MAX_DECODED_MB" in line
     assert error_line(cv2.error("Sizes of input arguments do not match")) is None  # a bug
 

@@ -36,10 +36,13 @@ _cv: Any = cv2
 __all__ = ["principal_curvatures"]
 
 
-def _working_grid(sigma_px: float, shape: tuple[int, int]) -> tuple[int, tuple[int, int], float]:
-    """The level whose grid the curvature is computed on (cells of 2^level pixels), that grid's
-    (rows, columns) and the Gaussian σ left to apply there, in its pixels: ``sigma_px`` less the
-    smoothing of the box downsampling and of the central difference."""
+def _working_grid(
+    sigma_px: float, shape: tuple[int, int]
+) -> tuple[int, bool, tuple[int, int], float]:
+    """The level whose grid the curvature is computed on (cells of 2^level pixels), whether its
+    cells divide the image exactly, that grid's (rows, columns) and the Gaussian σ left to
+    apply there, in its pixels: ``sigma_px`` less the smoothing of the box downsampling and of
+    the central difference."""
     hgt, wid = shape
     level = _working_level(sigma_px, shape)
     k = 2**level
@@ -47,7 +50,7 @@ def _working_grid(sigma_px: float, shape: tuple[int, int]) -> tuple[int, tuple[i
     h_l, w_l = (hgt // k, wid // k) if exact else (max(1, round(hgt / k)), max(1, round(wid / k)))
     box_var = (k * k - 1) / 12.0
     var = sigma_px * sigma_px - box_var - k * k / 3.0
-    return level, (h_l, w_l), math.sqrt(var) / k if var > 0.0 else 0.0
+    return level, exact, (h_l, w_l), math.sqrt(var) / k if var > 0.0 else 0.0
 
 
 def principal_curvatures(
@@ -107,9 +110,8 @@ def principal_curvatures(
     if not img_h >= 1:
         raise ValueError(f"image_height={image_height!r} must be a positive pixel count")
 
-    level, (h_l, w_l), sigma_l = _working_grid(scale * img_h, (hgt, wid))
+    level, exact, (h_l, w_l), sigma_l = _working_grid(scale * img_h, (hgt, wid))
     k = 2**level
-    exact = hgt % k == 0 and wid % k == 0
     if not exact:  # working-grid inputs for the whole frame at once
         whole_n = box_downsample(normal, level, (w_l, h_l))
         whole_c = _working_coverage(depth, mask, level, (w_l, h_l))

@@ -47,8 +47,8 @@ def error_line(exc: BaseException) -> str | None:
         type(exc).__module__ == "cv2" and "Insufficient memory" in str(exc)
     ):
         return (
-            "out of memory: the frame is too large for this machine's free memory "
-            "(DEPICT_MAX_PIXELS and DEPICT_MAX_DECODED_MB refuse such files before decoding)"
+            "out of memory: this run needs more memory than is free; set DEPICT_MAX_PIXELS or "
+            "DEPICT_MAX_DECODED_MB to refuse files and renders that large before they start"
         )
     return None
 
