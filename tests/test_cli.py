@@ -472,6 +472,7 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "gamma=nan: Input should be a finite number",
     ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
+    "empty plot": (["compare", "{exr}", "--plot", ""], "--plot: is empty"),
     "an operator's own error, named once": (
         ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", *SHADOWS_OF_NOPE],
         "error: unsharp_masking: no RGB layer 'nope' (unlit)",

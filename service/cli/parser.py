@@ -240,8 +240,12 @@ def _compare_arguments(p: argparse.ArgumentParser) -> None:
         "every rendering), per_image, or a number",
     )
     p.add_argument("--json", action="store_true", help="print the result as JSON")
-    p.add_argument("--plot", metavar="OUT.png", help="scores vs direction (like LLA Fig. 13)")
-    p.add_argument("--sheet", metavar="OUT.png", help="renderings and score maps (Fig. 12)")
+    p.add_argument(
+        "--plot", metavar="OUT.png", type=named_path, help="scores vs direction (like LLA Fig. 13)"
+    )
+    p.add_argument(
+        "--sheet", metavar="OUT.png", type=named_path, help="renderings and score maps (Fig. 12)"
+    )
     p.add_argument("--width", type=int, default=512, help="mesh render width")
     p.add_argument("--height", type=int, default=512, help="mesh render height")
     p.add_argument("--azimuth", type=float, default=30.0, help="mesh framing azimuth, degrees")
