@@ -50,7 +50,8 @@ class _Stopped(BaseException):
 
 def _stop(signum: int, _frame: object) -> None:
     for each in _stops():  # once: a second signal must not interrupt the cleanup
-        signal.signal(each, signal.SIG_IGN)
+        if signal.getsignal(each) is _stop:  # (main() puts back what it replaced)
+            signal.signal(each, signal.SIG_IGN)
     raise _Stopped(signum)
 
 
