@@ -107,6 +107,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
                 break
             except FileExistsError:  # (someone else's: never ours to remove)
                 tmp_path = None
+            except OSError:  # (not made: nothing to remove)
+                tmp_path = None
+                raise
         try:
             mode = target.stat().st_mode & 0o777
         except OSError:
@@ -118,17 +121,19 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
     finally:
         if tmp_path is not None:
-            tmp_path.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):  # (a read-only folder: EROFS even when missing)
+                tmp_path.unlink(missing_ok=True)
 
 
-def partial_files(paths: Iterable[str | Path]) -> list[Path]:
+def partial_files(paths: Iterable[str | Path] | str | Path) -> list[Path]:
     """The temporary files :func:`atomic_path` made beside any of the outputs ``paths`` and did
     not get to remove (a process stopped while it wrote: e.g. a batch's worker ended with the
     batch); each folder listed once, names matched exactly (a user's ``.out.old.tmp.exr`` or
     another output's temporary file are not among them)."""
     wanted: dict[Path, set[str]] = {}
-    for path in paths:
-        target = Path(path)
+    for path in [paths] if isinstance(paths, str | Path) else paths:
+        given = Path(path)  # (beside a link's target, as atomic_path writes)
+        target = Path(os.path.realpath(given)) if given.is_symlink() else given
         wanted.setdefault(target.parent, set()).add(target.name)
     found = []
     for folder, names in wanted.items():

@@ -127,7 +127,7 @@ class Limits:
                 "(DEPICT_MAX_DECODED_MB); ask for a smaller size"
             )
         memory = _physical_memory()
-        if size * RENDER_WORKING > memory:
+        if self.max_bytes is None and size * RENDER_WORKING > memory:
             raise LimitError(
                 f"{where}: {width}x{height} pixels would take about "
                 f"{size * RENDER_WORKING / 2**30:.1f} GiB to render, more than this machine's "

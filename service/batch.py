@@ -490,7 +490,8 @@ def run_batch(
                 pinned = run.frames(todo, pinned, pinned_path, bar)
         except BaseException:  # stopped (Ctrl-C, a signal): frames being written stay unwritten
             try:
-                _close(client, cluster)
+                with contextlib.suppress(Exception):  # (the stop, not this, is what to report)
+                    _close(client, cluster)
             finally:
                 if cluster is not None:  # (our workers are gone: what they wrote is partial)
                     for partial in partial_files(expand(out_pattern, f) for f in todo):

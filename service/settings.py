@@ -77,8 +77,8 @@ class Settings(BaseSettings):
     timeout_s: float = Field(
         default=120.0, gt=0, description="time limit of a job, queue wait included"
     )
-    shutdown_grace_s: int = Field(
-        default=10, ge=0, description="on SIGTERM, seconds running requests may finish"
+    shutdown_grace_s: float = Field(
+        default=10.0, ge=0, description="on SIGTERM, how long running requests may finish"
     )
     viewer_ttl_s: float = Field(
         default=3600.0, gt=0, description="seconds the viewer keeps a frame after its last use"

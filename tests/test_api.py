@@ -86,6 +86,9 @@ def test_settings_defaults_and_env(monkeypatch: pytest.MonkeyPatch) -> None:
     s = Settings()
     assert (s.host, s.port, s.workers, s.queue, s.timeout_s) == ("127.0.0.1", 8000, 2, 8, 120.0)
     assert s.key is None and s.max_upload_bytes == 512 * 2**20 and s.max_pixels == 8192**2
+    assert s.shutdown_grace_s == 10.0
+    monkeypatch.setenv("DEPICT_SHUTDOWN_GRACE_S", "2.5")  # (seconds, as every *_S)
+    assert Settings().shutdown_grace_s == 2.5
     monkeypatch.setenv("DEPICT_WORKERS", "3")
     monkeypatch.setenv("DEPICT_API_KEY", "abc")
     monkeypatch.setenv("DEPICT_MAX_UPLOAD_MB", "1.5")

@@ -473,6 +473,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
     ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
     "empty plot": (["compare", "{exr}", "--plot", ""], "--plot: is empty"),
+    "a light that is not one": (
+        ["enhance", "{exr}", "-o", "{out}", "--op", "light_alignment", "--set", "lights=1,2"],
+        "light '1,2' is not of the form",
+    ),
     "an operator's own error, named once": (
         ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", *SHADOWS_OF_NOPE],
         "error: unsharp_masking: no RGB layer 'nope' (unlit)",

@@ -126,3 +126,6 @@ def test_partial_files_are_exactly_the_temporary_outputs(tmp_path: Path) -> None
         (tmp_path / name).write_bytes(b"")
     found = partial_files([tmp_path / "o.0001.exr", tmp_path / "o.exr", tmp_path / "gone/x.exr"])
     assert [p.name for p in found] == [".o.0001.0a1b2c3d.tmp.exr", ".o.5e6f7a8b.tmp.exr"]
+    # an output through a link is written beside its target; one path alone is one path
+    (tmp_path / "link.exr").symlink_to(tmp_path / "o.exr")
+    assert [p.name for p in partial_files(tmp_path / "link.exr")] == [".o.5e6f7a8b.tmp.exr"]

@@ -113,3 +113,21 @@ def test_unsharp_masking_with_one_pixel_alone_in_a_strip_of_one_row(alone: int) 
     out = unsharp_masking(img, depth, None, mask, sigma_scene=0.05, pixel_size=depth / 1000)
     np.testing.assert_array_equal(out[~mask], img[~mask])
     assert np.isfinite(out).all() and not np.array_equal(out[mask], img[mask])
+
+
+@pytest.mark.parametrize("rows", [1, 2, 3, 4, 5])
+def test_unsharp_masking_where_the_fade_meets_a_strip_in_one_column(rows: int) -> None:
+    """Pixels seen from afar (σ_px under one level) fade to the unsmoothed signal; where that
+    box meets a strip's window in one column of up to four rows, OpenCV took the piece for a
+    scalar (a failure at four rows, a wrong shape at one)."""
+    rng = np.random.default_rng(0)
+    img = (0.5 + 0.2 * rng.random((140, 1024, 3))).astype(np.float32)
+    mask = np.zeros((140, 1024), bool)
+    mask[:128] = True
+    mask[128 : 128 + rows, 5:7] = True
+    depth = np.where(mask, 5.0, np.inf).astype(np.float32)
+    size = np.where(mask, 0.005, np.inf).astype(np.float32)
+    size[128 : 128 + rows, 6] = 0.3  # (far: in the fade box, which starts at column 6)
+    out = unsharp_masking(img, depth, None, mask, sigma_scene=0.05, pixel_size=size)
+    np.testing.assert_array_equal(out[~mask], img[~mask])
+    assert np.isfinite(out).all()

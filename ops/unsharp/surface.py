@@ -224,8 +224,9 @@ class _LightnessRows:
         x, _, n, _ = _cv.boundingRect(self.surf.valid[r])
         if n == 0:
             return np.empty((r.stop - r.start, 0), np.float32), None, slice(x, x)
-        # (a pixel alone in a strip of one row: two columns, for OpenCV takes one element for a
-        # scalar; the other column is off the surface or on it, and kept or sharpened alike)
+        # (a window one column wide is two: OpenCV takes an array of one column and up to four
+        # rows for a scalar; the other column is off the surface or on it, and kept or
+        # sharpened alike, to rounding)
         c = _box(r.start, r.stop, x, x + n, self.surf.valid.shape)[1]
         rc = (r, c)
         valid_r = self.surf.valid[rc]
@@ -237,16 +238,8 @@ class _LightnessRows:
             _cv.multiply(lam_r, valid_r, dst=lam_r, scale=self.lam, dtype=_cv.CV_32F)
         if self.gain is not None:
             _cv.multiply(lam_r, self.gain[rc], dst=lam_r)
-        if self.fade is not None:  # L − ((1 − a0) L + a0 S) = a0 (L − S), a0 = min(σ_px²/s_1², 1)
-            fy, fx = self.fade
-            y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
-            x0, x1 = max(c.start, fx.start), min(c.stop, fx.stop)
-            if y0 < y1 and x0 < x1:  # (elsewhere on the surface a0 = 1)
-                fb = (slice(y0 - r.start, y1 - r.start), slice(x0 - c.start, x1 - c.start))
-                a0 = _cv.divide(self.c_fade, _cv.max(self.ps[y0:y1, x0:x1], 1e-30))
-                _cv.multiply(a0, a0, dst=a0)
-                part = lam_r[fb]
-                _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
+        if self.fade is not None:
+            self._fade(lam_r, r, c)
         keep_r = _cv.compare(lam_r, 0.0, _cv.CMP_EQ)
         if self.adapt is not None:  # √(1 + Var)
             lam_r = _cv.multiply(lam_r, _sub_resize(self.adapt[0], self.adapt[1], r, c), dst=lam_r)
@@ -258,6 +251,25 @@ class _LightnessRows:
         new = _cv.add(lum_r, new, dst=new)
         new = _cv.max(new, 0.0, dst=new)
         return _cv.divide(new, _cv.max(lum_r, _L_EPS), dst=new), keep_r, c
+
+    def _fade(self, lam_r: Array, r: slice, c: slice) -> None:
+        """λ_r ×= a0 where the fade box meets the window (rows r, columns c): L − ((1 − a0) L +
+        a0 S) = a0 (L − S), a0 = min(σ_px²/s_1², 1) (elsewhere on the surface a0 = 1)."""
+        assert self.fade is not None
+        fy, fx = self.fade
+        y0, y1 = max(r.start, fy.start), min(r.stop, fy.stop)
+        x0, x1 = max(c.start, fx.start), min(c.stop, fx.stop)
+        if not (y0 < y1 and x0 < x1):
+            return
+        fb = (slice(y0 - r.start, y1 - r.start), slice(x0 - c.start, x1 - c.start))
+        part, ps = lam_r[fb], self.ps[y0:y1, x0:x1]
+        if min(ps.shape) == 1 and ps.size <= 4:  # (OpenCV would take it for a scalar)
+            a0 = np.float32(self.c_fade) / np.maximum(ps, np.float32(1e-30))
+            np.multiply(part, np.minimum(a0 * a0, np.float32(1.0)), out=part)
+            return
+        a0 = _cv.divide(self.c_fade, _cv.max(ps, 1e-30))
+        _cv.multiply(a0, a0, dst=a0)
+        _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
 
 
 def unsharp_lightness(

@@ -68,7 +68,8 @@ def _catch_stops(args: argparse.Namespace, replaced: dict[int, Any]) -> None:
         return
     for each in _stops():
         if signal.getsignal(each) is signal.SIG_DFL:
-            replaced[each] = signal.signal(each, _stop)
+            replaced[each] = signal.SIG_DFL  # (first: a signal as it is installed is restored)
+            signal.signal(each, _stop)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

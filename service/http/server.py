@@ -66,5 +66,6 @@ def serve(settings: Settings | None = None) -> None:
         http=slow_client_guard(settings.upload_timeout_s),
         log_config=None,
         access_log=False,
-        timeout_graceful_shutdown=settings.shutdown_grace_s,
+        # (typed int, given to asyncio.wait_for: seconds as a float are what it takes)
+        timeout_graceful_shutdown=settings.shutdown_grace_s,  # type: ignore[arg-type]
     )

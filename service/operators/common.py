@@ -57,6 +57,8 @@ class LightsParams(Params):
             return value
         pieces = [str(v) for v in value]
         joined = ",".join(pieces)
+        if not all(isinstance(v, str) for v in value):  # (numbers: pieces of one light)
+            return [joined]
         if not all(_is_light(p) for p in pieces) and _is_light(joined):
             return [joined]
         return value
