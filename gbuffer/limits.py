@@ -13,7 +13,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from gbuffer.errors import FrameError, LimitError
+from gbuffer.errors import LimitError, OptionError
 
 #: Without a configured ``max_pixels``, a data window over this many pixels is still refused.
 HARD_MAX_PIXELS = 1 << 30
@@ -46,9 +46,9 @@ def _env_number(name: str, scale: float = 1.0) -> int | None:
     try:
         value = float(text) * scale
     except ValueError:
-        raise FrameError(f"{name}={text!r} is not a number") from None
+        raise OptionError(f"{name}={text!r} is not a number") from None
     if not 0 < value < 2**62:
-        raise FrameError(f"{name}={text!r} must be positive")
+        raise OptionError(f"{name}={text!r} must be positive")
     return int(value)
 
 

@@ -166,6 +166,17 @@ def test_corrupt_pixels_give_one_line_with_the_library_words(
     info = json.loads(capfd.readouterr().out)
     assert info["parts"][0]["channels"] == ["G", "R"]
     assert "pixels not described" in info["warnings"][0]
+    assert "corrupt pixel data" in info["undecoded"]
+    # and in text, without blaming buffers it could not read ("cannot run: ... needs normal")
+    assert depict("inspect", bad) == 0
+    text = capfd.readouterr().out
+    assert "operators: none can run, the pixels could not be decoded" in text
+    assert "cannot run:" not in text
+    # a bad setting is not an undecodable file
+    with pytest.MonkeyPatch.context() as env:
+        env.setenv("DEPICT_MAX_PIXELS", "-5")
+        assert depict("inspect", bad) == 2
+    one_error(capfd, "DEPICT_MAX_PIXELS='-5' must be positive")
 
 
 def test_control_bytes_in_names_are_escaped(

@@ -65,10 +65,13 @@ def _inspection_lines(info: dict[str, Any]) -> list[str]:
         lines.append(f"  cryptomatte {layer['name']} ({layer['ranks']} ranks): {names}")
     lines += [f"  missing: {line}" for line in info.get("missing", [])]
     ops = info["operators"]
-    if not ops["not_runnable"]:
+    if info.get("undecoded"):  # (what the buffers would be is not known: none are listed)
+        lines.append("  operators: none can run, the pixels could not be decoded (below)")
+    elif not ops["not_runnable"]:
         lines.append("  operators: every one can run")
-    for name, lacks in ops["not_runnable"].items():
-        lines.append(f"  cannot run: {name} (needs {', '.join(lacks)})")
+    else:
+        for name, lacks in ops["not_runnable"].items():
+            lines.append(f"  cannot run: {name} (needs {', '.join(lacks)})")
     for key in ("problems", "warnings"):
         lines += [f"  {key[:-1]}: {line}" for line in info.get(key, [])]
     return lines
@@ -94,5 +97,6 @@ def _describe_header(path: str, error: Exception) -> dict[str, Any]:
     """What ``inspect`` says of a file whose header reads but whose pixels do not."""
     info = describe_layout(read_layout(path))
     info["file"] = path
+    info["undecoded"] = str(error)
     info["warnings"].append(f"pixels not described: {error}")
     return info
