@@ -366,3 +366,16 @@ def test_without_a_size_limit_a_render_is_held_to_the_machines_memory() -> None:
     with pytest.raises(LimitError, match=r"16384x16384 pixels would take about 172\.0 GiB"):
         Limits().check_render(16384, 16384, "render")
     Limits().check_render(1024, 1024, "render")
+
+
+def test_an_exr_output_named_otherwise_is_written_with_a_note(
+    copy: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """(``-o shot.png`` wrote OpenEXR under a PNG's name without a word.)"""
+    out = tmp_path / "shot.png"
+    assert depict("enhance", copy, "-o", out) == 0
+    err = capfd.readouterr().err.splitlines()
+    assert err == [f"depict: warning: {out} is written as OpenEXR (its name does not end in .exr)"]
+    assert out.read_bytes()[:4] == b"\x76\x2f\x31\x01"
+    assert depict("enhance", copy, "-o", tmp_path / "shot.EXR") == 0
+    assert capfd.readouterr().err == ""

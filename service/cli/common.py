@@ -53,6 +53,13 @@ def warn(messages: list[str]) -> None:
         print(f"depict: warning: {printable(message)}", file=sys.stderr)
 
 
+def exr_name(out: str) -> list[str]:
+    """A note when an OpenEXR output is named otherwise (``-o shot.png``): what it will be."""
+    if Path(out).suffix.lower() == ".exr":
+        return []
+    return [f"{out} is written as OpenEXR (its name does not end in .exr)"]
+
+
 def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
     """(input, output) of each file ``depict enhance`` names: ``-o`` is the output of a single
     input, or an existing folder that receives each input's output under the input's name.

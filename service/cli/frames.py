@@ -10,7 +10,7 @@ import numpy as np
 from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
-from service.cli.common import each_file, enhance_targets, read_request, steps, warn
+from service.cli.common import each_file, enhance_targets, exr_name, read_request, steps, warn
 from service.enhance import WriteRequest, enhance
 from service.masks import matte
 
@@ -30,7 +30,7 @@ def cmd_enhance(args: argparse.Namespace) -> int:
 
     def one(src: str, out: str) -> None:
         result = enhance(src, out, compiled, read, write)
-        warn(result["read_warnings"] + result["warnings"])
+        warn(result["read_warnings"] + result["warnings"] + exr_name(out))
         print(f"wrote {out}")
 
     return each_file(pairs, one)

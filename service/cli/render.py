@@ -8,6 +8,7 @@ import time
 
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
+from service.cli.common import exr_name, warn
 from service.scene import RenderRequest, render_to_file
 from service.warmup import warm
 
@@ -24,6 +25,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         shading=args.shading,
     )
     render_to_file(args.mesh, args.output, scene)
+    warn(exr_name(args.output))
     print(f"wrote {args.output} ({args.width}x{args.height})")
     return 0
 
