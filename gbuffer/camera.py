@@ -74,6 +74,11 @@ class Camera:
             m = np.asarray(self.world_to_camera, dtype=np.float64)
             if m.shape != (4, 4) or not np.all(np.isfinite(m)):
                 raise FrameError("camera world_to_camera must be a finite 4x4 matrix (4 rows)")
+            if not abs(np.linalg.det(m[:3, :3])) > 1e-12:
+                raise FrameError(
+                    "camera world_to_camera has no inverse (its rotation part is singular, e.g. "
+                    "all zeros): world-space normals could not be turned into camera space"
+                )
             self.world_to_camera = m
         if self.fov_y_deg is not None and not 0.0 < self.fov_y_deg < 180.0:
             raise FrameError(f"camera fov_y_deg={self.fov_y_deg} is outside (0, 180)")

@@ -510,6 +510,10 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
         close(frame.buffers["normal"], scene.normal, inner(scene), 2.5e-2)
     with pytest.raises(FrameError, match="camera must be a Camera, a dict or a path"):
         read(path, camera=42)  # type: ignore[arg-type]
+    # a matrix of zeros was taken, and every normal turned into camera space became 0
+    zero = {**cam_dict(scene), "world_to_camera": [[0.0] * 4] * 4}
+    with pytest.raises(FrameError, match="world_to_camera has no inverse"):
+        read(path, camera=zero)
 
 
 # -- a real Blender render ------------------------------------------------------------------------
