@@ -13,7 +13,6 @@ from typing import Any, Literal
 
 from gbuffer.camera import Camera
 from gbuffer.io import write
-from gbuffer.limits import Limits
 from ops.shading import parse_light
 
 
@@ -41,7 +40,6 @@ def render_to_file(
     """
     from gbuffer.render import auto_camera, load_mesh, render
 
-    Limits.from_env().check_render(scene.width, scene.height, "render")
     mesh = load_mesh(mesh_path)
     try:
         lights = [parse_light(text) for text in scene.lights] or None

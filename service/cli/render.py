@@ -8,6 +8,7 @@ import time
 
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
+from gbuffer.limits import Limits
 from service.cli.common import exr_name, warn
 from service.scene import RenderRequest, render_to_file
 from service.warmup import warm
@@ -15,6 +16,8 @@ from service.warmup import warm
 
 def cmd_render(args: argparse.Namespace) -> int:
     check_outputs([args.output], [args.mesh, args.camera])
+    # (the service checks its own settings' limits before a render reaches a worker)
+    Limits.from_env().check_render(args.width, args.height, "render")
     scene = RenderRequest(
         width=args.width,
         height=args.height,
