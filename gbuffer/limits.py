@@ -120,14 +120,16 @@ class Limits:
             )
         channels = sum(BUFFERS[name][0] for name in RENDER_BUFFERS)
         size = pixels * channels * 4
-        if self.max_bytes is not None and size > self.max_bytes:
-            raise LimitError(
-                f"{where}: {width}x{height} pixels render {channels} float channels, "
-                f"{size / 2**20:.0f} MiB, over the limit of {self.max_bytes / 2**20:.0f} MiB "
-                "(DEPICT_MAX_DECODED_MB); ask for a smaller size"
-            )
+        if self.max_bytes is not None:
+            if size > self.max_bytes:
+                raise LimitError(
+                    f"{where}: {width}x{height} pixels render {channels} float channels, "
+                    f"{size / 2**20:.0f} MiB, over the limit of {self.max_bytes / 2**20:.0f} "
+                    "MiB (DEPICT_MAX_DECODED_MB); ask for a smaller size"
+                )
+            return
         memory = _physical_memory()
-        if self.max_bytes is None and size * RENDER_WORKING > memory:
+        if size * RENDER_WORKING > memory:
             raise LimitError(
                 f"{where}: {width}x{height} pixels would take about "
                 f"{size * RENDER_WORKING / 2**30:.1f} GiB to render, more than this machine's "
