@@ -19,6 +19,7 @@ or its client went away, it is dropped (409 ``superseded``) before reaching a wo
 from __future__ import annotations
 
 import asyncio
+from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -97,6 +98,11 @@ def store(server: Server) -> FrameStore:
     return server.frame_store()
 
 
+def _naming(frame: StoredFrame) -> AbstractContextManager[None]:
+    """Errors of a job on a kept frame name its upload, not the server's copy of it."""
+    return scrubbed(frame.folder, {frame.source: frame.name})
+
+
 def _answer(frame: StoredFrame, server: Server) -> dict[str, Any]:
     return {
         "id": frame.id,
@@ -108,7 +114,7 @@ def _answer(frame: StoredFrame, server: Server) -> dict[str, Any]:
 
 async def _keep(server: Server, frame: StoredFrame) -> dict[str, Any]:
     """Inspect the received frame on a worker, then keep it."""
-    with scrubbed(frame.folder, {frame.source: frame.name}):
+    with _naming(frame):
         out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read)
     frame.info = out["info"]
     frame.info["file"] = frame.name
@@ -145,7 +151,7 @@ async def upload(
     name = Path(file.filename or "frame.exr").name or "frame.exr"
     with store(server).new_folder() as (frame_id, folder):
         frame = StoredFrame(frame_id, folder, name, fields.request(limits), 0)
-        with scrubbed(folder, {frame.source: name}):
+        with _naming(frame):
             await receive_exr(file, frame.source, limits)
         return await _keep(server, frame)
 
@@ -215,7 +221,7 @@ async def layer_png(
         raise Problem("not-found", f"the frame has no layer {layer!r}; layers: {have}")
     out = work.path / "layer.png"
     factor = jobs.shrink_factor(frame.info["size"], height)
-    with scrubbed(frame.folder, {frame.source: frame.name}):
+    with _naming(frame):
         await server.run(
             "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
         )
@@ -253,7 +259,7 @@ async def preview(
     try:
         folder, work_dir = str(frame.folder), str(work.path)
         args = (folder, factor, steps, frame.read, work_dir, body.exposure, body.score_map)
-        with scrubbed(frame.folder, {frame.source: frame.name}):
+        with _naming(frame):
             return await server.run("preview", jobs.preview_job, *args)
     finally:
         lock.release()
@@ -277,7 +283,7 @@ async def enhanced(
     steps = await forms.pipeline_field(pipeline) or pipelines.DEFAULT
     out = work.path / "out.exr"
     write = WriteRequest(input_name=frame.name)
-    with scrubbed(frame.folder, {frame.source: frame.name}):
+    with _naming(frame):
         await server.run(
             "enhance", worker.enhance_job, str(frame.source), str(out), steps, frame.read, write
         )
