@@ -266,6 +266,7 @@ def test_render_requests(client: Any) -> None:
     for scene, words in [
         ("{", "scene"),
         ('{"width": 0}', "width"),
+        ('{"width": true}', "expected a number, not true or false"),
         ('{"colour": 1}', "colour"),
         ('{"camera": {"fov_y_deg": -1}}', "scene.camera"),
     ]:

@@ -471,6 +471,14 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         ["enhance", "{exr}", "-o", "{out}", "--op", "radiance_scaling", "--set", "gamma=NaN"],
         "gamma=nan: Input should be a finite number",
     ),
+    "true for a number": (  # (pydantic read it as 1: gamma = 1)
+        ["enhance", "{exr}", "-o", "{out}", "--op", "light_alignment", "--set", "gamma=true"],
+        "light_alignment: gamma=True: expected a number, not true or false",
+    ),
+    "false among numbers": (
+        ["enhance", "{exr}", "-o", "{out}", "--op", "light_alignment", "--set", "sigmas=0,false"],
+        "sigmas=[0, False]: expected a number, not true or false",
+    ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
     "empty plot": (["compare", "{exr}", "--plot", ""], "--plot: is empty"),
     "a light that is not one": (

@@ -797,3 +797,24 @@ def test_shade_directions_validation(
 def test_shade_directions_rejects_a_bad_normal_shape(ball: analytic.Scene) -> None:
     with pytest.raises(ValueError, match="normal"):
         shade_directions(ball.normal[..., :2], np.float32([0, 0, 1]), positions(ball), LIGHTS)
+
+
+@pytest.mark.parametrize("value", [True, False, [True], [0.5, False]])
+def test_no_parameter_reads_true_or_false_as_a_number(value: Any) -> None:
+    """Pydantic reads true as 1 and false as 0 for a number: every operator's number parameters
+    refuse them (``--set gamma=true`` ran with γ = 1), its switches still take them."""
+    from pydantic import ValidationError
+
+    from service.registry import REGISTRY
+
+    refused = 0
+    for name, op in REGISTRY.items():
+        for field in op.params.model_fields:
+            try:
+                got = getattr(op.params(**{field: value}), field)
+            except ValidationError as exc:
+                refused += "expected a number, not true or false" in str(exc)
+                continue
+            items = got if isinstance(got, list) else [got]  # taken: no number made of it
+            assert not any(type(v) in (int, float) for v in items), (name, field, got)
+    assert refused > (20 if isinstance(value, bool) else 5)

@@ -12,15 +12,16 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gbuffer.frame import Frame
 from service.errors import PipelineError
 from service.masks import MASK_SYNTAX, blend_layers, matte
 from service.masks import parse as parse_mask
+from service.numbers import NumbersModel
 
 
-class Params(BaseModel):
+class Params(NumbersModel):
     """Base of every operator's parameters: unknown keys are refused, values validated.
 
     An operator may name sets of parameter values in ``PRESETS`` (e.g. ``"paper"``: the values
@@ -205,5 +206,7 @@ def describe_validation(op: Operator, exc: ValidationError) -> str:
             fields[str(err["loc"][0])].description if err["loc"] and err["loc"][0] in fields else ""
         )
         hint = f" ({desc})" if desc else ""
-        problems.append(f"{op.name}: {loc}={value!r}: {err['msg']}{hint}")
+        # a validator's own words, without pydantic's "Value error, " before them
+        msg = str(err["ctx"]["error"]) if err["type"] == "value_error" else err["msg"]
+        problems.append(f"{op.name}: {loc}={value!r}: {msg}{hint}")
     return "; ".join(problems)

@@ -39,6 +39,7 @@ from service.http.deps import Server, Work
 from service.http.routes.analysis import CameraField, MapField, NormalSpace, Preset
 from service.http.routes.frames import COMMON, binary
 from service.http.uploads import EXR_MEDIA_TYPE, receive_exr, scrubbed
+from service.numbers import NumbersModel
 from service.problems import Problem, openapi_responses
 from service.scene import RenderRequest
 from service.viewer import work as jobs
@@ -62,7 +63,7 @@ class FrameInfo(BaseModel):
     expires_s: float = Field(description="seconds the frame is kept after its last use")
 
 
-class PreviewRequest(BaseModel):
+class PreviewRequest(NumbersModel):
     model_config = ConfigDict(extra="forbid")
     pipeline: dict[str, Any] | list[Any] = Field(
         default_factory=lambda: {"steps": [{"op": "radiance_scaling"}]},

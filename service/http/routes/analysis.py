@@ -17,6 +17,7 @@ from service.http import forms
 from service.http.deps import Server, Work
 from service.http.routes.frames import COMMON
 from service.http.uploads import mesh_suffix, receive_exr, save, scrubbed
+from service.numbers import NumbersModel
 from service.problems import openapi_responses
 from service.registry import get
 
@@ -67,7 +68,7 @@ class Comparison(BaseModel):
     sheet_png: str | None = Field(None, description="the contact sheet, base64 PNG (sheet=true)")
 
 
-class CompareOptions(BaseModel):
+class CompareOptions(NumbersModel):
     """The ``options`` form field of ``POST /v1/compare`` (JSON); unknown keys are refused."""
 
     model_config = ConfigDict(extra="forbid")

@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, File, Form, Query, UploadFile
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import ConfigDict, Field, ValidationError
 from starlette.responses import FileResponse, Response
 
 from gbuffer.io import DEFAULT_LAYOUT
@@ -18,6 +18,7 @@ from service.enhance import WriteRequest
 from service.http import forms, worker
 from service.http.deps import Server, Work
 from service.http.uploads import EXR_MEDIA_TYPE, mesh_suffix, receive_exr, save, scrubbed
+from service.numbers import NumbersModel
 from service.output import LAYER_PATTERN
 from service.problems import openapi_responses
 from service.scene import RenderRequest
@@ -37,7 +38,7 @@ def binary(description: str, *media_types: str) -> dict[int | str, dict[str, Any
     }
 
 
-class Scene(BaseModel):
+class Scene(NumbersModel):
     """What to render: the ``scene`` form field of ``POST /v1/render`` (JSON)."""
 
     model_config = ConfigDict(extra="forbid")
