@@ -405,6 +405,33 @@ def test_truncated_exr_400(server: Server, files: dict[str, Path]) -> None:
     assert "/tmp" not in body["detail"]  # the server's paths stay private
 
 
+def test_multipart_cut_before_its_close_delimiter_400(
+    server: Server, files: dict[str, Path]
+) -> None:
+    """A form whose body ends before ``--BOUNDARY--`` is a cut-short upload (it was a 422 "file:
+    Field required"); a whole one sent in chunks that split the delimiter is taken."""
+    bound = "cut-short-test"
+    head = (
+        f"--{bound}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"f.exr\"\r\n"
+        "Content-Type: image/x-exr\r\n\r\n"
+    ).encode()
+    whole = head + files["canonical"].read_bytes() + f"\r\n--{bound}--\r\n".encode()
+    headers = {**AUTH, "Content-Type": f"multipart/form-data; boundary={bound}"}
+
+    def chunks(body: bytes) -> Iterator[bytes]:  # the last 40 bytes 3 at a time
+        yield body[:-40]
+        yield from (body[i : i + 3] for i in range(len(body) - 40, len(body), 3))
+
+    for body, status in [(whole[:-20], 400), (whole[: len(head) + 100], 400), (whole, 200)]:
+        response = httpx.post(
+            f"{server.url}/v1/enhance", content=chunks(body), headers=headers, timeout=60
+        )
+        if status == 400:
+            assert_problem(response, 400, "the upload was cut short")
+        else:
+            assert response.status_code == 200, response.text
+
+
 def test_huge_header_413(server: Server, files: dict[str, Path]) -> None:
     data = huge_header(files["canonical"].read_bytes())
     assert_problem(post_enhance(server, data), 413, "DEPICT_MAX_PIXELS")

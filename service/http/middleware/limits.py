@@ -1,13 +1,15 @@
 """What a request may be, checked as it arrives: multipart uploads on the upload routes (415),
 a body within ``DEPICT_MAX_UPLOAD_MB`` (413, from ``Content-Length`` before any byte is read,
-else as the bytes arrive) and received within ``DEPICT_UPLOAD_TIMEOUT_S`` (408, the connection
-closed after)."""
+else as the bytes arrive), received within ``DEPICT_UPLOAD_TIMEOUT_S`` (408, the connection
+closed after) and, for a multipart body, whole (400 when it ends before its close delimiter: the
+form parser would take the cut-off part for a missing field)."""
 
 from __future__ import annotations
 
 import time
 
 import anyio
+from python_multipart.multipart import parse_options_header
 from starlette.exceptions import HTTPException
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
@@ -76,10 +78,11 @@ class Limits:
                 await _drain(receive)
             await problem.response(scope["path"], REQUEST_ID.get())(scope, receive, send)
             return
-        await self.app(scope, self._bounded(receive), send)
+        await self.app(scope, self._bounded(receive, _CloseDelimiter.of(scope)), send)
 
-    def _bounded(self, receive: Receive) -> Receive:
-        """``receive`` raising 408 past the upload deadline and 413 past the body limit."""
+    def _bounded(self, receive: Receive, close: _CloseDelimiter | None) -> Receive:
+        """``receive`` raising 408 past the upload deadline, 413 past the body limit and, with
+        ``close``, 400 when a multipart body ends before its close delimiter."""
         deadline = time.perf_counter() + self.settings.upload_timeout_s
         limit = self.settings.max_upload_bytes
         received = 0
@@ -94,13 +97,52 @@ class Limits:
             if waited.cancelled_caught:  # a stalled or trickling upload: answer, then close
                 raise HTTPException(408, self._too_slow(), headers={"Connection": "close"})
             if message["type"] == "http.request":
-                received += len(message.get("body", b""))
+                chunk = message.get("body", b"")
+                received += len(chunk)
                 if received > limit:
                     raise HTTPException(413, self._too_large(None))
                 body_done = not message.get("more_body", False)
+                if close is not None:
+                    close.feed(chunk)
+                    if body_done and not close.seen:
+                        raise HTTPException(400, _CUT_SHORT)
             return message
 
         return bounded_receive
+
+
+_CUT_SHORT = (
+    "the multipart body ends before its close delimiter (--BOUNDARY--): the upload was cut "
+    "short; send it again"
+)
+
+
+class _CloseDelimiter:
+    """Whether a multipart body's close delimiter ``--BOUNDARY--`` has gone by, chunk by chunk
+    (its bytes may straddle two chunks)."""
+
+    def __init__(self, boundary: bytes) -> None:
+        self.mark = b"--" + boundary + b"--"
+        self.tail = b""
+        self.seen = False
+
+    @classmethod
+    def of(cls, scope: Scope) -> _CloseDelimiter | None:
+        """The tracker of an upload route's multipart body with a boundary, else None."""
+        if scope["method"] != "POST" or scope["path"] not in UPLOAD_PATHS:
+            return None
+        ctype, options = parse_options_header(request_headers(scope).get("content-type", ""))
+        boundary = options.get(b"boundary")
+        if ctype != b"multipart/form-data" or not boundary:
+            return None  # (the form parser answers a missing boundary itself)
+        return cls(boundary)
+
+    def feed(self, chunk: bytes) -> None:
+        if self.seen or not chunk:
+            return
+        keep = len(self.mark) - 1
+        self.seen = self.mark in self.tail + chunk[:keep] or self.mark in chunk
+        self.tail = (self.tail + chunk)[-keep:] if len(chunk) < keep else chunk[-keep:]
 
 
 async def _drain(receive: Receive) -> None:
