@@ -58,6 +58,24 @@ def _from_point_cloud(loaded: Any, path: Path) -> trimesh.Trimesh | None:
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
 
 
+def _unusable_triangles(path: Path) -> str:
+    """Why a file whose reading left no triangles had some: the triangles trimesh dropped for
+    vertices with NaN or infinite coordinates ("" when it had none, or cannot say)."""
+    try:
+        raw = trimesh.load(str(path), process=False)
+        meshes = list(raw.geometry.values()) if isinstance(raw, trimesh.Scene) else [raw]
+        faces = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in meshes if len(m.faces)]
+    except Exception:  # (read once already: this only adds to the message)
+        return ""
+    if not faces:
+        return ""
+    bad = sum(int((~np.isfinite(f).all(axis=(1, 2))).sum()) for f in faces)
+    total = sum(len(f) for f in faces)
+    if not bad:
+        return ""
+    return f" with finite vertices ({bad} of {total} have NaN or infinite coordinates)"
+
+
 def load_mesh(path: str | Path) -> trimesh.Trimesh:
     """Read a triangle mesh (OBJ, PLY incl. triangle strips, STL, GLB/glTF, OFF).
 
@@ -85,7 +103,7 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     elif isinstance(loaded, trimesh.PointCloud):
         mesh = _from_point_cloud(loaded, path)
     if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
-        raise FrameError(f"mesh file {path} holds no triangles")
+        raise FrameError(f"mesh file {path} holds no triangles{_unusable_triangles(path)}")
     if not np.all(np.isfinite(mesh.vertices)):
         raise FrameError(f"mesh file {path} has non-finite vertex coordinates")
     mesh.metadata[FILE_NORMALS] = "vertex_normals" in mesh._cache  # read from the file

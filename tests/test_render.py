@@ -343,6 +343,8 @@ def test_load_mesh_ply_triangle_strips(tmp_path: Path) -> None:
         (None, "missing.obj", "does not exist"),
         ("", "empty.obj", "no triangles"),
         ("v 0 0 0\nv 1 0 0\n", "points.obj", "no triangles"),
+        ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "nan.obj", r"finite vertices \(1 of 1 have"),
+        ("v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\nf 1 2 3\n", "inf.obj", r"\(2 of 2 have NaN or"),
         ("garbage \x00\x01 not a mesh", "bad.glb", "cannot read"),
         ("solid x\n", "x.fbx", "suffix"),
     ],
