@@ -64,7 +64,8 @@ def _unusable_triangles(path: Path) -> str:
     try:
         raw = trimesh.load(str(path), process=False)
         meshes = list(raw.geometry.values()) if isinstance(raw, trimesh.Scene) else [raw]
-        faces = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in meshes if len(m.faces)]
+        tris = [m for m in meshes if isinstance(m, trimesh.Trimesh) and len(m.faces)]
+        faces = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in tris]
     except Exception:  # (read once already: this only adds to the message)
         return ""
     if not faces:

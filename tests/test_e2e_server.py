@@ -412,7 +412,7 @@ def test_multipart_cut_before_its_close_delimiter_400(
     Field required"); a whole one sent in chunks that split the delimiter is taken."""
     bound = "cut-short-test"
     head = (
-        f"--{bound}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"f.exr\"\r\n"
+        f'--{bound}\r\nContent-Disposition: form-data; name="file"; filename="f.exr"\r\n'
         "Content-Type: image/x-exr\r\n\r\n"
     ).encode()
     whole = head + files["canonical"].read_bytes() + f"\r\n--{bound}--\r\n".encode()
