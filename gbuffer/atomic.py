@@ -94,10 +94,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     refused). The temporary name keeps the suffix of ``path`` (libraries choose formats by
     suffix). The file gets the mode of the file it replaces, else the usual ``0o666 & ~umask``
     (not the private 0600 of a temporary file). An :class:`OSError` (a folder that cannot be
-    written, a full disk) becomes an :class:`OutputError` naming ``path``.
+    written, a full disk) becomes an :class:`OutputError` naming ``path``. Folders made for the
+    output are removed again when it is not written (those still empty).
     """
     target = output_target(path)
     tmp_path: Path | None = None
+    made = _missing_folders(target.parent)
+    written = False
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
         while True:  # (named before it exists: a signal as it is made cannot orphan it)
@@ -117,12 +120,26 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         os.chmod(tmp_path, mode)
         yield tmp_path
         os.replace(tmp_path, target)
+        written = True
     except OSError as exc:
         raise OutputError(f"cannot write {path}: {exc.strerror or exc}") from None
     finally:
         if tmp_path is not None:
             with contextlib.suppress(OSError):  # (a read-only folder: EROFS even when missing)
                 tmp_path.unlink(missing_ok=True)
+        if not written:
+            for folder in made:  # deepest first; one another run wrote into stays
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    """``folder`` and those of its parents that do not exist, deepest first."""
+    missing = []
+    while not folder.exists() and folder.parent != folder:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
 
 
 def partial_files(paths: Iterable[str | Path] | str | Path) -> list[Path]:

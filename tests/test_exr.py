@@ -298,3 +298,28 @@ def test_written_files_get_the_usual_permissions(tmp_path: Path) -> None:
     with atomic_path(target) as tmp:
         tmp.write_bytes(b"y")
     assert target.stat().st_mode & 0o777 == 0o640
+
+
+def test_an_output_not_written_leaves_no_folders_it_made(tmp_path: Path) -> None:
+    """Folders made for an output are removed when it fails (they stayed, empty); a folder that
+    was there, or that holds something, stays."""
+    import pytest
+
+    from gbuffer.atomic import atomic_path
+    from gbuffer.errors import OutputError
+
+    (tmp_path / "kept").mkdir()
+    with pytest.raises(RuntimeError), atomic_path(tmp_path / "kept/new/deeper/out.exr"):
+        raise RuntimeError("the encoder failed")
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["kept"]
+    long = "a" * 245  # the name fits, its temporary name (.NAME.XXXXXXXX.tmp.exr) does not
+    with pytest.raises(OutputError, match="cannot write"), atomic_path(tmp_path / f"n/{long}.exr"):
+        pass
+    assert not (tmp_path / "n").exists()
+    with pytest.raises(RuntimeError), atomic_path(tmp_path / "a/b/out.exr") as tmp:
+        (tmp_path / "a/other.txt").write_text("another run's file")
+        raise RuntimeError(tmp.name)
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["other.txt"]
+    with atomic_path(tmp_path / "x/y/out.bin") as tmp:
+        tmp.write_bytes(b"x")
+    assert (tmp_path / "x/y/out.bin").read_bytes() == b"x"
