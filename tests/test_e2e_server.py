@@ -432,6 +432,38 @@ def test_multipart_cut_before_its_close_delimiter_400(
             assert response.status_code == 200, response.text
 
 
+@pytest.mark.parametrize(
+    "request_bytes",
+    [
+        b"GARBAGE\r\n\r\n",
+        b"POST /v1/enhance HTTP/1.1\r\nHost: x\r\nContent-Length: -5\r\n\r\n",
+        b"POST /v1/enhance HTTP/1.1\r\nHost: x\r\nTransfer-Encoding: chunked\r\n\r\nzz\r\n",
+        b"\x16\x03\x01\x02\x00\x01\x00\x01\xfc\x03\x03" + bytes(32),  # a TLS hello
+    ],
+    ids=["request line", "negative length", "chunk size", "TLS"],
+)
+def test_malformed_http_400_problem(server: Server, request_bytes: bytes) -> None:
+    """What uvicorn cannot parse is a 400 problem like every other error (it was plain text), and
+    an answer the app had begun from the headers alone (a 401) logs no traceback (three did)."""
+    import socket
+
+    logged = len(server.logs())
+    host, port = server.url.removeprefix("http://").split(":")
+    with socket.create_connection((host, int(port)), timeout=30) as sock:
+        sock.sendall(request_bytes)
+        answer = b""
+        while chunk := sock.recv(65536):
+            answer += chunk
+    head, _, body = answer.partition(b"\r\n\r\n")
+    assert head.startswith(b"HTTP/1.1 400 "), answer
+    assert b"content-type: application/problem+json" in head.lower(), head
+    problem = json.loads(body)
+    assert problem["status"] == 400 and problem["type"] == "urn:depict:problem:bad-request"
+    assert problem["detail"].startswith("malformed HTTP request: ")
+    time.sleep(0.5)  # (the app's own answer is logged after the 400)
+    assert "Traceback" not in server.logs()[logged:]
+
+
 def test_huge_header_413(server: Server, files: dict[str, Path]) -> None:
     data = huge_header(files["canonical"].read_bytes())
     assert_problem(post_enhance(server, data), 413, "DEPICT_MAX_PIXELS")

@@ -1,27 +1,37 @@
 """``depict serve``: the app on uvicorn, with a guard against clients that never finish
-sending their request headers."""
+sending their request headers, and malformed requests answered as problems."""
 
 from __future__ import annotations
 
+import json
 import logging
 from typing import Any
 
+import h11
 import uvicorn
 from uvicorn.protocols.http.h11_impl import H11Protocol
 
 from service.http.app import create_app
 from service.logs import configure_logging
+from service.problems import MEDIA_TYPE, Problem
 from service.settings import Settings
 
 log = logging.getLogger("depict.http")
 
 
-def slow_client_guard(timeout_s: float) -> type:
+_MALFORMED = (
+    "malformed HTTP request: its request line, a header or the framing of its body "
+    "(Content-Length, chunk sizes) could not be parsed"
+)
+
+
+def guarded_protocol(timeout_s: float) -> type:
     """uvicorn's h11 protocol, closing a connection whose request headers have not all arrived
     ``timeout_s`` after it opened or after its previous answer (the body is timed by
-    :mod:`service.http.middleware.limits`)."""
+    :mod:`service.http.middleware.limits`), and answering a request it cannot parse (a bad
+    request line, header or chunk size) with a 400 problem instead of plain text."""
 
-    class SlowClientGuard(H11Protocol):
+    class GuardedProtocol(H11Protocol):
         _guard: Any = None
 
         def connection_made(self, transport: Any) -> None:
@@ -48,7 +58,30 @@ def slow_client_guard(timeout_s: float) -> type:
                 log.info("closed a connection whose request did not arrive in time")
                 self.transport.close()
 
-    return SlowClientGuard
+        def send_400_response(self, msg: str) -> None:
+            cycle = self.cycle
+            if cycle is not None and not cycle.response_complete:
+                # the app may be answering this request already (e.g. a 401 from the headers
+                # alone): its answer is dropped instead of failing on a closed connection
+                cycle.disconnected = True
+                if cycle.response_started:  # (too late for another answer)
+                    self.transport.close()
+                    return
+            body = json.dumps(Problem("bad-request", _MALFORMED).body()).encode()
+            headers = [
+                (b"content-type", MEDIA_TYPE.encode()),
+                (b"content-length", str(len(body)).encode()),
+                (b"connection", b"close"),
+            ]
+            for event in (
+                h11.Response(status_code=400, headers=headers, reason=b"Bad Request"),
+                h11.Data(data=body),
+                h11.EndOfMessage(),
+            ):
+                self.transport.write(self.conn.send(event))
+            self.transport.close()
+
+    return GuardedProtocol
 
 
 def serve(settings: Settings | None = None) -> None:
@@ -63,7 +96,7 @@ def serve(settings: Settings | None = None) -> None:
         create_app(settings),
         host=settings.host,
         port=settings.port,
-        http=slow_client_guard(settings.upload_timeout_s),
+        http=guarded_protocol(settings.upload_timeout_s),
         log_config=None,
         access_log=False,
         # (typed int, given to asyncio.wait_for: seconds as a float are what it takes)
