@@ -4,6 +4,7 @@ and never destroy what an output path names: an input, a special file, a symboli
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import secrets
@@ -102,17 +103,25 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     made = _missing_folders(target.parent)
     written = False
     try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        while True:  # (named before it exists: a signal as it is made cannot orphan it)
+        for attempt in range(_ATTEMPTS):
+            target.parent.mkdir(parents=True, exist_ok=True)
+            # (named before it exists: a signal as it is made cannot orphan it)
             tmp_path = target.parent / f".{target.stem}.{secrets.token_hex(4)}.tmp{target.suffix}"
             try:  # (named as :func:`partial_files` finds it)
                 os.close(os.open(tmp_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
                 break
             except FileExistsError:  # (someone else's: never ours to remove)
                 tmp_path = None
+            except FileNotFoundError:  # (a new folder that another write failing removed)
+                tmp_path = None
+                if attempt == _ATTEMPTS - 1:
+                    raise
             except OSError:  # (not made: nothing to remove)
                 tmp_path = None
                 raise
+        else:
+            raise FileExistsError(errno.EEXIST, "no free temporary name beside it")
+        assert tmp_path is not None
         try:
             mode = target.stat().st_mode & 0o777
         except OSError:
@@ -128,9 +137,13 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
             with contextlib.suppress(OSError):  # (a read-only folder: EROFS even when missing)
                 tmp_path.unlink(missing_ok=True)
         if not written:
-            for folder in made:  # deepest first; one another run wrote into stays
+            for folder in made:  # deepest first; one something else wrote into is not empty
                 with contextlib.suppress(OSError):
                     folder.rmdir()
+
+
+#: Tries at a free temporary name (and at the folder, made again if a concurrent write removed it).
+_ATTEMPTS = 100
 
 
 def _missing_folders(folder: Path) -> list[Path]:
