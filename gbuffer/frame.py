@@ -76,6 +76,30 @@ RENDER_BUFFERS: tuple[str, ...] = (
 LOBES: tuple[str, ...] = ("ambient", "diffuse", "specular", "transmission")
 
 
+def _on_surface(depth: np.ndarray) -> np.ndarray:
+    """Where a depth is a surface's: finite and positive (0 or below is no surface, as files are
+    read)."""
+    return np.isfinite(depth) & (depth > 0)
+
+
+def _check_buffer(name: str, buffer: Any) -> None:
+    """ValueError naming ``name`` unless ``buffer`` is an array of real numbers shaped as
+    :data:`BUFFERS` says ((H, W) for one component, (H, W, C) for C; any of them for others)."""
+    if not isinstance(buffer, np.ndarray) or buffer.dtype.kind not in "biuf":
+        kind = buffer.dtype if isinstance(buffer, np.ndarray) else type(buffer).__name__
+        raise ValueError(f"frame buffer {name!r} must be an array of real numbers, got {kind}")
+    components = BUFFERS.get(name, (0, ""))[0]
+    if components == 1:
+        right = buffer.ndim == 2
+    elif components:
+        right = buffer.ndim == 3 and buffer.shape[2] == components
+    else:
+        right = buffer.ndim in (2, 3)
+    if not right:
+        want = {1: "(H, W)", 0: "(H, W) or (H, W, C)"}.get(components, f"(H, W, {components})")
+        raise ValueError(f"frame buffer {name!r} must be {want}, got {buffer.shape}")
+
+
 @dataclass
 class Passthrough:
     """The file as read, for a lossless write-back.
@@ -130,12 +154,22 @@ class Frame:
     colorspace: ColorSpace = LINEAR_REC709
 
     def __post_init__(self) -> None:
+        for name, buffer in self.buffers.items():
+            _check_buffer(name, buffer)
         shapes = {b.shape[:2] for b in self.buffers.values()}
         if len(shapes) > 1:
             raise ValueError(f"frame buffers have different sizes: {sorted(shapes)}")
         if self.display_size is None:
             h, w = self.shape
             self.display_size = (w, h)
+        elif not (
+            len(self.display_size) == 2
+            and all(isinstance(v, int | np.integer) and v > 0 for v in self.display_size)
+        ):
+            raise ValueError(
+                f"display_size must be (width, height), two whole numbers > 0; "
+                f"got {self.display_size!r}"
+            )
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -183,14 +217,22 @@ class Frame:
 
     @property
     def mask(self) -> np.ndarray:
-        """(H, W) float32 in [0, 1]: surface presence (coverage, else finite depth, else alpha)."""
+        """(H, W) float32 in [0, 1]: surface presence (coverage, else finite positive depth, else
+        alpha)."""
         if "coverage" in self.buffers:
             return self.buffers["coverage"]
         if "depth" in self.buffers:
-            return np.isfinite(self.buffers["depth"]).astype(np.float32)
+            return _on_surface(self.buffers["depth"]).astype(np.float32)
         if "alpha" in self.buffers:
             return np.clip(self.buffers["alpha"], 0.0, 1.0)
         return np.ones(self.shape, np.float32)
+
+    def covered(self) -> np.ndarray:
+        """(H, W) bool: the pixels with a surface, ``mask > 0`` (straight from the depth when the
+        mask comes from it: no float mask to build and compare)."""
+        if "coverage" not in self.buffers and "depth" in self.buffers:
+            return _on_surface(self.buffers["depth"])
+        return np.asarray(self.mask > 0)
 
     def view_vectors(self) -> np.ndarray:
         """(H, W, 3) unit vectors towards the eye (orthographic default without a camera)."""

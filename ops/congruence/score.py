@@ -193,6 +193,8 @@ def congruence(
     if not np.isfinite(cv2.sumElems(lum0)[0] + cv2.sumElems(dep0)[0]):
         if np.isnan(dep).any():
             raise ValueError("depth contains NaN (use +inf for background)")
+        if np.isneginf(dep).any():
+            raise ValueError("depth contains -inf: depth is positive, +inf on background")
         raise ValueError("image contains NaN or infinite values")
     lref = _brightness(lum0, cov0)
 

@@ -169,7 +169,7 @@ def _beauty(shade: Callable[[Block], np.ndarray], frame: Frame, crop: bool) -> n
         styled = _rgb(shade(_FULL))
         return np.asarray(cv2.cvtColor(styled, cv2.COLOR_GRAY2RGB)) if styled.ndim == 2 else styled
     h, w = frame.shape
-    covered = _covered(frame)
+    covered = frame.covered()
     if base.shape != (h, w, 3) or base.dtype != np.float32:
         styled = _rgb(shade(_FULL))
         img = np.repeat(styled[..., None], 3, axis=2) if styled.ndim == 2 else styled
@@ -197,14 +197,6 @@ def _beauty(shade: Callable[[Block], np.ndarray], frame: Frame, crop: bool) -> n
 
     run_strips(h, strip, _COMPOSE_ROWS)
     return out
-
-
-def _covered(frame: Frame) -> np.ndarray:
-    """``frame.mask > 0`` as a bool (H, W), straight from the depth when the mask comes from it
-    (np.isfinite: no float mask to build and compare)."""
-    if "coverage" not in frame.buffers and "depth" in frame.buffers:
-        return np.isfinite(frame.buffers["depth"])
-    return np.asarray(frame.mask > 0)
 
 
 def _rgb(styled: np.ndarray) -> np.ndarray:

@@ -1,0 +1,71 @@
+"""What a :class:`gbuffer.frame.Frame` built in Python accepts (the readers and the renderer build
+right ones; a script's arrays may be anything), and which of its pixels hold a surface."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+
+import numpy as np
+import pytest
+
+from gbuffer.frame import Frame
+from service import pipeline
+from tests.exr_factory import make_scene
+
+
+def sphere() -> dict[str, np.ndarray]:
+    s = make_scene(24, 32)
+    names = ("beauty", "normal", "depth", "albedo", "diffuse", "specular")
+    return {n: np.asarray(getattr(s, n), np.float32) for n in names}
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "words"),
+    [
+        ("beauty", lambda b: b[..., 0].copy(), "'beauty' must be (H, W, 3), got (24, 32)"),
+        ("beauty", lambda b: np.dstack([b, b[..., :1]]), "must be (H, W, 3), got (24, 32, 4)"),
+        ("depth", lambda d: np.dstack([d] * 3), "'depth' must be (H, W), got (24, 32, 3)"),
+        ("depth", lambda d: d.astype(np.complex64), "real numbers, got complex64"),
+        ("normal", lambda n: n.astype(object), "'normal' must be an array of real numbers"),
+        ("depth", lambda d: d.tolist(), "real numbers, got list"),
+        ("mine", lambda _: np.zeros((24, 32, 2, 2)), "'mine' must be (H, W) or (H, W, C)"),
+    ],
+)
+def test_a_buffer_of_the_wrong_kind_is_named(name: str, value: Any, words: str) -> None:
+    """(Wrong channel counts went on to NumPy's broadcasting errors inside the operators,
+    complex values lost their imaginary part with a warning.)"""
+    buffers = sphere()
+    buffers[name] = value(buffers.get(name, buffers["depth"]))
+    with pytest.raises(ValueError, match=re.escape(words)):
+        Frame(buffers=buffers)
+
+
+@pytest.mark.parametrize("size", [(0, 0), (32, -24), (32.5, 24), (32,)])
+def test_a_display_window_of_no_size_is_refused(size: Any) -> None:
+    """(0, 0) divided by zero in five operators and gave NaN in Light Alignment."""
+    with pytest.raises(ValueError, match=r"display_size must be \(width, height\), two whole"):
+        Frame(buffers=sphere(), display_size=size)
+
+
+def test_depth_of_zero_or_below_is_no_surface() -> None:
+    """As files are read: a script's negative depth covered its pixels, and Radiance Scaling and
+    unsharp masking failed on a negative "sigma_scene", Apparent Relief shaded them."""
+    buffers = sphere()
+    on = np.isfinite(buffers["depth"])
+    assert on.any() and not on.all()
+    depth = np.where(on, -buffers["depth"], np.inf).astype(np.float32)
+    depth[0, 0] = 0.0
+    frame = Frame(buffers={**buffers, "depth": depth})
+    assert not frame.covered().any() and not (frame.mask > 0).any()
+    assert Frame(buffers=buffers).covered().sum() == on.sum()
+    for op in ("radiance_scaling", "unsharp_masking", "apparent_relief", "light_alignment"):
+        out = pipeline.run(frame, [{"op": op}])
+        assert np.array_equal(out.buffers["beauty"], frame.buffers["beauty"]), op
+
+
+def test_a_depth_of_minus_infinity_is_named_by_the_score() -> None:
+    buffers = sphere()
+    depth = -buffers["depth"]  # (the background's +inf becomes -inf)
+    with pytest.raises(Exception, match="depth contains -inf: depth is positive"):
+        pipeline.run(Frame(buffers={**buffers, "depth": depth}), [{"op": "congruence"}])
