@@ -598,3 +598,36 @@ def test_depth_unsharp_masking_leaves_the_far_edge_of_a_floor_alone() -> None:
     out = depth_unsharp_masking(img, depth, mask, amount=2.0, sigma=0.05, white=1.0)
     change = _lightness(out) - _lightness(img)
     assert np.abs(change[24:-16]).max() < 1e-2  # the whole floor, its far edge included
+
+
+@pytest.mark.parametrize("background", [(0.6, 0.0, 0.8), (5.0, -3.0, 0.0), "noise"])
+def test_normals_off_the_surface_do_not_matter(background: tuple[float, ...] | str) -> None:
+    """Normals where there is no surface may be anything: they were averaged into the cells at
+    the surface's rim, and a unit background normal made every covered pixel NaN ("gain_map
+    must be finite everywhere" from unsharp_masking, which was given no gain map)."""
+    h, w = 32, 40
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+    x, y = (x + 0.5) / w * 2 - 1, (y + 0.5) / h * 2 - 1
+    inside = x**2 + y**2 < 0.9
+    z = np.sqrt(np.clip(1.2 - x**2 - y**2, 0.05, None))
+    normal = np.dstack([x, y, z]) / np.sqrt(x**2 + y**2 + z**2)[..., None]
+    normal[~inside] = 0.0
+    depth = np.where(inside, 4.0 - z, np.inf).astype(np.float32)
+    ps = np.where(inside, 0.07 + 0.01 * np.abs(x), np.inf).astype(np.float32)
+    beauty = np.where(inside[..., None], 0.3 + 0.2 * normal[..., :1], 0.0).repeat(3, -1)
+    other = normal.copy()
+    rng = np.random.default_rng(1)
+    other[~inside] = (
+        rng.normal(0, 3, (int((~inside).sum()), 3)) if background == "noise" else background
+    )
+    mask = inside.astype(np.float32)
+    args = {"sigma_scene": 0.05, "pixel_size": ps}
+    results = []
+    for n in (normal, other):
+        n = n.astype(np.float32)
+        blur = surface_blur(beauty[..., 0].astype(np.float32), depth, n, mask, **args)
+        out = unsharp_masking(beauty.astype(np.float32), depth, n, mask, amount=2.0, **args)
+        assert np.isfinite(blur).all() and np.isfinite(out).all()
+        results.append((blur, out))
+    for a, b in zip(*results, strict=True):
+        assert np.array_equal(a, b)

@@ -189,6 +189,26 @@ def masked_rows(src: Array, valid: Array, fill: float, out: Array) -> None:
     _masked_rows(c(src), c(valid), np.float32(fill), out)
 
 
+def masked_vectors(src: Array, valid: Array) -> Array:
+    """(h, w, 3) rows ``src`` where ``valid`` (uint8), else 0: normals off the surface, which
+    may be anything, kept out of the cells' averages."""
+    c = np.ascontiguousarray
+    out = np.empty(src.shape, np.float32)
+    _masked_vector_rows(c(src), c(valid), out)
+    return out
+
+
+@exact_kernel
+def _masked_vector_rows(src, valid, out):  # type: ignore[no-untyped-def]
+    for i in range(out.shape[0]):
+        s, v, o = src[i], valid[i], out[i]
+        for j in range(o.shape[0]):
+            keep = v[j] != 0
+            o[j, 0] = s[j, 0] if keep else _F0
+            o[j, 1] = s[j, 1] if keep else _F0
+            o[j, 2] = s[j, 2] if keep else _F0
+
+
 def cell_coverage(valid: Array, cov: Array, inv: Array) -> None:
     """The first level's coverage of full-resolution rows ``valid`` (uint8 0/1): each cell's
     share of valid pixels, and its inverse (floored at 1e-12)."""

@@ -16,7 +16,13 @@ from ops import color
 from ops.parallel import STRIP_PIXELS
 from ops.pyramid.reduce import halve
 from ops.unsharp._common import _MIN_LEVEL_SIDE, Array
-from ops.unsharp._reduce import cell_average, cell_coverage, cell_planes, masked_rows
+from ops.unsharp._reduce import (
+    cell_average,
+    cell_coverage,
+    cell_planes,
+    masked_rows,
+    masked_vectors,
+)
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -273,9 +279,9 @@ def _surface(
         if lps is not None and lps1 is not None:
             cell_average(lps[r], None, inv, lps1[c])
         if normal is not None and nrm1 is not None:
-            # normals off the surface may be anything (0, NaN): average them in and zero the
-            # NaN; a partial cell's sum is renormalised by its coverage
-            n3 = halve(normal[r])
+            # normals off the surface may be anything (0, NaN, a sky's): 0 there, so a partial
+            # cell's sum renormalised by its coverage is its surface's (NaN on the surface: 0)
+            n3 = halve(masked_vectors(normal[r], v))
             _cv.patchNaNs(n3, 0.0)
             cell_planes(n3, inv, [n[c] for n in nrm1])
 
