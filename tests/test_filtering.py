@@ -204,3 +204,35 @@ def test_bad_shapes_raise() -> None:
         multiscale_normals(s.normal, s.depth[:16], s.mask)
     with pytest.raises(ValueError, match="mask"):
         multiscale_normals(s.normal, s.depth, s.mask[:16])
+
+
+def test_the_widest_valid_scales_fit_in_memory() -> None:
+    """σ_7 = 1 · H · 4⁶ (every parameter at its bound) on a 32×40 frame: the coarsest level is a
+    few pixels, and its window padded by 1.5 σ took 9 GB and failed in OpenCV after 28 s (29 GB
+    at 1080p). The window stops at the level's size: here under an address space of 4 GiB."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = """
+import resource
+resource.setrlimit(resource.RLIMIT_AS, (4 << 30, resource.RLIM_INFINITY))
+import numpy as np
+from ops.filtering import normal_pyramid
+h, w = 32, 40
+y, x = np.mgrid[0:h, 0:w].astype(np.float32)
+x, y = (x + 0.5) / w * 2 - 1, (y + 0.5) / h * 2 - 1
+inside = x**2 + y**2 < 0.9
+z = np.sqrt(np.clip(1.2 - x**2 - y**2, 0.05, None))
+n = np.dstack([x, y, z]) / np.sqrt(x**2 + y**2 + z**2)[..., None]
+n = np.where(inside[..., None], n, 0).astype(np.float32)
+depth = np.where(inside, 4.0 - z, np.inf).astype(np.float32)
+pyr = normal_pyramid(n, depth, scales=8, base=1.0, factor=4.0)
+assert all(np.isfinite(f).all() for f in pyr.normals)
+print("ok", len(pyr.normals))
+"""
+    root = Path(__file__).resolve().parent.parent
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=root, capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0 and "ok 8" in done.stdout, done.stderr[-2000:]

@@ -170,7 +170,8 @@ def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
     renormalised and 0 on background (LLA §5).
 
     Weights G_σ(p − q) G_r(g_p − g_q) over the circular window of radius
-    max(1, round(1.5 σ)) (that of ``cv2.ximgproc.jointBilateralFilter``, borders reflected),
+    max(1, round(1.5 σ)) (that of ``cv2.ximgproc.jointBilateralFilter``, borders reflected; at
+    most the level's longer side),
     G_r of standard deviation ``depth_sigma`` on the guide g: log depth, background far behind
     every surface. Radii ≤ 2 (every level the pyramid picks, σ ≤ 1.5) run the compiled
     :func:`_jbf_rows` on row strips, with G_r evaluated to 2e-7 (:func:`ops.numerics.exp_neg`);
@@ -184,7 +185,9 @@ def _bilateral(src: F32, geo: DepthPyramid, k: int, sigma: float) -> F32:
     logd = geo.logd[k] if k > 0 else np.where(valid, geo.logd[0], np.float32(0.0))
     far = max(float(logd.max()), 0.0) + 40.0 * geo.depth_sigma
     guide = np.asarray(logd + (np.float32(1.0) - m) * np.float32(far), np.float32)
-    radius = max(1, round(1.5 * sigma))
+    # (a window wider than the level only adds reflected copies of it: at most one each side,
+    # whatever σ, or its padded copy would grow with σ², to tens of GB at the widest scales)
+    radius = min(max(1, round(1.5 * sigma)), max(m.shape))
     if radius > 2:
         out = cv2.ximgproc.jointBilateralFilter(
             guide, np.ascontiguousarray(src), 2 * radius + 1, geo.depth_sigma, sigma
