@@ -818,3 +818,21 @@ def test_no_parameter_reads_true_or_false_as_a_number(value: Any) -> None:
             items = got if isinstance(got, list) else [got]  # taken: no number made of it
             assert not any(type(v) in (int, float) for v in items), (name, field, got)
     assert refused > (20 if isinstance(value, bool) else 5)
+
+
+@pytest.mark.parametrize("ior", [1e-4, 1.5, 10.0])
+def test_transmission_shading_is_finite_at_every_valid_ior(ior: float) -> None:
+    """With a small ior (η = 10⁴) the refracted ray's t·ℓ of pixels whose view ray does not enter
+    overflowed in its power, and inf × 0 made NaN of the beauty and every lobe."""
+    h = w = 8
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32) / 8 - 0.45
+    n = np.dstack([x, y, np.ones_like(x)])
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    t = np.full((h, w, 3), 0.2, np.float32)
+    buffers = {"normal": n.astype(np.float32), "depth": np.full((h, w), 3.0, np.float32)}
+    lobes = {"beauty": t * 2, "diffuse": t.copy(), "transmission": t.copy()}
+    out = pipeline.run(
+        Frame(buffers={**buffers, **lobes}), [{"op": "light_alignment", "params": {"ior": ior}}]
+    )
+    for name, values in {**out.buffers, **out.outputs}.items():
+        assert np.isfinite(values).all(), name

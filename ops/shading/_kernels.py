@@ -79,8 +79,8 @@ def _add_row(t, e0, e1, e2, first, o):
 @kernel
 def _transmission_rows(nrm, lt, ltc, v, vc, eta, base, gate):
     """Per pixel of the rows of (rows, 3W) ``nrm``: max(t·ℓ_t, 0) into ``base`` (to be raised to
-    the lobe's exponent) and, into ``gate``, the coverage (|n|² > 0.25) where the view ray
-    enters (k >= 0): :func:`ops.shading.brdf.transmission`'s t·ℓ = (η n·v − √k) n·ℓ − η ℓ·v,
+    the lobe's exponent; 0 outside the gate) and, into ``gate``, the coverage (|n|² > 0.25)
+    where the view ray enters (k >= 0): :func:`ops.shading.brdf.transmission`'s t·ℓ = (η n·v − √k) n·ℓ − η ℓ·v,
     k = 1 − η²(1 − (n·v)²), η = 1/ior. ``lt`` and ``v`` as ``ld`` in :func:`_terms_rows`."""
     zero, one, quarter = np.float32(0.0), np.float32(1.0), np.float32(0.25)
     for i in range(nrm.shape[0]):
@@ -95,8 +95,11 @@ def _transmission_rows(nrm, lt, ltc, v, vc, eta, base, gate):
             lv = lx * vx + ly * vy + lz * vz
             k = one - eta * eta * (one - nv * nv)
             root = np.sqrt(max(k, zero))
-            tr[j] = max((eta * nv - root) * nl - eta * lv, zero)
-            gr[j] = one if (nx * nx + ny * ny + nz * nz > quarter) and k >= zero else zero
+            g = one if (nx * nx + ny * ny + nz * nz > quarter) and k >= zero else zero
+            # (0 where the gate is: with a small ior, η t·ℓ of a ray that does not enter is
+            # large enough for its power to overflow, and inf × 0 would be NaN)
+            tr[j] = max((eta * nv - root) * nl - eta * lv, zero) * g
+            gr[j] = g
 
 
 @kernel
