@@ -50,6 +50,21 @@ def output_target(path: str | Path) -> Path:
     return target
 
 
+def regular_file(path: str | Path) -> Path:
+    """``path``, when it is a regular file (through links), else :class:`OSError`: missing, or
+    "it is a FIFO (named pipe), not a regular file" and the like, said before it is opened (a
+    FIFO with no writer would block the reader for ever)."""
+    kind = special_kind(os.stat(path).st_mode)
+    if kind is not None:
+        raise OSError(errno.EINVAL, f"it is {kind}, not a regular file")
+    return Path(path)
+
+
+def read_text(path: str | Path) -> str:
+    """The UTF-8 text of the regular file ``path`` (:func:`regular_file`)."""
+    return regular_file(path).read_text(encoding="utf-8")
+
+
 def special_kind(mode: int) -> str | None:
     """What a file of ``mode`` (``os.stat``) is when it is not a regular file ("a FIFO (named
     pipe)", "a directory", ...), else None."""

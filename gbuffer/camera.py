@@ -29,6 +29,7 @@ from typing import Any, Literal
 import cv2
 import numpy as np
 
+from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 
 Projection = Literal["perspective", "orthographic"]
@@ -186,11 +187,12 @@ class Camera:
     @classmethod
     def from_json_file(cls, path: str | Path) -> Camera:
         try:
-            data = json.loads(Path(path).read_text(encoding="utf-8"))
+            data = json.loads(read_text(path))
         except UnicodeDecodeError:
             raise FrameError(f"cannot read camera file {path}: it is not UTF-8 text") from None
         except (OSError, ValueError) as exc:  # (not JSON, a number of too many digits)
-            raise FrameError(f"cannot read camera file {path}: {exc}") from exc
+            why = (exc.strerror if isinstance(exc, OSError) else None) or exc
+            raise FrameError(f"cannot read camera file {path}: {why}") from exc
         except RecursionError:
             raise FrameError(f"cannot read camera file {path}: nested too deeply") from None
         if not isinstance(data, dict):

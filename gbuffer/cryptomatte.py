@@ -24,6 +24,7 @@ import mmh3
 import numpy as np
 
 from gbuffer import exr
+from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 
@@ -84,7 +85,7 @@ def _manifest(header: dict[str, Any], key: str, directory: Path | None) -> dict[
             raise FrameError(f"cryptomatte/{key}/manif_file {sidecar!r}: not a relative path")
         path = directory / rel
         try:
-            text = path.read_text(encoding="utf-8")
+            text = read_text(path)
         except OSError as exc:
             raise FrameError(
                 f"cannot read the Cryptomatte manifest {path}: {exc.strerror}"

@@ -8,7 +8,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from gbuffer.atomic import atomic_path
+from gbuffer.atomic import atomic_path, regular_file
 from ops.relief import SHIPPED_ARMS, arm_from_image, arm_template, make_arm, paint_arm
 
 __all__ = [
@@ -26,7 +26,10 @@ def base_arm(base: str | None, size: int) -> np.ndarray:
     if base in SHIPPED_ARMS:
         return make_arm(base, size)
     if base:
-        img = cv2.imread(base, cv2.IMREAD_UNCHANGED)
+        try:
+            img = cv2.imread(str(regular_file(base)), cv2.IMREAD_UNCHANGED)
+        except OSError as exc:
+            raise ValueError(f"--base {base!r}: {exc.strerror or exc}") from None
         if img is None:
             raise ValueError(f"--base {base!r}: not a shipped ARM nor a readable image")
         return arm_from_image(img)

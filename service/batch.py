@@ -63,7 +63,7 @@ from rich.progress import (
     TimeRemainingColumn,
 )
 
-from gbuffer.atomic import atomic_path, output_target, partial_files
+from gbuffer.atomic import atomic_path, output_target, partial_files, read_text
 from gbuffer.errors import OutputError
 from gbuffer.frame import Frame
 from service import allocator
@@ -280,7 +280,7 @@ def _close(client: Any, cluster: Any) -> None:
 
 def _load_pinned(path: Path) -> dict[str, float]:
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(read_text(path))
     except (OSError, ValueError) as exc:  # (not UTF-8, not JSON, a number too long)
         raise BatchError(f"cannot read pinned statistics {path}: {exc}") from None
     if not isinstance(data, dict) or not all(isinstance(v, int | float) for v in data.values()):

@@ -31,7 +31,7 @@ from typing import Any
 
 import httpx
 
-from gbuffer.atomic import atomic_path
+from gbuffer.atomic import atomic_path, read_text
 from service.errors import DepictError
 
 __all__ = ["Client", "DepictError"]
@@ -57,7 +57,7 @@ def _camera_json(camera: Any) -> str | None:
     if hasattr(camera, "to_dict"):
         return json.dumps(camera.to_dict())
     try:
-        return Path(camera).read_text()
+        return read_text(camera)
     except OSError as exc:
         raise DepictError(f"cannot read camera file {camera}: {exc.strerror}") from None
 

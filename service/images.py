@@ -17,6 +17,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from gbuffer.atomic import regular_file
 from gbuffer.errors import FrameError
 from ops.colorspace import LINEAR_REC709, ColorSpace, convert, from_chromaticities
 
@@ -73,9 +74,10 @@ def load_image(
     space: ColorSpace = LINEAR_REC709,
 ) -> np.ndarray:
     """Read an image as float32: a colour picture (``srgb``) in ``space``, else data."""
-    p = Path(path)
-    if not p.is_file():
-        raise FrameError(f"image {path} does not exist")
+    try:
+        p = regular_file(path)
+    except OSError as exc:
+        raise FrameError(f"image {path}: {exc.strerror or exc}") from None
     img, integer, file_space = _read(p)
     if not np.all(np.isfinite(img)):
         raise FrameError(f"image {path} holds NaN or Inf values")

@@ -25,6 +25,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from gbuffer import holes
+from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from service.output import finish as finish  # pipeline.finish: the result placed for writing
@@ -125,7 +126,7 @@ def parse(spec: PipelineSpec | dict[str, Any] | Sequence[Any] | str) -> Pipeline
 def load(path: str | Path) -> PipelineSpec:
     """Read a pipeline JSON file."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        text = read_text(path)
     except OSError as exc:
         raise PipelineError(f"cannot read pipeline {path}: {exc.strerror}") from None
     except UnicodeDecodeError:

@@ -337,6 +337,35 @@ def test_a_fifo_or_a_folder_as_input_is_refused_without_waiting(
     one_error(capfd, f"{tmp_path}: it is a directory, not a regular file")
 
 
+@pytest.mark.timeout(60)
+@pytest.mark.parametrize(
+    ("argv", "words"),
+    [
+        (["inspect", "{frame}", "--camera", "{fifo}"], "cannot read camera file {fifo}: it is a"),
+        (["score", "{frame}", "--pipeline", "{fifo}"], "cannot read pipeline {fifo}: it is a"),
+        (["arm", "-o", "{out}", "--base", "{fifo}", "--paint", "0.5,0.5"], "--base '{fifo}': it"),
+        (
+            ["batch", "{seq}", "--frames", "1", "-o", "{seq_out}", "--pipeline", "{fifo}"],
+            "cannot read pipeline {fifo}: it",
+        ),
+    ],
+    ids=["camera", "pipeline", "ARM base", "batch pipeline"],
+)
+def test_a_fifo_named_by_an_option_is_refused_without_waiting(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str], argv: list[str], words: str
+) -> None:
+    """(A camera or pipeline file or an ARM image that is a FIFO with no writer blocked the
+    command for ever.)"""
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    (tmp_path / "shot.0001.exr").write_bytes(frame.read_bytes())
+    names = {"frame": frame, "fifo": fifo, "out": tmp_path / "out.png"}
+    names |= {"seq": tmp_path / "shot.####.exr", "seq_out": tmp_path / "o.####.exr"}
+    assert depict(*(a.format(**names) for a in argv)) == 2
+    line = one_error(capfd, words.format(**names))
+    assert line.endswith("it is a FIFO (named pipe), not a regular file"), line
+
+
 def test_a_frame_with_no_covered_pixel_is_written_with_a_warning(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
