@@ -50,8 +50,11 @@ def template_picture(size: int) -> np.ndarray:
 def write_picture(path: str | Path, pixels: np.ndarray) -> None:
     """Write an 8-bit picture in the format of ``path``'s suffix (PNG when none), atomically."""
     suffix = Path(path).suffix.lower() or ".png"
-    with atomic_path(path) as tmp:
+    try:  # (encoded first: nothing is written for a format OpenCV has no encoder of)
         ok, buf = cv2.imencode(suffix, pixels)
-        if not ok:
-            raise ValueError(f"cannot write {path}: use .png")
+    except cv2.error:  # (no encoder for the suffix: .exr, .txt)
+        ok = False
+    if not ok:
+        raise ValueError(f"cannot write {path}: no {suffix} encoder for an 8-bit picture; use .png")
+    with atomic_path(path) as tmp:
         Path(tmp).write_bytes(buf.tobytes())

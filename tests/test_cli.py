@@ -497,6 +497,19 @@ ERRORS: dict[str, tuple[list[str], str]] = {
     "negative pixel": (["relief-pick", "{exr}", "3", "-1"], "y="),
     "arm size": (["arm", "-o", "{out}", "--size", "10"], "size"),
     "arm paint syntax": (["arm", "-o", "{out}", "--paint", "0.5"], "--paint"),
+    "arm to a format it has no encoder for": (  # (a cv2.error traceback, exit 1)
+        ["arm", "-o", "{out}"],
+        "no .exr encoder for an 8-bit picture; use .png",
+    ),
+    "arm paint outside the descriptor's square": (  # (a black ARM, exit 0)
+        ["arm", "-o", "{out}.png", "--paint", "nan,0"],
+        "must be a descriptor (S1, S2), each in [-1, 1]",
+    ),
+    "arm size with paint": (
+        ["arm", "-o", "{out}.png", "--size", "5", "--paint", "0,0"],
+        "--size 5",
+    ),
+    "arm base without paint": (["arm", "-o", "{out}.png", "--base", "convex"], "give --paint"),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
     "missing -o": (["render", "{missing}"], "-o/--output"),
 }

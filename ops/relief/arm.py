@@ -252,7 +252,7 @@ def paint_arm(
     Parameters
     ----------
     arm : (h, w) or (h, w, C) ARM in [0, 1].
-    s : (S1, S2) the centre, e.g. from :func:`pick`.
+    s : (S1, S2) the centre, each in [-1, 1], e.g. from :func:`pick`.
     value : the value painted (one per channel for a multi-channel ARM), in [0, 1].
     radius : disc radius in descriptor units, in (0, 2].
     softness : fraction of the radius over which the paint fades out, in [0, 1].
@@ -267,6 +267,8 @@ def paint_arm(
     if vals.size not in (1, chans) or not (np.all(vals >= 0.0) and np.all(vals <= 1.0)):
         raise ValueError(f"value={value!r} must be {chans} number(s) in [0, 1]")
     c1, c2 = float(s[0]), float(s[1])
+    if not (-1.0 <= c1 <= 1.0 and -1.0 <= c2 <= 1.0):  # (NaN too: it painted nothing)
+        raise ValueError(f"s={s!r} must be a descriptor (S1, S2), each in [-1, 1]")
     grid = arm_coords(tex.shape[:2])
     alpha = np.zeros(tex.shape[:2], np.float32)
     for a, b in ((c1, c2), (c2, c1)):

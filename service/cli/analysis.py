@@ -155,6 +155,10 @@ def _paint(text: str) -> tuple[float, float, float]:
 
 def cmd_arm(args: argparse.Namespace) -> int:
     check_outputs([args.output], [args.base if args.base not in arm.SHIPPED_ARMS else None])
+    if not 64 <= args.size <= 4096:  # (the --paint path made an ARM of any size)
+        raise UsageError(f"--size {args.size}: outside the allowed range [64, 4096]")
+    if args.base is not None and not args.paint:
+        raise UsageError("--base is the ARM --paint paints on; give --paint S1,S2 too")
     if args.paint:
         painted = arm.base_arm(args.base, args.size)
         for text in args.paint:
