@@ -534,3 +534,22 @@ def test_errors_are_one_line_and_exit_2(
     assert needle in lines[0]
     assert "Traceback" not in captured.err + captured.out
     assert not out.exists()  # nothing half-written
+
+
+def test_a_reader_that_stops_early_is_no_error() -> None:
+    """``depict ops | head -1``: the pipe closed, the command ends quietly as a C tool killed by
+    SIGPIPE would (141; it was "depict: error: Broken pipe", exit 2)."""
+    import subprocess
+    import sys
+
+    child = subprocess.Popen(
+        [sys.executable, "-m", "service.cli", "ops"],
+        cwd=Path(__file__).resolve().parent.parent,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    assert child.stdout is not None and child.stderr is not None
+    child.stdout.close()  # (before it writes: its first line meets a closed pipe)
+    err = child.stderr.read().decode()
+    assert child.wait(timeout=120) == 141
+    assert err == ""

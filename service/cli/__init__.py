@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
+import sys
 import threading
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -72,6 +74,14 @@ def _catch_stops(args: argparse.Namespace, replaced: dict[int, Any]) -> None:
             signal.signal(each, _stop)
 
 
+def _drop_stdout() -> None:
+    """Point standard output at /dev/null: what is still buffered for a closed pipe is let go
+    instead of failing again as the process ends."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     allocator.tune()
     args = build_parser().parse_args(argv)
@@ -83,6 +93,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     except _Stopped as stop:
         return 128 + stop.signum
+    except BrokenPipeError:  # (``depict ops | head``: the reader has all it wanted)
+        _drop_stdout()
+        return 128 + signal.SIGPIPE
     except Exception as exc:  # bad input, a server that refused or is down: one line
         line = error_line(exc)
         if line is None:
