@@ -264,3 +264,8 @@ def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixtu
     assert "no frames" in capsys.readouterr().err
     assert cli(["batch", src, "-o", str(sequence / "o.####.exr"), "--op", "nope"]) == 2
     assert "unknown operator" in capsys.readouterr().err
+    cores = os.cpu_count() or 1
+    for workers in ("0", str(4 * cores + 1)):  # (1000 started 1000 worker processes)
+        assert cli(["batch", src, "-o", str(sequence / "o.####.exr"), "--workers", workers]) == 2
+        assert f"--workers {workers}: give 1 to {4 * cores}" in capsys.readouterr().err
+    assert not (sequence / "o.0001.exr").exists()

@@ -24,8 +24,12 @@ def cmd_batch(args: argparse.Namespace) -> int:
         debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
     )
     frames = parse_frames(args.frames) if args.frames else None
-    if args.workers is not None and args.workers < 1:
-        raise BatchError(f"--workers must be >= 1, got {args.workers}")
+    cores = os.cpu_count() or 1
+    if args.workers is not None and not 1 <= args.workers <= 4 * cores:  # (1000: 1000 processes)
+        raise BatchError(
+            f"--workers {args.workers}: give 1 to {4 * cores} (this machine has {cores} cores; "
+            "a farm's nodes join with --scheduler)"
+        )
     summary = run_batch(
         os.path.abspath(args.input),
         os.path.abspath(args.output),
