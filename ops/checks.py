@@ -156,8 +156,9 @@ CURVATURE_SCALE = Range(0.0, 0.1)
 CURVATURE_GAIN = Range(0.0, 100.0, lo_open=True)
 #: Relative depth jump |Δ log d| between samples of different surfaces.
 CURVATURE_DEPTH_JUMP = Range(0.0, 10.0, lo_open=True)
-#: L_norm of Apparent Relief's curvedness (per unit image height).
-CURVEDNESS_NORM = Range(0.0, 1e6, lo_open=True)
+#: L_norm of Apparent Relief's curvedness (per unit image height; below 1e-6 every curvature
+#: saturates, and under float32's smallest normal numbers S became NaN).
+CURVEDNESS_NORM = Range(1e-6, 1e6)
 
 # -- Light Alignment (Vergne et al. 2009) ---------------------------------------------------------
 #: γ of W_γ (Eq. 1).

@@ -25,6 +25,7 @@ from gbuffer.limits import Limits
 from ops import relief as rl
 from service import pipeline
 from service.enhance import ReadRequest
+from service.errors import PipelineError
 from service.registry import Context
 
 
@@ -105,6 +106,12 @@ def pick_job(
     """``depict relief-pick``: the Apparent Relief descriptor S under pixel (x, y) with the
     ``apparent_relief`` parameters ``params``, its ARM texture coordinates and its region."""
     frame = read.read(in_path)
+    h, w = frame.shape
+    if 0 <= x < w and 0 <= y < h and not frame.covered()[y, x]:  # (else rl.pick says which)
+        raise PipelineError(
+            f"pixel ({x}, {y}) shows no surface (no finite, positive depth there): pick a pixel "
+            "on an object"
+        )
     steps = pipeline.compile([{"op": "apparent_relief", "params": {**params, "style": "cel"}}])
     context = Context(files=False)
     out, _ = pipeline.run_timed(frame, steps, context)

@@ -510,6 +510,14 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "--size 5",
     ),
     "arm base without paint": (["arm", "-o", "{out}.png", "--base", "convex"], "give --paint"),
+    "a pick on the background": (  # (it said "plane", S = (0, 0))
+        ["relief-pick", "{exr}", "0", "0"],
+        "pixel (0, 0) shows no surface",
+    ),
+    "a curvedness norm under float32's range": (  # (S was NaN, and the JSON invalid)
+        ["relief-pick", "{exr}", str(W // 2), str(H // 2), "--curvedness-norm", "1e-320"],
+        "curvedness_norm=1e-320 is outside the allowed range [1e-06, 1e+06]",
+    ),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
     "missing -o": (["render", "{missing}"], "-o/--output"),
 }
