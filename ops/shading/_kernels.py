@@ -80,8 +80,9 @@ def _add_row(t, e0, e1, e2, first, o):
 def _transmission_rows(nrm, lt, ltc, v, vc, eta, base, gate):
     """Per pixel of the rows of (rows, 3W) ``nrm``: max(t·ℓ_t, 0) into ``base`` (to be raised to
     the lobe's exponent; 0 outside the gate) and, into ``gate``, the coverage (|n|² > 0.25)
-    where the view ray enters (k >= 0): :func:`ops.shading.brdf.transmission`'s t·ℓ = (η n·v − √k) n·ℓ − η ℓ·v,
-    k = 1 − η²(1 − (n·v)²), η = 1/ior. ``lt`` and ``v`` as ``ld`` in :func:`_terms_rows`."""
+    where the view ray enters (k >= 0): :func:`ops.shading.brdf.transmission`'s
+    t·ℓ = (η n·v − √k) n·ℓ − η ℓ·v, k = 1 − η²(1 − (n·v)²), η = 1/ior. ``lt`` and ``v`` as
+    ``ld`` in :func:`_terms_rows`."""
     zero, one, quarter = np.float32(0.0), np.float32(1.0), np.float32(0.25)
     for i in range(nrm.shape[0]):
         n, b, w = nrm[i], lt[0 if ltc else i], v[0 if vc else i]
