@@ -31,6 +31,7 @@ import numpy as np
 
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
+from ops.checks import holds_truth_value
 
 Projection = Literal["perspective", "orthographic"]
 
@@ -79,6 +80,11 @@ class Camera:
                 raise FrameError(
                     "camera world_to_camera has no inverse (its rotation part is singular, e.g. "
                     "all zeros): world-space normals could not be turned into camera space"
+                )
+            if not np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), rtol=0.0, atol=1e-6):
+                raise FrameError(  # (it was ignored: [0, 0, 0, 0] read as a camera)
+                    f"camera world_to_camera's last row must be [0, 0, 0, 1] (a rigid "
+                    f"transform), got {m[3].tolist()}"
                 )
             self.world_to_camera = m
         if self.fov_y_deg is not None and not 0.0 < self.fov_y_deg < 180.0:
@@ -158,6 +164,9 @@ class Camera:
         unknown = sorted(set(data) - known - {"height"})
         if unknown:
             raise FrameError(f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}")
+        for key in ("world_to_camera", "fov_y_deg", "focal_px", "height", "ortho_height"):
+            if holds_truth_value(data.get(key)):  # (JSON's true is a Python 1)
+                raise FrameError(f"camera JSON {key}: expected numbers, not true or false")
         projection = data.get("projection", "perspective")
         fov = data.get("fov_y_deg")
         if "focal_px" in data:

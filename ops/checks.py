@@ -64,6 +64,7 @@ __all__ = [
     "Bounds",
     "Range",
     "check_sequence",
+    "holds_truth_value",
 ]
 
 
@@ -220,3 +221,11 @@ INTEGRATION_SCALE = Range(0.0, 0.25, lo_open=True)
 DEPTH_JUMP = Range(0.0, 100.0, lo_open=True)
 #: Shading strength mapped to 1.
 SHADING_NORM = POSITIVE
+
+
+def holds_truth_value(value: object) -> bool:
+    """Whether ``value`` is a bool or a list or tuple holding one (where numbers are expected,
+    Python and pydantic read true and false as 1 and 0)."""
+    if isinstance(value, bool):
+        return True
+    return isinstance(value, list | tuple) and any(holds_truth_value(v) for v in value)

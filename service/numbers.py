@@ -13,6 +13,8 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationInfo, field_validator
 
+from ops.checks import holds_truth_value
+
 __all__ = ["NumbersModel"]
 
 
@@ -23,18 +25,11 @@ class NumbersModel(BaseModel):
     @classmethod
     def _no_truth_values_as_numbers(cls, value: Any, info: ValidationInfo) -> Any:
         field = cls.model_fields.get(info.field_name or "")
-        if field is not None and _holds_truth_value(value):
+        if field is not None and holds_truth_value(value):
             kinds = _scalar_kinds(field.annotation)
             if kinds & {int, float} and bool not in kinds:
                 raise ValueError("expected a number, not true or false")
         return value
-
-
-def _holds_truth_value(value: Any) -> bool:
-    """Whether ``value`` is a bool or a list or tuple holding one."""
-    if isinstance(value, bool):
-        return True
-    return isinstance(value, list | tuple) and any(_holds_truth_value(v) for v in value)
 
 
 def _scalar_kinds(annotation: Any) -> set[Any]:

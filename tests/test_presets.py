@@ -514,6 +514,13 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
     zero = {**cam_dict(scene), "world_to_camera": [[0.0] * 4] * 4}
     with pytest.raises(FrameError, match="world_to_camera has no inverse"):
         read(path, camera=zero)
+    # true read as 1 (a field of view of 1°), a last row of zeros ignored
+    for key, value in [("fov_y_deg", True), ("world_to_camera", [[1, 0, 0, True]] * 4)]:
+        with pytest.raises(FrameError, match=f"camera JSON {key}: expected numbers, not true"):
+            read(path, camera={**cam_dict(scene), key: value})
+    rows = [list(r) for r in cam_dict(scene)["world_to_camera"][:3]] + [[0.0, 0.0, 0.0, 0.0]]
+    with pytest.raises(FrameError, match=r"last row must be \[0, 0, 0, 1\]"):
+        read(path, camera={**cam_dict(scene), "world_to_camera": rows})
 
 
 # -- a real Blender render ------------------------------------------------------------------------
