@@ -399,3 +399,16 @@ def perspective_sphere(
         return n, -p[..., 2], cov, np.zeros(u.shape, np.int64)
 
     return _make(height, width, fn, None, fov_y_deg)
+
+
+def small_cap(height: int = 32, width: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A small frame of a bulging cap on background: (normal (H, W, 3), 0 off the cap; depth
+    (H, W), +inf off it; the cap's coverage (H, W) bool), float32 (fuzzing found its faults)."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float32)
+    x, y = (x + 0.5) / width * 2 - 1, (y + 0.5) / height * 2 - 1
+    inside = x**2 + y**2 < 0.9
+    z = np.sqrt(np.clip(1.2 - x**2 - y**2, 0.05, None))
+    normal = np.dstack([x, y, z]) / np.sqrt(x**2 + y**2 + z**2)[..., None]
+    normal = np.where(inside[..., None], normal, 0.0).astype(np.float32)
+    depth = np.where(inside, 4.0 - z, np.inf).astype(np.float32)
+    return normal, depth, inside

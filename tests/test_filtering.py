@@ -219,14 +219,8 @@ import resource
 resource.setrlimit(resource.RLIMIT_AS, (4 << 30, resource.RLIM_INFINITY))
 import numpy as np
 from ops.filtering import normal_pyramid
-h, w = 32, 40
-y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-x, y = (x + 0.5) / w * 2 - 1, (y + 0.5) / h * 2 - 1
-inside = x**2 + y**2 < 0.9
-z = np.sqrt(np.clip(1.2 - x**2 - y**2, 0.05, None))
-n = np.dstack([x, y, z]) / np.sqrt(x**2 + y**2 + z**2)[..., None]
-n = np.where(inside[..., None], n, 0).astype(np.float32)
-depth = np.where(inside, 4.0 - z, np.inf).astype(np.float32)
+from tests.analytic import small_cap
+n, depth, _ = small_cap()
 pyr = normal_pyramid(n, depth, scales=8, base=1.0, factor=4.0)
 assert all(np.isfinite(f).all() for f in pyr.normals)
 print("ok", len(pyr.normals))

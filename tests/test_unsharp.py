@@ -26,6 +26,7 @@ from ops.unsharp import (
     unsharp_lightness,
     unsharp_masking,
 )
+from tests import analytic
 
 FOCAL = 400.0  # pixels
 
@@ -605,15 +606,9 @@ def test_normals_off_the_surface_do_not_matter(background: tuple[float, ...] | s
     """Normals where there is no surface may be anything: they were averaged into the cells at
     the surface's rim, and a unit background normal made every covered pixel NaN ("gain_map
     must be finite everywhere" from unsharp_masking, which was given no gain map)."""
-    h, w = 32, 40
-    y, x = np.mgrid[0:h, 0:w].astype(np.float32)
-    x, y = (x + 0.5) / w * 2 - 1, (y + 0.5) / h * 2 - 1
-    inside = x**2 + y**2 < 0.9
-    z = np.sqrt(np.clip(1.2 - x**2 - y**2, 0.05, None))
-    normal = np.dstack([x, y, z]) / np.sqrt(x**2 + y**2 + z**2)[..., None]
-    normal[~inside] = 0.0
-    depth = np.where(inside, 4.0 - z, np.inf).astype(np.float32)
-    ps = np.where(inside, 0.07 + 0.01 * np.abs(x), np.inf).astype(np.float32)
+    normal, depth, inside = analytic.small_cap()
+    x = np.abs(normal[..., 0])  # (a pixel size that varies across the cap)
+    ps = np.where(inside, 0.07 + 0.01 * x, np.inf).astype(np.float32)
     beauty = np.where(inside[..., None], 0.3 + 0.2 * normal[..., :1], 0.0).repeat(3, -1)
     other = normal.copy()
     rng = np.random.default_rng(1)
