@@ -84,7 +84,14 @@ def _signed_picture(values: np.ndarray) -> np.ndarray:
 
 
 def _grey_or_signed(values: np.ndarray) -> np.ndarray:
+    """A one-channel field in grey (signed: blue below 0, red above), a three-component one
+    (positions, vectors) as its components in RGB, around mid-grey when signed (as normals)."""
     v = np.nan_to_num(values, nan=0.0, posinf=0.0, neginf=0.0)
+    if v.ndim == 3:  # (each signed component went through _signed_picture: 9 channels)
+        if v.min() < 0.0:
+            peak = float(np.percentile(np.abs(v), 99.5)) or 1.0
+            return np.clip(0.5 + 0.5 * v / peak, 0.0, 1.0).astype(np.float32)
+        return (v / max(float(v.max()), 1.0)).astype(np.float32)
     if v.min() < 0.0:
         return _signed_picture(v)
     hi = max(float(v.max()), 1.0)

@@ -127,16 +127,16 @@ def test_inspect_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) ->
     assert len(info["parts"]) == 1 and "N.X" in info["parts"][0]["channels"]
 
 
-@pytest.mark.parametrize("layer", ["beauty", "normal", "depth"])
+@pytest.mark.parametrize("layer", ["beauty", "normal", "depth", "position", "P", "N"])
 def test_preview_writes_a_png(
     exr: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], layer: str
 ) -> None:
     out = tmp_path / f"{layer}.png"
     assert depict("preview", exr, "-o", out, "--layer", layer) == 0
     assert capsys.readouterr().out.strip() == f"wrote {out} ({layer})"
-    img = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)
-    assert img is not None and img.shape[:2] == (H, W) and img.dtype == np.uint8
-    assert img.max() > img.min()
+    img = cv2.imread(str(out), cv2.IMREAD_UNCHANGED)  # (a signed vector layer, position or
+    assert img is not None and img.shape == (H, W, 3) and img.dtype == np.uint8  # P, made 9
+    assert img.max() > img.min()  # channels: an empty "cannot write PNG" error)
 
 
 def test_warmup_runs_every_operator(capsys: pytest.CaptureFixture[str]) -> None:
