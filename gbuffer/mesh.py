@@ -6,6 +6,7 @@ vertex / face colours per face corner; sRGB 8-bit values are linearised through 
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -13,6 +14,7 @@ import cv2
 import numpy as np
 import trimesh
 
+from gbuffer.atomic import regular_file
 from gbuffer.errors import FrameError
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
@@ -58,6 +60,11 @@ def _from_point_cloud(loaded: Any, path: Path) -> trimesh.Trimesh | None:
     return trimesh.Trimesh(vertices=vertices, faces=faces, process=False)
 
 
+#: The largest vertex coordinate a mesh may have: the renderer works in float32, where the
+#: squares of larger ones overflow (1e30 gave NaN pixels).
+MAX_COORDINATE = 1e15
+
+
 def _unusable_triangles(path: Path) -> str:
     """Why a file whose reading left no triangles had some: the triangles trimesh dropped for
     vertices with NaN or infinite coordinates ("" when it had none, or cannot say)."""
@@ -85,15 +92,21 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     triangles.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FrameError(f"mesh file {path} does not exist")
+    try:
+        regular_file(path)
+    except FileNotFoundError:
+        raise FrameError(f"mesh file {path} does not exist") from None
+    except OSError as exc:  # (a FIFO, a folder: "does not exist" was wrong, and a FIFO blocks)
+        raise FrameError(f"mesh file {path}: {exc.strerror or exc}") from None
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise FrameError(
             f"mesh file {path} has suffix {path.suffix!r}; supported: {', '.join(MESH_SUFFIXES)}"
         )
     loaded: Any
     try:
-        loaded = trimesh.load(str(path))
+        with warnings.catch_warnings(), np.errstate(all="ignore"):
+            warnings.simplefilter("ignore", RuntimeWarning)  # (NaN or huge coordinates: said below)
+            loaded = trimesh.load(str(path))
         if isinstance(loaded, trimesh.Scene):
             loaded = loaded.to_mesh() if loaded.geometry else None
     except Exception as exc:  # trimesh raises many types on bad files
@@ -105,9 +118,15 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
         mesh = _from_point_cloud(loaded, path)
     if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise FrameError(f"mesh file {path} holds no triangles{_unusable_triangles(path)}")
-    if not np.all(np.isfinite(mesh.vertices)):
-        raise FrameError(f"mesh file {path} has non-finite vertex coordinates")
-    mesh.metadata[FILE_NORMALS] = "vertex_normals" in mesh._cache  # read from the file
+    if not np.all(np.abs(mesh.vertices) <= MAX_COORDINATE):  # (NaN too)
+        raise FrameError(
+            f"mesh file {path} has vertex coordinates that are not finite or over "
+            f"{MAX_COORDINATE:g} (rendering is float32: they gave NaN); scale the mesh down"
+        )
+    from_file = "vertex_normals" in mesh._cache
+    if from_file and not np.all(np.isfinite(mesh._cache["vertex_normals"])):
+        raise FrameError(f"mesh file {path} has vertex normals that are not finite (vn nan)")
+    mesh.metadata[FILE_NORMALS] = from_file  # read from the file
     return mesh
 
 

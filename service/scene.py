@@ -34,7 +34,8 @@ class RenderRequest:
 def render_to_file(
     mesh_path: str | Path, out_path: str | Path, scene: RenderRequest
 ) -> dict[str, Any]:
-    """Render ``mesh_path`` as ``scene`` says and write the EXR; ``{"size": [w, h]}``.
+    """Render ``mesh_path`` as ``scene`` says and write the EXR; ``{"size": [w, h],
+    "warnings": [...]}`` (:data:`NOTHING_SEEN` when no pixel shows the mesh).
 
     A light that does not parse is a ValueError naming ``--light`` (the service names its field).
     """
@@ -58,4 +59,12 @@ def render_to_file(
         mesh, scene.width, scene.height, camera=camera, lights=lights, shading=scene.shading
     )
     write(frame, out_path)
-    return {"size": [scene.width, scene.height]}
+    empty = [] if frame.covered().any() else [NOTHING_SEEN]
+    return {"size": [scene.width, scene.height], "warnings": empty}
+
+
+#: The warning of a render in which no pixel shows the mesh.
+NOTHING_SEEN = (
+    "no pixel shows the mesh: it is out of the camera's view, or has no area (degenerate "
+    "triangles); check the camera or the mesh"
+)

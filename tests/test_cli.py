@@ -22,6 +22,7 @@ from ops import relief as rl
 from service import pipeline
 from service.cli import main
 from service.registry import operators
+from service.scene import NOTHING_SEEN
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 W, H = 96, 72
@@ -518,6 +519,11 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         ["relief-pick", "{exr}", str(W // 2), str(H // 2), "--curvedness-norm", "1e-320"],
         "curvedness_norm=1e-320 is outside the allowed range [1e-06, 1e+06]",
     ),
+    "a light too bright for float32": (  # (a beauty of NaN, exit 0)
+        ["render", "{mesh}", "-o", "{out}", "--light", "0,0,1*1e308"],
+        "light intensity must be finite, >= 0 and at most 1e+15",
+    ),
+    "an azimuth of inf": (["render", "{mesh}", "-o", "{out}", "--azimuth", "inf"], "azimuth must"),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
     "missing -o": (["render", "{missing}"], "-o/--output"),
 }
@@ -534,6 +540,7 @@ def test_errors_are_one_line_and_exit_2(
     argv, needle = ERRORS[case]
     out = tmp_path / "out.exr"
     values = {"bad": not_exr, "missing": tmp_path / "missing.exr", "exr": exr, "out": out}
+    values["mesh"] = SPOT
     assert depict(*[a.format(**values) for a in argv]) == 2
     captured = capsys.readouterr()
     lines = captured.err.splitlines()
@@ -561,3 +568,17 @@ def test_a_reader_that_stops_early_is_no_error() -> None:
     err = child.stderr.read().decode()
     assert child.wait(timeout=120) == 141
     assert err == ""
+
+
+def test_a_render_that_shows_nothing_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A degenerate mesh (or a camera looking away) was an empty frame without a word."""
+    mesh = tmp_path / "degenerate.obj"
+    mesh.write_text("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n")
+    out = tmp_path / "r.exr"
+    assert depict("render", mesh, "-o", out, "--width", "32", "--height", "24") == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"depict: warning: {NOTHING_SEEN}"] and out.exists()
+    assert depict("render", SPOT, "-o", out, "--width", "32", "--height", "24") == 0
+    assert "warning" not in capsys.readouterr().err

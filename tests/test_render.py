@@ -345,6 +345,12 @@ def test_load_mesh_ply_triangle_strips(tmp_path: Path) -> None:
         ("v 0 0 0\nv 1 0 0\n", "points.obj", "no triangles"),
         ("v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n", "nan.obj", r"finite vertices \(1 of 1 have"),
         ("v 0 0 0\nv 1 0 0\nv 0 inf 0\nf 1 2 3\nf 1 2 3\n", "inf.obj", r"\(2 of 2 have NaN or"),
+        ("v 0 0 0\nv 1e30 0 0\nv 0 1 0\nf 1 2 3\n", "huge.obj", "not finite or over 1e\\+15"),
+        (
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn nan nan nan\nvn 0 0 1\nvn 0 0 1\nf 1//1 2//2 3//3\n",
+            "vn.obj",
+            "vertex normals that are not finite",
+        ),
         ("garbage \x00\x01 not a mesh", "bad.glb", "cannot read"),
         ("solid x\n", "x.fbx", "suffix"),
     ],
@@ -355,6 +361,18 @@ def test_load_mesh_errors(tmp_path: Path, content: str | None, name: str, match:
         path.write_text(content)
     with pytest.raises(FrameError, match=match):
         load_mesh(path)
+
+
+def test_a_mesh_path_that_is_not_a_file_is_named(tmp_path: Path) -> None:
+    """("does not exist" for a folder; a FIFO with no writer blocked the reader.)"""
+    import os
+
+    os.mkfifo(tmp_path / "pipe.obj")
+    (tmp_path / "dir.obj").mkdir()
+    with pytest.raises(FrameError, match=r"pipe\.obj: it is a FIFO"):
+        load_mesh(tmp_path / "pipe.obj")
+    with pytest.raises(FrameError, match=r"dir\.obj: it is a directory"):
+        load_mesh(tmp_path / "dir.obj")
 
 
 def test_rasterizer_reuse_and_delete(sphere: trimesh.Trimesh) -> None:

@@ -23,10 +23,17 @@ __all__ = [
 ]
 
 
+#: The largest magnitude of a light's numbers: shading is float32, and a colour times an
+#: intensity, or a point light's squared distance, must stay finite there (1e308 gave NaN).
+LIGHT_MAX = 1e15
+
+
 def _vec3(value: Sequence[float] | np.ndarray, name: str) -> Vec3:
     arr = np.asarray(value, dtype=np.float64).reshape(-1)
-    if arr.shape != (3,) or not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    if arr.shape != (3,) or not np.all(np.abs(arr) <= LIGHT_MAX):
+        raise ValueError(
+            f"{name} must be 3 finite numbers of magnitude at most {LIGHT_MAX:g}, got {value!r}"
+        )
     return (float(arr[0]), float(arr[1]), float(arr[2]))
 
 
@@ -63,8 +70,11 @@ class Light:
         if min(color) < 0.0:
             raise ValueError(f"light color must be >= 0 in each channel, got {color}")
         object.__setattr__(self, "color", color)
-        if not (math.isfinite(self.intensity) and self.intensity >= 0.0):
-            raise ValueError(f"light intensity must be finite and >= 0, got {self.intensity}")
+        if not 0.0 <= self.intensity <= LIGHT_MAX:
+            raise ValueError(
+                f"light intensity must be finite, >= 0 and at most {LIGHT_MAX:g}, "
+                f"got {self.intensity}"
+            )
         object.__setattr__(self, "intensity", float(self.intensity))
 
 

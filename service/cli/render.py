@@ -27,8 +27,8 @@ def cmd_render(args: argparse.Namespace) -> int:
         lights=tuple(args.light),
         shading=args.shading,
     )
-    render_to_file(args.mesh, args.output, scene)
-    warn(exr_name(args.output))
+    done = render_to_file(args.mesh, args.output, scene)
+    warn(exr_name(args.output) + done["warnings"])
     print(f"wrote {args.output} ({args.width}x{args.height})")
     return 0
 
