@@ -135,6 +135,10 @@ def write_png(rgb: np.ndarray, path: str | Path) -> None:
     import OpenImageIO as oiio  # (its 17 MiB and 30 ms only where a PNG is written)
 
     img = np.ascontiguousarray((np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
+    if oiio.ImageOutput.create(str(path)) is None:  # (the error named the temporary file)
+        oiio.geterror()  # (taken: else OpenImageIO prints it as the process ends)
+        suffix = Path(path).suffix or "(no suffix)"
+        raise FrameError(f"cannot write {path}: no picture format for {suffix}; use .png")
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)

@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from distributed import Client, Future, LocalCluster, as_completed, wait
 from rich.progress import (
     BarColumn,
@@ -282,10 +283,23 @@ def _load_pinned(path: Path) -> dict[str, float]:
     try:
         data = json.loads(read_text(path))
     except (OSError, ValueError) as exc:  # (not UTF-8, not JSON, a number too long)
-        raise BatchError(f"cannot read pinned statistics {path}: {exc}") from None
-    if not isinstance(data, dict) or not all(isinstance(v, int | float) for v in data.values()):
-        raise BatchError(f"pinned statistics {path} must be a JSON object of numbers")
+        why = (exc.strerror if isinstance(exc, OSError) else None) or exc
+        raise BatchError(f"cannot read pinned statistics {path}: {why}") from None
+    if not isinstance(data, dict) or not all(_statistic(v) for v in data.values()):
+        raise BatchError(  # (true was taken as 1, and 1e308 became inf in float32)
+            f"pinned statistics {path} must be a JSON object of numbers, each finite in "
+            "float32 (not true or false)"
+        )
     return {str(k): float(v) for k, v in data.items()}
+
+
+def _statistic(value: object) -> bool:
+    """Whether a pinned value is a number the operators can use (float32, finite)."""
+    return (
+        isinstance(value, int | float)
+        and not isinstance(value, bool)
+        and abs(float(value)) <= float(np.finfo(np.float32).max)
+    )
 
 
 def _cluster(scheduler: str | None, workers: int | None) -> tuple[Client, LocalCluster | None]:

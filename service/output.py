@@ -65,6 +65,16 @@ def _earlier_result(frame: Frame) -> str | None:
     return value if isinstance(value, str) else None
 
 
+def check_layer_name(output_layer: str) -> None:
+    """FrameError unless ``output_layer`` is a layer name (checked once for a whole sequence
+    too: ``depict batch --output-layer ''`` failed each frame)."""
+    if not LAYER_NAME.match(output_layer):
+        raise FrameError(
+            f"output layer {output_layer!r} is not a layer name: dot-separated words of letters, "
+            "digits, '_', '-' (and spaces inside), e.g. Depict or ViewLayer.Depict"
+        )
+
+
 def result_layer(frame: Frame, output_layer: str | None) -> str:
     """The layer the result goes to ("" for ``R,G,B,A``); see the module docstring."""
     earlier = _earlier_result(frame)
@@ -72,11 +82,7 @@ def result_layer(frame: Frame, output_layer: str | None) -> str:
         if earlier is not None:
             return earlier
         return frame.result_layer or ""
-    if not LAYER_NAME.match(output_layer):
-        raise FrameError(
-            f"output layer {output_layer!r} is not a layer name: dot-separated words of letters, "
-            "digits, '_', '-' (and spaces inside), e.g. Depict or ViewLayer.Depict"
-        )
+    check_layer_name(output_layer)
     taken = sorted(c for c in _channels(frame) if c.startswith(f"{output_layer}."))
     if taken and output_layer != earlier:
         raise FrameError(

@@ -269,3 +269,16 @@ def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixtu
         assert cli(["batch", src, "-o", str(sequence / "o.####.exr"), "--workers", workers]) == 2
         assert f"--workers {workers}: give 1 to {4 * cores}" in capsys.readouterr().err
     assert not (sequence / "o.0001.exr").exists()
+    # checked once, not by each frame (exit 1, a line per frame)
+    out = str(sequence / "o.####.exr")
+    assert cli(["batch", src, "-o", out, "--output-layer", ""]) == 2
+    assert "output layer '' is not a layer name" in capsys.readouterr().err
+    assert cli(["batch", src, "-o", out, "--frames="]) == 2  # (it was every frame)
+    assert "--frames '': '' is not FRAME" in capsys.readouterr().err
+    for value in ("true", "1e308"):  # (true was 1; 1e308 became inf in float32)
+        pinned = sequence / "pinned.json"
+        pinned.write_text(f'{{"radiance_scaling.white": {value}}}')
+        assert cli(["batch", src, "-o", out, "--pinned", str(pinned)]) == 2
+        assert "each finite in float32 (not true or false)" in capsys.readouterr().err
+        pinned.unlink()
+    assert not (sequence / "o.0001.exr").exists()

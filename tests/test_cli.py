@@ -524,6 +524,14 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "light intensity must be finite, >= 0 and at most 1e+15",
     ),
     "an azimuth of inf": (["render", "{mesh}", "-o", "{out}", "--azimuth", "inf"], "azimuth must"),
+    "a buffer mapped twice": (  # (the last --map was taken, without a word)
+        ["score", "{exr}", "--map", "normal=N", "--map", "normal=P"],
+        "normal is mapped twice",
+    ),
+    "a preview to a format with no writer": (  # (the error named the temporary file)
+        ["preview", "{exr}", "-o", "{out}.txt"],
+        "out.exr.txt: no picture format for .txt; use .png",
+    ),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
     "missing -o": (["render", "{missing}"], "-o/--output"),
 }

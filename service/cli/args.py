@@ -215,6 +215,8 @@ def mapping(args: argparse.Namespace) -> dict[str, str]:
         key, sep, value = item.partition("=")
         if not sep:
             raise UsageError(f"--map {item!r}: expected BUFFER=CHANNELS")
+        if key.strip() in out:  # (the last one was taken, without a word)
+            raise UsageError(f"--map {item!r}: {key.strip()} is mapped twice; give it once")
         out[key.strip()] = value.strip()
     return out
 

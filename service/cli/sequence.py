@@ -12,6 +12,7 @@ from service.batch import BatchError, Summary, parse_frames, run_batch
 from service.cli.args import printable
 from service.cli.common import read_request, steps
 from service.enhance import WriteRequest
+from service.output import check_layer_name
 
 
 def cmd_batch(args: argparse.Namespace) -> int:
@@ -23,7 +24,9 @@ def cmd_batch(args: argparse.Namespace) -> int:
     write = WriteRequest(
         debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
     )
-    frames = parse_frames(args.frames) if args.frames else None
+    frames = None if args.frames is None else parse_frames(args.frames)  # ("": every frame)
+    if args.output_layer is not None:
+        check_layer_name(args.output_layer)
     cores = os.cpu_count() or 1
     if args.workers is not None and not 1 <= args.workers <= 4 * cores:  # (1000: 1000 processes)
         raise BatchError(
