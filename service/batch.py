@@ -65,7 +65,8 @@ from rich.progress import (
 )
 
 from gbuffer.atomic import atomic_path, output_target, partial_files, read_text
-from gbuffer.errors import OutputError
+from gbuffer.errors import FrameError, OutputError
+from gbuffer.exr import read_layout
 from gbuffer.frame import Frame
 from service import allocator
 from service.enhance import ReadRequest, WriteRequest, enhance_frame, read_for
@@ -293,6 +294,19 @@ def _load_pinned(path: Path) -> dict[str, float]:
     return {str(k): float(v) for k, v in data.items()}
 
 
+def _whole_exr(path: str) -> bool:
+    """Whether ``path`` is an EXR file whose headers, chunk tables and last chunk are all
+    there: ``--skip-existing`` makes a cut-off output again (an empty or truncated one counted
+    as done)."""
+    if not os.path.exists(path):
+        return False
+    try:
+        read_layout(path)
+    except FrameError:
+        return False
+    return True
+
+
 def _statistic(value: object) -> bool:
     """Whether a pinned value is a number the operators can use (float32, finite)."""
     return (
@@ -480,7 +494,7 @@ def run_batch(
     t_start = time.perf_counter()
     todo = []
     for f in frame_list:
-        if skip_existing and os.path.exists(expand(out_pattern, f)):
+        if skip_existing and _whole_exr(expand(out_pattern, f)):
             summary.skipped.append(f)
         else:
             todo.append(f)

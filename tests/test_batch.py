@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from gbuffer.exr import read_layout
 from gbuffer.io import write
 from gbuffer.render import render
 from service.batch import BatchError, expand, find_frames, parse_frames, run_batch
@@ -199,7 +200,11 @@ def test_batch_on_a_dask_cluster(
     pinned = json.loads(pins.read_text())
     check_outputs(sequence, out, pinned)
 
-    # again with --skip-existing: nothing left to do but the failed frame
+    # again with --skip-existing: nothing left to do but the failed frame and two outputs cut
+    # off (an empty and a truncated one counted as done)
+    whole = Path(expand(out, 3)).read_bytes()
+    Path(expand(out, 3)).write_bytes(whole[: len(whole) // 2])
+    Path(expand(out, 4)).write_bytes(b"")
     code = cli(
         [
             *("batch", str(sequence / "in" / "shot.####.exr"), "-o", out, "--skip-existing"),
@@ -207,7 +212,9 @@ def test_batch_on_a_dask_cluster(
         ]
     )
     assert code == 1
-    assert "0 done, 11 skipped, 1 failed" in capsys.readouterr().out
+    assert "2 done, 9 skipped, 1 failed" in capsys.readouterr().out
+    assert Path(expand(out, 3)).read_bytes() == whole
+    read_layout(expand(out, 4))  # whole again
 
 
 def test_batch_on_the_local_default(sequence: Path) -> None:
