@@ -533,6 +533,11 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "out.exr.txt: no picture format for .txt; use .png",
     ),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
+    "compare of no method": (["compare", "{exr}", "--methods=,"], "name at least one method"),
+    "compare of a one-pixel render": (  # (the score's "depth must be at least 3x3")
+        ["compare", "{mesh}", "--width", "1"],
+        "a comparison renders at least 3x3 pixels",
+    ),
     "missing -o": (["render", "{missing}"], "-o/--output"),
 }
 
@@ -590,3 +595,19 @@ def test_a_render_that_shows_nothing_says_so(
     assert err == [f"depict: warning: {NOTHING_SEEN}"] and out.exists()
     assert depict("render", SPOT, "-o", out, "--width", "32", "--height", "24") == 0
     assert "warning" not in capsys.readouterr().err
+
+
+def test_compare_says_which_flags_its_input_does_not_use(
+    exr: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A mesh's framing given with a frame, a frame's reading with a mesh: ignored, silently."""
+    one = ("--methods", "lambert", "--directions", "1")
+    assert depict("compare", exr, "--width", "100", *one) == 0
+    assert capsys.readouterr().err.splitlines() == [
+        f"depict: warning: --width: for a mesh input; it is a frame ({exr}): ignored"
+    ]
+    mesh = ("compare", SPOT, *one, "--width", "32", "--height", "24")
+    assert depict(*mesh, "--preset", "blender", "--map", "depth=Z") == 0
+    assert capsys.readouterr().err.splitlines() == [
+        f"depict: warning: --preset, --map: for an EXR input; it is a mesh ({SPOT}): ignored"
+    ]

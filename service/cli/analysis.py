@@ -19,7 +19,7 @@ from analysis.result import ComparisonResult
 from gbuffer.atomic import atomic_path, check_outputs
 from service import arm
 from service.cli.args import UsageError, parse_sets
-from service.cli.common import read_request, steps
+from service.cli.common import read_request, steps, warn
 from service.jobs import compare_job, pick_job, score_job
 
 MESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
@@ -83,11 +83,34 @@ def compare_options(args: argparse.Namespace) -> tuple[bool, dict[str, Any]]:
         "label": Path(args.input).stem,
         "shading_norm": _shading_norm(args.shading_norm),
     }
+    if not options["methods"]:  # (an empty list ran every method)
+        raise UsageError(f"--methods {args.methods!r}: name at least one method")
+    framing = {k: getattr(args, k) for k in MESH_FRAMING if getattr(args, k) is not None}
+    reading = [flag for flag, given in _read_flags(args).items() if given]
     if is_mesh:
-        options.update(
-            width=args.width, height=args.height, azimuth=args.azimuth, elevation=args.elevation
-        )
+        options.update({**MESH_FRAMING, **framing})
+        if min(options["width"], options["height"]) < 3:  # (the score's "depth must be 3x3")
+            raise UsageError("--width and --height: a comparison renders at least 3x3 pixels")
+    ignored = reading if is_mesh else [f"--{k}" for k in framing]  # (ignored without a word)
+    if ignored:
+        what = "an EXR input; it is a mesh" if is_mesh else "a mesh input; it is a frame"
+        warn([f"{', '.join(ignored)}: for {what} ({args.input}): ignored"])
     return is_mesh, options
+
+
+def _read_flags(args: argparse.Namespace) -> dict[str, bool]:
+    """Whether each flag of reading a frame was given."""
+    return {
+        "--preset": args.preset != "auto",
+        "--camera": args.camera is not None,
+        "--map": bool(args.map),
+        "--normal-space": args.normal_space is not None,
+        "--colorspace": args.colorspace is not None,
+    }
+
+
+#: How ``depict compare`` renders a mesh input, unless its flags say otherwise.
+MESH_FRAMING: dict[str, Any] = {"width": 512, "height": 512, "azimuth": 30.0, "elevation": 20.0}
 
 
 def cmd_compare(args: argparse.Namespace) -> int:

@@ -246,10 +246,10 @@ def _compare_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--sheet", metavar="OUT.png", type=named_path, help="renderings and score maps (Fig. 12)"
     )
-    p.add_argument("--width", type=int, default=512, help="mesh render width")
-    p.add_argument("--height", type=int, default=512, help="mesh render height")
-    p.add_argument("--azimuth", type=float, default=30.0, help="mesh framing azimuth, degrees")
-    p.add_argument("--elevation", type=float, default=20.0, help="mesh framing elevation, deg")
+    p.add_argument("--width", type=int, help="mesh render width (512)")
+    p.add_argument("--height", type=int, help="mesh render height (512)")
+    p.add_argument("--azimuth", type=float, help="mesh framing azimuth, degrees (30)")
+    p.add_argument("--elevation", type=float, help="mesh framing elevation, degrees (20)")
     add_read_options(p)
     add_server_option(p)
     p.set_defaults(command="service.cli.analysis:cmd_compare", remote="service.cli.remote:compare")

@@ -82,8 +82,8 @@ class CompareOptions(NumbersModel):
     albedo: Literal["white", "frame"] = "white"
     label: str = Field("", max_length=200)
     shading_norm: Literal["reference", "per_image"] | float = "reference"
-    width: int = Field(512, ge=1, le=16384, description="mesh render width")
-    height: int = Field(512, ge=1, le=16384, description="mesh render height")
+    width: int = Field(512, ge=3, le=16384, description="mesh render width")
+    height: int = Field(512, ge=3, le=16384, description="mesh render height")
     azimuth: float = Field(30.0, ge=-360, le=360, description="mesh framing azimuth, degrees")
     elevation: float = Field(20.0, ge=-90, le=90, description="mesh framing elevation, degrees")
 
