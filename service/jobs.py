@@ -43,6 +43,7 @@ def score_job(
     if steps is not None:
         frame, op_s = pipeline.run_timed(frame, steps, Context(files=files))
     out = score_frame(frame, maps=False, **options)
+    scored = bool(frame.covered().any())  # (0.0 and nothing said, for an all-NaN beauty)
     return {
         "score": float(out["score"]),
         "shading_norm": float(out["shading_norm"]),
@@ -50,7 +51,15 @@ def score_job(
         "image_shape": [int(v) for v in out["image_shape"]],
         "params": {k: v if isinstance(v, str) else float(v) for k, v in out["params"].items()},
         "op_s": op_s,
+        "warnings": [] if scored else [NOTHING_SCORED],
     }
+
+
+#: Why a score is 0 when no pixel could be scored.
+NOTHING_SCORED = (
+    "no pixel was scored: none is covered (a finite, positive depth on a surface) with a finite "
+    "radiance (NaN or Inf pixels are holes); the score 0 says nothing of the picture"
+)
 
 
 def compare_job(

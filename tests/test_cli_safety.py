@@ -22,6 +22,7 @@ from gbuffer.limits import RENDER_WORKING, Limits, _physical_memory
 from gbuffer.render import render
 from service.cli import main
 from service.cli.args import error_line
+from service.jobs import NOTHING_SCORED
 from tests.exr_factory import (
     make_scene,
     write_canonical,
@@ -385,6 +386,21 @@ def test_a_frame_with_no_covered_pixel_is_written_with_a_warning(
     capfd.readouterr()
     covered = write_canonical(tmp_path / "ok.exr", make_scene(48, 64))
     assert depict("enhance", covered, "-o", out) == 0
+    assert "warning" not in capfd.readouterr().err
+
+
+def test_a_score_of_no_scored_pixel_says_so(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """(No pixel covered, or a beauty all NaN: "congruence score 0.0000" and nothing more.)"""
+    s = make_scene(48, 64)
+    s.depth[...] = np.inf
+    src = write_canonical(tmp_path / "empty.exr", s)
+    assert depict("score", src) == 0
+    out, err = capfd.readouterr()
+    assert "congruence score 0.0000" in out
+    assert err.splitlines() == [f"depict: warning: {NOTHING_SCORED}"]
+    assert depict("score", write_canonical(tmp_path / "ok.exr", make_scene(48, 64))) == 0
     assert "warning" not in capfd.readouterr().err
 
 

@@ -49,6 +49,7 @@ def cmd_score(args: argparse.Namespace) -> int:
 
 def print_score(args: argparse.Namespace, data: dict[str, Any]) -> int:
     data.pop("op_s", None)
+    warn(data.get("warnings", []))
     if args.json:
         print(json.dumps(data, indent=2))
     else:

@@ -47,6 +47,11 @@ class Score(BaseModel):
     analysis_shape: list[int] = Field(description="(h, w) at which the score was evaluated")
     image_shape: list[int] = Field(description="(h, w) of the frame")
     params: dict[str, float | str] = Field(description="the congruence parameters used")
+    warnings: list[str] = Field(
+        default_factory=list,
+        description="what to know about the number: e.g. that no pixel was scored (no covered "
+        "pixel, or every pixel's radiance NaN or Inf), when the score is 0 for that reason",
+    )
 
 
 class Comparison(BaseModel):
@@ -178,7 +183,7 @@ async def score(
         fields,
         lambda src, read: ("score", jobs.score_job, str(src), steps, read, options),
     )
-    keys = ("score", "shading_norm", "analysis_shape", "image_shape", "params")
+    keys = ("score", "shading_norm", "analysis_shape", "image_shape", "params", "warnings")
     return {k: out[k] for k in keys}
 
 
