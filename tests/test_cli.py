@@ -309,7 +309,8 @@ def test_score_text_and_json(exr: Path, capsys: pytest.CaptureFixture[str]) -> N
     assert m, text
     assert depict("score", exr, "--json") == 0
     data = json.loads(capsys.readouterr().out)
-    assert set(data) == {"score", "shading_norm", "analysis_shape", "image_shape", "params"}
+    keys = {"score", "shading_norm", "analysis_shape", "image_shape", "params", "warnings"}
+    assert set(data) == keys and data["warnings"] == []
     assert data["shading_norm"] > 0
     assert 0.0 <= data["score"] <= 1.0
     assert f"{data['score']:.4f}" == m.group(1)
