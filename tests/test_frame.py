@@ -69,3 +69,33 @@ def test_a_depth_of_minus_infinity_is_named_by_the_score() -> None:
     depth = -buffers["depth"]  # (the background's +inf becomes -inf)
     with pytest.raises(Exception, match="depth contains -inf: depth is positive"):
         pipeline.run(Frame(buffers={**buffers, "depth": depth}), [{"op": "congruence"}])
+
+
+#: The operators that read the frame's normals at every pixel of a window, background included.
+NORMAL_READERS = ("light_alignment", "exaggerated_shading", "light_warping")
+
+
+@pytest.mark.parametrize("op", NORMAL_READERS)
+def test_nan_normals_off_the_surface_change_nothing(op: str) -> None:
+    """A script's frame may hold anything off the surface (a compositor's normalise of a zero
+    vector gives NaN): Light Alignment's pyramid spread it to every covered pixel (the whole
+    beauty NaN), Exaggerated Shading and Light Warping refused the frame."""
+    buffers = sphere()
+    off = ~np.isfinite(buffers["depth"])
+    assert off.any() and (buffers["normal"][off] == 0).all()
+    nan = buffers["normal"].copy()
+    nan[off] = np.nan
+    want = pipeline.run(Frame(buffers=buffers), [{"op": op}]).buffers["beauty"]
+    got = pipeline.run(Frame(buffers={**buffers, "normal": nan}), [{"op": op}]).buffers["beauty"]
+    assert np.isfinite(want).all()
+    assert np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("op", NORMAL_READERS)
+def test_nan_normals_on_the_surface_are_counted(op: str) -> None:
+    """As a file's are refused: Light Alignment made every covered pixel NaN from a few."""
+    buffers = sphere()
+    ys, xs = np.nonzero(np.isfinite(buffers["depth"]))
+    buffers["normal"][ys[:3], xs[:3]] = [np.nan, 0.0, np.inf]
+    with pytest.raises(Exception, match=f"{op}: the normal is NaN or Inf at 3 covered pixels"):
+        pipeline.run(Frame(buffers=buffers), [{"op": op}])

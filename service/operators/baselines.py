@@ -16,7 +16,7 @@ from ops.baselines import ES_SCALES, exaggerated_shading, light_warping
 from ops.curvature import isotropic
 from ops.shading import parse_light
 from service.operators.base import Context, Params, register
-from service.operators.common import frame_albedo
+from service.operators.common import frame_albedo, surface_normals
 from service.operators.curvature import CurvatureParams, frame_curvature
 
 
@@ -78,7 +78,7 @@ class ExaggeratedParams(OneLightParams):
 )
 def apply_exaggerated_shading(frame: Frame, p: ExaggeratedParams, ctx: Context) -> None:
     shading = exaggerated_shading(
-        frame.buffers["normal"],
+        surface_normals(frame, "exaggerated_shading"),
         frame.buffers["depth"],
         frame.mask,
         p.direction(),
@@ -109,7 +109,7 @@ class WarpingParams(OneLightParams, CurvatureParams):
 )
 def apply_light_warping(frame: Frame, p: WarpingParams, ctx: Context) -> None:
     shading = light_warping(
-        frame.buffers["normal"],
+        surface_normals(frame, "light_warping"),
         frame.buffers["depth"],
         frame.mask,
         p.direction(),

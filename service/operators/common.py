@@ -100,6 +100,23 @@ def user_image(ctx: Context, path: str, what: str, **kwargs: Any) -> np.ndarray:
     return load_image(path, **kwargs)
 
 
+def surface_normals(frame: Frame, why: str) -> np.ndarray:
+    """The frame's normals, with NaN or Inf off the surface made 0 (a frame built in Python may
+    hold anything there; files are read with 0): a :class:`PipelineError` counts the covered
+    pixels whose normal is NaN or Inf (a file's are refused as it is read)."""
+    normal = frame.need("normal", why)
+    if np.isfinite(normal).all():
+        return normal
+    bad = ~np.isfinite(normal).all(axis=2)
+    covered = int(np.count_nonzero(bad & frame.covered()))
+    if covered:
+        raise PipelineError(
+            f"{why}: the normal is NaN or Inf at {covered} covered pixel{'s' * (covered != 1)} "
+            "(give those pixels coverage 0, or a finite normal)"
+        )
+    return np.where(bad[..., None], np.float32(0.0), normal).astype(np.float32)
+
+
 def frame_albedo(frame: Frame, albedo: float | None) -> np.ndarray:
     """The frame's albedo buffer, or a constant grey (``albedo``, or 0.8 without one)."""
     if albedo is None and "albedo" in frame.buffers:

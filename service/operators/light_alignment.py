@@ -46,6 +46,7 @@ from service.operators.common import (
     channels,
     frame_albedo,
     kept_lighting_gain,
+    surface_normals,
 )
 
 Component = Literal["diffuse", "specular", "transmission"]
@@ -217,7 +218,7 @@ def _light_layer(k: int, component: str) -> str:
     ),
 )
 def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -> None:
-    normal = frame.need("normal", "light_alignment")
+    normal = surface_normals(frame, "light_alignment")
     depth = frame.need("depth", "light_alignment")
     mask = frame.mask
     form = _form(frame, p)
