@@ -437,8 +437,26 @@ class _Run:
                         tmp.write_text(json.dumps(pinned, indent=2, sort_keys=True))
         futures = {self.submit(f, pinned or {}, fetched.pop(f, None)): f for f in queue}
         for future in as_completed(futures):
-            record(self.gather(future, futures[future]))
+            record(_unpinned(self.gather(future, futures[future]), pinned or {}, pinned_path))
         return pinned
+
+
+def _unpinned(
+    result: dict[str, Any], pinned: dict[str, float], pinned_path: Path | None
+) -> dict[str, Any]:
+    """``result`` with a warning when its frame measured a statistic the pins lack (a stale or
+    hand-edited ``--pinned`` file): measured on each frame, it would flicker along the
+    sequence."""
+    stray = sorted(set(result.get("measured") or {}) - set(pinned))
+    if result["status"] != "done" or not stray:
+        return result
+    where = f"the pinned statistics {pinned_path}" if pinned_path else "the first frame's"
+    warning = (
+        f"statistics measured on each frame, not pinned: {', '.join(stray)} ({where} lack "
+        f"{'it' if len(stray) == 1 else 'them'}"
+        f"{'; delete the file to measure them again' if pinned_path else ''})"
+    )
+    return {**result, "warnings": [*result.get("warnings", []), warning]}
 
 
 def _progress(enabled: bool) -> Progress:

@@ -289,3 +289,28 @@ def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixtu
         assert "each finite in float32 (not true or false)" in capsys.readouterr().err
         pinned.unlink()
     assert not (sequence / "o.0001.exr").exists()
+
+
+def test_a_statistic_the_pins_lack_is_measured_with_a_warning(sequence: Path) -> None:
+    """A stale or hand-edited --pinned file (a key misspelt): the statistic it lacks was
+    measured on every frame without a word, and flickered along the sequence."""
+    pins = sequence / "typo.json"
+    spec = compile(DEFAULT_PIPELINE)
+    keys = enhance(str(sequence / "in" / "shot.0001.exr"), str(sequence / "k.exr"), spec)
+    assert keys["measured"], "the default pipeline measures a statistic to pin"
+    pins.write_text(json.dumps({f"{key}x": 1.0 for key in keys["measured"]}))
+    summary = run_batch(
+        str(sequence / "in" / "shot.####.exr"),
+        str(sequence / "typo" / "rs.####.exr"),
+        steps=spec,
+        frames=[1, 2],
+        workers=1,
+        progress=False,
+        pinned_file=pins,
+    )
+    assert summary.done == [1, 2]
+    (warning, frames), *_ = summary.warnings.items()
+    assert sorted(frames) == [1, 2]
+    assert warning.startswith("statistics measured on each frame, not pinned: ")
+    assert all(key in warning for key in keys["measured"])
+    assert f"the pinned statistics {pins} lack" in warning
