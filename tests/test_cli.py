@@ -482,6 +482,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "sigmas=[0, False]: expected a number, not true or false",
     ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
+    "empty server": (  # (an unset variable in --server "$FARM": it ran here)
+        ["enhance", "{exr}", "-o", "{out}", "--server", ""],
+        "--server: is empty; give the server's URL, or leave --server out to run here",
+    ),
     "empty plot": (["compare", "{exr}", "--plot", ""], "--plot: is empty"),
     "a light that is not one": (
         ["enhance", "{exr}", "-o", "{out}", "--op", "light_alignment", "--set", "lights=1,2"],

@@ -59,12 +59,21 @@ def printable(text: str) -> str:
     return _CONTROL.sub(lambda m: f"\\x{ord(m.group()):02x}", text)
 
 
-def named_path(text: str) -> str:
-    """An argparse ``type`` for a file to write: any name but an empty one (which would
-    name the current folder)."""
-    if not text.strip():
-        raise argparse.ArgumentTypeError("is empty; give a file name")
-    return text
+def not_blank(hint: str) -> Any:
+    """An argparse ``type``: any text but a blank one, which would stand for no option at all
+    (an unset variable in ``--server "$FARM"`` ran the command here), or a one-line error
+    ending with ``hint``."""
+
+    def parse(text: str) -> str:
+        if not text.strip():
+            raise argparse.ArgumentTypeError(f"is empty; {hint}")
+        return text
+
+    return parse
+
+
+#: An argparse ``type`` for a file to write (an empty name would name the current folder).
+named_path = not_blank("give a file name")
 
 
 def bounded(kind: type, low: float, high: float) -> Any:
@@ -226,6 +235,7 @@ def add_server_option(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--server",
         metavar="URL",
-        default=os.environ.get("DEPICT_SERVER") or None,
+        default=os.environ.get("DEPICT_SERVER", "").strip() or None,
+        type=not_blank("give the server's URL, or leave --server out to run here"),
         help="run on this Depict server (env DEPICT_SERVER; key from DEPICT_API_KEY)",
     )
