@@ -65,23 +65,27 @@ def _from_point_cloud(loaded: Any, path: Path) -> trimesh.Trimesh | None:
 MAX_COORDINATE = 1e15
 
 
-def _unusable_triangles(path: Path) -> str:
-    """Why a file whose reading left no triangles had some: the triangles trimesh dropped for
-    vertices with NaN or infinite coordinates ("" when it had none, or cannot say)."""
-    try:
-        raw = trimesh.load(str(path), process=False)
-        meshes = list(raw.geometry.values()) if isinstance(raw, trimesh.Scene) else [raw]
-        tris = [m for m in meshes if isinstance(m, trimesh.Trimesh) and len(m.faces)]
-        faces = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in tris]
-    except Exception:  # (read once already: this only adds to the message)
-        return ""
-    if not faces:
-        return ""
-    bad = sum(int((~np.isfinite(f).all(axis=(1, 2))).sum()) for f in faces)
-    total = sum(len(f) for f in faces)
-    if not bad:
-        return ""
-    return f" with finite vertices ({bad} of {total} have NaN or infinite coordinates)"
+#: mesh.metadata key: (triangles left out for vertices with NaN or infinite coordinates, of all)
+LEFT_OUT = "depict_left_out"
+
+
+def _read(path: Path) -> tuple[Any, tuple[int, int]]:
+    """trimesh's reading of ``path`` (a scene flattened into one mesh) and how many of its
+    triangles had a vertex with NaN or infinite coordinates, of all: trimesh's processing
+    (merged vertices, as ``trimesh.load`` does by default) leaves those out."""
+    loaded: Any = trimesh.load(str(path), process=False)
+    parts = list(loaded.geometry.values()) if isinstance(loaded, trimesh.Scene) else [loaded]
+    bad = total = 0
+    for part in parts:
+        if isinstance(part, trimesh.Trimesh):
+            finite = np.isfinite(np.asarray(part.vertices)).all(axis=1)
+            faces = np.asarray(part.faces)
+            bad += int(np.count_nonzero(~finite[faces].all(axis=1))) if len(faces) else 0
+            total += len(faces)
+            part.process()
+    if isinstance(loaded, trimesh.Scene):
+        loaded = loaded.to_mesh() if loaded.geometry else None
+    return loaded, (bad, total)
 
 
 def load_mesh(path: str | Path) -> trimesh.Trimesh:
@@ -106,9 +110,7 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     try:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore", RuntimeWarning)  # (NaN or huge coordinates: said below)
-            loaded = trimesh.load(str(path))
-        if isinstance(loaded, trimesh.Scene):
-            loaded = loaded.to_mesh() if loaded.geometry else None
+            loaded, (bad, total) = _read(path)
     except Exception as exc:  # trimesh raises many types on bad files
         raise FrameError(f"cannot read mesh {path}: {type(exc).__name__}: {exc}") from exc
     mesh: trimesh.Trimesh | None = None
@@ -117,7 +119,8 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     elif isinstance(loaded, trimesh.PointCloud):
         mesh = _from_point_cloud(loaded, path)
     if mesh is None or len(mesh.faces) == 0 or len(mesh.vertices) == 0:
-        raise FrameError(f"mesh file {path} holds no triangles{_unusable_triangles(path)}")
+        finite = f" with finite vertices ({bad} of {total} have NaN or infinite coordinates)"
+        raise FrameError(f"mesh file {path} holds no triangles{finite if bad else ''}")
     if not np.all(np.abs(mesh.vertices) <= MAX_COORDINATE):  # (NaN too)
         raise FrameError(
             f"mesh file {path} has vertex coordinates that are not finite or over "
@@ -127,6 +130,7 @@ def load_mesh(path: str | Path) -> trimesh.Trimesh:
     if from_file and not np.all(np.isfinite(mesh._cache["vertex_normals"])):
         raise FrameError(f"mesh file {path} has vertex normals that are not finite (vn nan)")
     mesh.metadata[FILE_NORMALS] = from_file  # read from the file
+    mesh.metadata[LEFT_OUT] = (bad, total)
     return mesh
 
 

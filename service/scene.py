@@ -35,10 +35,12 @@ def render_to_file(
     mesh_path: str | Path, out_path: str | Path, scene: RenderRequest
 ) -> dict[str, Any]:
     """Render ``mesh_path`` as ``scene`` says and write the EXR; ``{"size": [w, h],
-    "warnings": [...]}`` (:data:`NOTHING_SEEN` when no pixel shows the mesh).
+    "warnings": [...]}`` (:data:`NOTHING_SEEN` when no pixel shows the mesh; the triangles left
+    out for vertices that are not finite).
 
     A light that does not parse is a ValueError naming ``--light`` (the service names its field).
     """
+    from gbuffer.mesh import LEFT_OUT
     from gbuffer.render import auto_camera, load_mesh, render
 
     mesh = load_mesh(mesh_path)
@@ -59,8 +61,14 @@ def render_to_file(
         mesh, scene.width, scene.height, camera=camera, lights=lights, shading=scene.shading
     )
     write(frame, out_path)
-    empty = [] if frame.covered().any() else [NOTHING_SEEN]
-    return {"size": [scene.width, scene.height], "warnings": empty}
+    said = [] if frame.covered().any() else [NOTHING_SEEN]
+    bad, total = mesh.metadata.get(LEFT_OUT, (0, 0))
+    if bad:
+        said.append(
+            f"{bad} of the mesh's {total} triangles have a vertex with NaN or infinite "
+            "coordinates: they are left out"
+        )
+    return {"size": [scene.width, scene.height], "warnings": said}
 
 
 #: The warning of a render in which no pixel shows the mesh.

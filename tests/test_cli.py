@@ -602,6 +602,22 @@ def test_a_render_that_shows_nothing_says_so(
     assert "warning" not in capsys.readouterr().err
 
 
+def test_a_render_says_which_triangles_it_left_out(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Triangles with a NaN or infinite vertex were dropped by the reader without a word."""
+    mesh = tmp_path / "holes.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv nan 2 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
+    out = tmp_path / "r.exr"
+    assert depict("render", mesh, "-o", out, "--width", "32", "--height", "24") == 0
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "depict: warning: 1 of the mesh's 3 triangles have a vertex with NaN or infinite "
+        "coordinates: they are left out"
+    ]
+    assert out.exists()
+
+
 def test_compare_says_which_flags_its_input_does_not_use(
     exr: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
