@@ -33,6 +33,7 @@ import httpx
 
 from gbuffer.atomic import atomic_path, read_text
 from service.errors import DepictError
+from service.headers import WARNING, warning_text
 
 __all__ = ["Client", "DepictError"]
 
@@ -72,6 +73,9 @@ class Client:
     timeout : seconds for one request (upload, processing and download).
     retries : how many times a 429 (queue full) is retried after its ``Retry-After``.
     transport : an httpx transport (tests: ``httpx.ASGITransport``); default a real socket.
+
+    After :meth:`enhance` or :meth:`render`, :attr:`warnings` holds the server's warnings about
+    that file (as ``depict enhance`` prints them: NaN pixels read as holes, ...).
     """
 
     def __init__(
@@ -89,6 +93,7 @@ class Client:
         headers = {"Authorization": f"Bearer {key}"} if key else {}
         self.url = url.rstrip("/")
         self.retries = retries
+        self.warnings: list[str] = []
         self._http = httpx.Client(
             base_url=self.url, headers=headers, timeout=timeout, transport=transport
         )
@@ -175,6 +180,7 @@ class Client:
         with atomic_path(output) as tmp, open(tmp, "wb") as out:
             for chunk in response.iter_bytes(1 << 20):
                 out.write(chunk)
+        self.warnings = [warning_text(v) for v in response.headers.get_list(WARNING)]
         return Path(output)
 
     # -- API -----------------------------------------------------------------------------------

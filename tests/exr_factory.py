@@ -506,3 +506,21 @@ def write_corrupt(path: Path) -> Path:
         data[i] ^= 0x5A
     path.write_bytes(bytes(data))
     return path
+
+
+def render_with_nan(path: Path, size: tuple[int, int], pixels: dict[str, list[tuple]]) -> Path:
+    """A canonical render with NaN/Inf put at ``pixels``: buffer -> [(y, x, component, value)]."""
+    import trimesh
+
+    from gbuffer.io import write
+    from gbuffer.render import render
+
+    frame = render(trimesh.creation.icosphere(subdivisions=3), *size)
+    for name, changes in pixels.items():
+        arr = frame.buffers[name].copy()
+        for y, x, k, value in changes:
+            arr[y, x, k] = value
+        frame.buffers[name] = arr
+    frame.outputs = {}  # written from the buffers
+    write(frame, path)
+    return path

@@ -25,6 +25,7 @@ from service.cli.args import error_line
 from service.jobs import NOTHING_SCORED
 from tests.exr_factory import (
     make_scene,
+    render_with_nan,
     write_canonical,
     write_corrupt,
     write_decode_bomb,
@@ -238,19 +239,6 @@ def test_missing_buffer_names_the_buffer(tmp_path: Path, capfd: pytest.CaptureFi
 
 
 # -- fireflies -------------------------------------------------------------------------------------
-
-
-def render_with_nan(path: Path, size: tuple[int, int], pixels: dict[str, list[tuple]]) -> Path:
-    """A canonical render with NaN/Inf put at ``pixels``: buffer -> [(y, x, component, value)]."""
-    frame = render(trimesh.creation.icosphere(subdivisions=3), *size)
-    for name, changes in pixels.items():
-        arr = frame.buffers[name].copy()
-        for y, x, k, value in changes:
-            arr[y, x, k] = value
-        frame.buffers[name] = arr
-    frame.outputs = {}  # written from the buffers
-    write_exr(frame, path)
-    return path
 
 
 def test_nan_and_inf_radiance_are_holes_passed_through(

@@ -9,6 +9,7 @@ the server's memory comes back to its baseline afterwards.
 from __future__ import annotations
 
 import json
+import math
 import shutil
 import signal
 import struct
@@ -29,7 +30,9 @@ from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from service.cli import main as cli
 from service.client import Client, DepictError
+from service.headers import warning_text, warning_value
 from tests import exr_factory
+from tests.exr_factory import render_with_nan
 from tests.live_server import (
     Server,
     free_port,
@@ -218,6 +221,58 @@ def test_render_matches_local_cli(
     assert cli([*args, "-o", str(local)]) == 0
     assert cli([*args, "-o", str(remote), "--server", server.url]) == 0
     assert local.read_bytes() == remote.read_bytes()
+
+
+def test_the_server_says_what_the_command_line_warns(
+    server: Server,
+    files: dict[str, Path],
+    tmp_path: Path,
+    remote_env: None,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """NaN pixels read as holes, triangles left out, an output not named .exr: a file answer
+    carries its warnings as Depict-Warning headers (they were dropped), and ``--server`` prints
+    them as the local command does."""
+    holes = render_with_nan(tmp_path / "holes.exr", (96, 72), {"beauty": [(36, 48, 0, math.nan)]})
+    mesh = tmp_path / "torn.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv nan 2 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
+    commands = [
+        ["enhance", str(holes), "-o", str(tmp_path / "{}.exr")],
+        ["render", str(mesh), "--width", "32", "--height", "24", "-o", str(tmp_path / "{}.out")],
+    ]
+    for command in commands:
+        said = []
+        for where, extra in (("local", []), ("remote", ["--server", server.url])):
+            assert cli([arg.format(where) for arg in command] + extra) == 0
+            said.append(capsys.readouterr().err.replace(where, "WHERE"))
+        assert said[0].count("depict: warning: ") == len(said[0].splitlines()) >= 1
+        assert said[1] == said[0]
+    response = httpx.post(
+        f"{server.url}/v1/render",
+        files={"mesh": ("torn.obj", mesh.read_bytes())},
+        data={"scene": '{"width": 32, "height": 24}'},
+        headers=AUTH,
+        timeout=60,
+    )
+    assert response.status_code == 200, response.text
+    assert response.headers.get_list("depict-warning") == [
+        "1 of the mesh's 3 triangles have a vertex with NaN or infinite coordinates: they are "
+        "left out"
+    ]
+    clean = httpx.post(
+        f"{server.url}/v1/enhance",
+        files={"file": ("a.exr", files["canonical"].read_bytes())},
+        headers=AUTH,
+        timeout=60,
+    )
+    assert clean.status_code == 200 and "depict-warning" not in clean.headers
+
+
+def test_a_warning_header_gives_back_any_text() -> None:
+    for text in ("plain", "100 % of 3 pixels", "ünïcode naïve ☂", "a\nline\x1b[31m", "%41"):
+        value = warning_value(text)
+        assert value.isascii() and value.isprintable()
+        assert warning_text(value) == text
 
 
 def test_preview_png(server: Server, files: dict[str, Path]) -> None:

@@ -16,7 +16,7 @@ from service.cli.analysis import (
     score_options,
 )
 from service.cli.args import UsageError, mapping
-from service.cli.common import each_file, enhance_targets, steps
+from service.cli.common import each_file, enhance_targets, exr_name, steps, warn
 from service.client import Client
 
 
@@ -41,6 +41,7 @@ def render(args: argparse.Namespace) -> int:
             elevation=args.elevation,
             lights=args.light,
         )
+        warn(exr_name(args.output) + client.warnings)
     print(f"wrote {args.output} ({args.width}x{args.height})")
     return 0
 
@@ -64,6 +65,7 @@ def enhance(args: argparse.Namespace) -> int:
                 output_layer=args.output_layer,
                 layout=args.layout,
             )
+            warn(client.warnings + exr_name(out))
             print(f"wrote {out}")
 
         return each_file(pairs, one)

@@ -15,6 +15,7 @@ from gbuffer.io import DEFAULT_LAYOUT
 from gbuffer.presets import preset_help
 from service import pipeline as pipelines
 from service.enhance import WriteRequest
+from service.headers import WARNING, warning_value
 from service.http import forms, worker
 from service.http.deps import Server, Work
 from service.http.uploads import EXR_MEDIA_TYPE, mesh_suffix, receive_exr, save, scrubbed
@@ -30,10 +31,20 @@ COMMON = (400, 401, 408, 413, 415, 422, 429, 503, 504)
 
 
 def binary(description: str, *media_types: str) -> dict[int | str, dict[str, Any]]:
-    """``responses=`` of a route answering a file, with the problems of :data:`COMMON`."""
+    """``responses=`` of a route answering a file (its warnings in headers), with the problems
+    of :data:`COMMON`."""
     schema = {"schema": {"type": "string", "format": "binary"}}
+    warning = {
+        "description": "one per warning about the file, as `depict` prints them (NaN pixels "
+        "read as holes, triangles left out, ...); percent-encoded but for printable ASCII",
+        "schema": {"type": "string"},
+    }
     return {
-        200: {"description": description, "content": {t: schema for t in media_types}},
+        200: {
+            "description": description,
+            "content": {t: schema for t in media_types},
+            "headers": {WARNING: warning},
+        },
         **openapi_responses(*COMMON),
     }
 
@@ -136,11 +147,23 @@ async def enhance(
             layout=layout,
         )
         read = fields.request(server.settings.limits)
-        await server.run("enhance", worker.enhance_job, str(src), str(out), steps, read, write)
+        done = await server.run(
+            "enhance", worker.enhance_job, str(src), str(out), steps, read, write
+        )
     stem = Path(file.filename or "frame").stem or "frame"
     suffix = ".png" if preview == "png" else ".exr"
     media_type = "image/png" if preview == "png" else EXR_MEDIA_TYPE
-    return FileResponse(out, media_type=media_type, filename=f"{stem}_depict{suffix}")
+    return _with_warnings(
+        FileResponse(out, media_type=media_type, filename=f"{stem}_depict{suffix}"), done
+    )
+
+
+def _with_warnings(answer: Response, done: dict[str, Any]) -> Response:
+    """``answer`` with one :data:`~service.headers.WARNING` header per warning of the job (the
+    reader's first, as the command line prints them)."""
+    for text in [*done.get("read_warnings", []), *done.get("warnings", [])]:
+        answer.headers.append(WARNING, warning_value(str(text)))
+    return answer
 
 
 @router.post(
@@ -171,9 +194,11 @@ async def render(
     out = work.path / "render.exr"
     with scrubbed(work.path, {src: mesh.filename or "mesh"}):
         await save(mesh, src)
-        await server.run("render", worker.render_job, str(src), str(out), request)
+        done = await server.run("render", worker.render_job, str(src), str(out), request)
     stem = Path(mesh.filename or "mesh").stem or "mesh"
-    return FileResponse(out, media_type=EXR_MEDIA_TYPE, filename=f"{stem}.exr")
+    return _with_warnings(
+        FileResponse(out, media_type=EXR_MEDIA_TYPE, filename=f"{stem}.exr"), done
+    )
 
 
 def _render_request(scene: Scene) -> RenderRequest:
