@@ -524,3 +524,7 @@ def render_with_nan(path: Path, size: tuple[int, int], pixels: dict[str, list[tu
     frame.outputs = {}  # written from the buffers
     write(frame, path)
     return path
+
+
+#: An OBJ mesh of 3 triangles, one with a NaN vertex (left out when it is read).
+TORN_MESH = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv nan 2 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n"

@@ -23,6 +23,7 @@ from service import pipeline
 from service.cli import main
 from service.registry import operators
 from service.scene import NOTHING_SEEN
+from tests.exr_factory import TORN_MESH
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 W, H = 96, 72
@@ -588,33 +589,27 @@ def test_a_reader_that_stops_early_is_no_error() -> None:
     assert err == ""
 
 
-def test_a_render_that_shows_nothing_says_so(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+@pytest.mark.parametrize(
+    ("obj", "warning"),
+    [  # (each was without a word: an empty frame; triangles dropped by the reader)
+        ("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n", NOTHING_SEEN),
+        (
+            TORN_MESH,
+            "1 of the mesh's 3 triangles have a vertex with NaN or infinite coordinates: they "
+            "are left out",
+        ),
+        (SPOT.read_text(), None),
+    ],
+)
+def test_a_render_says_what_it_could_not_show(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], obj: str, warning: str | None
 ) -> None:
-    """A degenerate mesh (or a camera looking away) was an empty frame without a word."""
-    mesh = tmp_path / "degenerate.obj"
-    mesh.write_text("v 0 0 0\nv 0 0 0\nv 0 0 0\nf 1 2 3\n")
+    mesh = tmp_path / "mesh.obj"
+    mesh.write_text(obj)
     out = tmp_path / "r.exr"
     assert depict("render", mesh, "-o", out, "--width", "32", "--height", "24") == 0
     err = capsys.readouterr().err.splitlines()
-    assert err == [f"depict: warning: {NOTHING_SEEN}"] and out.exists()
-    assert depict("render", SPOT, "-o", out, "--width", "32", "--height", "24") == 0
-    assert "warning" not in capsys.readouterr().err
-
-
-def test_a_render_says_which_triangles_it_left_out(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:
-    """Triangles with a NaN or infinite vertex were dropped by the reader without a word."""
-    mesh = tmp_path / "holes.obj"
-    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv nan 2 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
-    out = tmp_path / "r.exr"
-    assert depict("render", mesh, "-o", out, "--width", "32", "--height", "24") == 0
-    err = capsys.readouterr().err.splitlines()
-    assert err == [
-        "depict: warning: 1 of the mesh's 3 triangles have a vertex with NaN or infinite "
-        "coordinates: they are left out"
-    ]
+    assert err == ([] if warning is None else [f"depict: warning: {warning}"])
     assert out.exists()
 
 

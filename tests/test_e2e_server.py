@@ -32,7 +32,7 @@ from service.cli import main as cli
 from service.client import Client, DepictError
 from service.headers import warning_text, warning_value
 from tests import exr_factory
-from tests.exr_factory import render_with_nan
+from tests.exr_factory import TORN_MESH, render_with_nan
 from tests.live_server import (
     Server,
     free_port,
@@ -235,7 +235,7 @@ def test_the_server_says_what_the_command_line_warns(
     them as the local command does."""
     holes = render_with_nan(tmp_path / "holes.exr", (96, 72), {"beauty": [(36, 48, 0, math.nan)]})
     mesh = tmp_path / "torn.obj"
-    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nv nan 2 0\nf 1 2 3\nf 2 4 3\nf 3 4 5\n")
+    mesh.write_text(TORN_MESH)
     commands = [
         ["enhance", str(holes), "-o", str(tmp_path / "{}.exr")],
         ["render", str(mesh), "--width", "32", "--height", "24", "-o", str(tmp_path / "{}.out")],
