@@ -404,16 +404,26 @@ def _missing(frame: Frame) -> list[str]:
     return out
 
 
+def header_json(text: object) -> Any:
+    """The JSON a ``depict/*`` header attribute holds, or None where it holds none (not text,
+    not JSON, nested past Python's recursion limit: another tool's or a damaged file's)."""
+    if not isinstance(text, str):
+        return None
+    try:
+        return json.loads(text)
+    except (ValueError, RecursionError):
+        return None
+
+
 def _provenance(header: dict[str, Any]) -> dict[str, Any] | None:
-    """What Depict wrote about an output it made (version, pipeline, input, result layer)."""
+    """What Depict wrote about an output it made (version, pipeline, input, result layer); a
+    pipeline or history that is not JSON as its text."""
     keys = ("version", "input", "pipeline", "result", "original", "history")
     found = {k: header[f"depict/{k}"] for k in keys if isinstance(header.get(f"depict/{k}"), str)}
     for key in ("pipeline", "history"):
         if key in found:
-            try:
-                found[key] = json.loads(found[key])
-            except json.JSONDecodeError:
-                pass
+            parsed = header_json(found[key])
+            found[key] = found[key] if parsed is None else parsed
     return found or None
 
 

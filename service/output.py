@@ -37,7 +37,7 @@ import numpy as np
 
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
-from gbuffer.io import DEFAULT_LAYOUT
+from gbuffer.io import DEFAULT_LAYOUT, header_json
 from gbuffer.presets import RESULT_ATTRIBUTE
 from service.version import version
 
@@ -136,17 +136,15 @@ def provenance(frame: Frame, input_name: str | None) -> dict[str, Any]:
         attrs["depict/input"] = input_name
     header = _header(frame)
     earlier = header.get("depict/pipeline")
-    if isinstance(earlier, str):
-        try:
-            history = json.loads(header.get("depict/history") or "[]")
-        except json.JSONDecodeError:
-            history = []
-        if not history:
+    if isinstance(earlier, str):  # (a history that is not a JSON list starts again from here)
+        history = header_json(header.get("depict/history"))
+        if not isinstance(history, list) or not history:
+            pipeline_before = header_json(earlier)
             history = [
                 {
                     "version": header.get("depict/version"),
                     "input": header.get("depict/input"),
-                    "pipeline": json.loads(earlier),
+                    "pipeline": earlier if pipeline_before is None else pipeline_before,
                 }
             ]
         attrs["depict/history"] = json.dumps([*history, entry], separators=(",", ":"))

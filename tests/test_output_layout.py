@@ -160,6 +160,35 @@ def test_canonical_input_keeps_its_beauty_once_under_input(spot: Path, tmp_path:
     assert header["depict/result"] == "" and header["depict/original"] == "input"
 
 
+@pytest.mark.parametrize(
+    "attributes",
+    [
+        {"depict/pipeline": "not json"},
+        {"depict/pipeline": "{}", "depict/history": "5"},
+        {"depict/pipeline": "{}", "depict/history": "[" * 5000 + "]" * 5000},
+    ],
+)
+def test_provenance_that_is_not_depicts_starts_the_history_again(
+    spot: Path, tmp_path: Path, attributes: dict[str, str], capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Another tool's or a damaged file's depict/* attributes: enhance failed with a traceback
+    (a history that is not a list), an error naming neither file nor attribute, or 'nested too
+    deeply' (the service answered 500), and inspect refused the file."""
+    header, chans = read_file(spot)
+    kept = {k: v for k, v in header.items() if k in ("worldToCamera", "depict/fovYDeg")}
+    odd = tmp_path / "odd.exr"
+    with OpenEXR.File({**kept, **attributes}, dict(chans)) as f:
+        f.write(str(odd))
+    out = tmp_path / "out.exr"
+    assert depict("enhance", odd, "-o", out) == 0
+    assert depict("inspect", odd) == 0
+    capsys.readouterr()
+    history = json.loads(str(read_file(out)[0]["depict/history"]))
+    earlier = attributes["depict/pipeline"]
+    assert history[0]["pipeline"] == (earlier if earlier == "not json" else {})
+    assert [h["input"] for h in history] == [None, odd.name]
+
+
 def test_a_file_that_uses_input_gets_a_fresh_name(spot: Path, tmp_path: Path) -> None:
     _, chans = read_file(spot)
     chans["input.R"] = np.zeros_like(chans["R"])
