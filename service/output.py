@@ -122,8 +122,11 @@ def place_result(frame: Frame, layer: str, keep_original: bool = True) -> str | 
         frame.outputs[prefix + name] = np.ascontiguousarray(beauty[..., i], dtype=np.float32)
     frame.outputs[prefix + "A"] = np.asarray(alpha, np.float32)
     if original is None:
-        source = frame.sources.get("beauty", "")
-        original = source.rpartition(".")[0] if "." in source.split(" ")[0] else None
+        source = frame.sources.get("beauty", "").split(" ")[0]
+        if "." in source:
+            original = source.rpartition(".")[0]
+        elif source and layer:  # the file's own R,G,B, the result beside them
+            original = ""
     return original if isinstance(original, str) else None
 
 
@@ -194,6 +197,6 @@ def finish(
     out.attributes.update(colorspace_attributes(out))
     out.attributes.update(provenance(out, input_name))
     out.attributes[RESULT_ATTRIBUTE] = layer
-    if original:
+    if original is not None:
         out.attributes[ORIGINAL_ATTRIBUTE] = original
     return out

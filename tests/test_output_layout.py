@@ -160,6 +160,32 @@ def test_canonical_input_keeps_its_beauty_once_under_input(spot: Path, tmp_path:
     assert header["depict/result"] == "" and header["depict/original"] == "input"
 
 
+def test_an_output_in_the_default_layout_keeps_the_inputs_camera(
+    spot: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The camera of a render's header stayed in the input's part, and the result's part (which
+    holds the beauty read back) had none: a second enhance ran without a camera, and gave other
+    pixels than with it, without a word; its original beauty was '?'."""
+    out = tmp_path / "out.exr"
+    assert depict("enhance", spot, "-o", out) == 0
+    capsys.readouterr()
+    assert depict("inspect", spot, "--json") == 0
+    camera = tmp_path / "camera.json"
+    camera.write_text(json.dumps(json.loads(capsys.readouterr().out)["camera"]))
+    assert depict("inspect", out) == 0
+    text = capsys.readouterr().out
+    assert "camera source: file header (worldToCamera)" in text
+    assert "depict: result in Depict (original beauty: R,G,B)" in text
+    again, given = tmp_path / "again.exr", tmp_path / "given.exr"
+    usm = ("--op", "unsharp_masking")
+    assert depict("enhance", out, "-o", again, *usm) == 0
+    assert depict("enhance", out, "-o", given, *usm, "--camera", camera) == 0
+    for c in RGBA:
+        np.testing.assert_array_equal(
+            read_file(again)[1][f"Depict.{c}"], read_file(given)[1][f"Depict.{c}"]
+        )
+
+
 @pytest.mark.parametrize(
     "attributes",
     [

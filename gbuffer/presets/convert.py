@@ -245,8 +245,11 @@ class _Build:
         dx0, dy0, dx1, dy1 = window(header, "displayWindow") if "displayWindow" in header else grid
         self.display_size = (dx1 - dx0 + 1, dy1 - dy0 + 1)
         self.origin = (grid[0] - dx0, grid[1] - dy0)
-        if camera is None:
-            self.camera = file_camera(header, self.warnings)
+        if camera is None:  # the primary part's, else another part's (a part a tool added)
+            headers = [header] + [h for i, (h, _) in enumerate(self.pt.parts) if i != primary]
+            self.camera = next(
+                (cam for h in headers if (cam := file_camera(h, self.warnings)) is not None), None
+            )
         else:
             self.camera = camera if camera.source else dataclasses.replace(camera, source="given")
         self.background = np.zeros(self.reader.shape, bool)

@@ -54,8 +54,9 @@ def _inspection_lines(info: dict[str, Any]) -> list[str]:
     made = info.get("depict")
     if made:
         where = made.get("result") or "R,G,B,A"
+        original = made.get("original", "?") or "R,G,B"
         lines.append(
-            f"  depict: result in {where} (original beauty: {made.get('original', '?')}), "
+            f"  depict: result in {where} (original beauty: {original}), "
             f"version {made.get('version', '?')}, input {made.get('input', '?')}"
         )
         if "pipeline" in made:
