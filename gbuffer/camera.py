@@ -38,6 +38,12 @@ Projection = Literal["perspective", "orthographic"]
 #: OpenEXR camera space (+z forward) <-> OpenGL camera space (-z forward).
 FLIP_Z = np.diag([1.0, 1.0, -1.0, 1.0])
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: The narrowest vertical field of view, degrees (a focal length of ~1e8 image heights).
+MIN_FOV_DEG = 1e-6
+#: The orthographic heights a camera may have, scene units.
+ORTHO_HEIGHTS = (1e-12, 1e12)
+
 
 @dataclass
 class Camera:
@@ -74,8 +80,11 @@ class Camera:
             )
         if self.world_to_camera is not None:
             m = np.asarray(self.world_to_camera, dtype=np.float64)
-            if m.shape != (4, 4) or not np.all(np.isfinite(m)):
-                raise FrameError("camera world_to_camera must be a finite 4x4 matrix (4 rows)")
+            if m.shape != (4, 4) or not np.all(np.abs(m) <= _FLOAT32_MAX):
+                raise FrameError(  # (over float32, the header's type: written as inf)
+                    "camera world_to_camera must be a 4x4 matrix (4 rows) of numbers finite in "
+                    "float32"
+                )
             if not abs(np.linalg.det(m[:3, :3])) > 1e-12:
                 raise FrameError(
                     "camera world_to_camera has no inverse (its rotation part is singular, e.g. "
@@ -87,10 +96,14 @@ class Camera:
                     f"transform), got {m[3].tolist()}"
                 )
             self.world_to_camera = m
-        if self.fov_y_deg is not None and not 0.0 < self.fov_y_deg < 180.0:
-            raise FrameError(f"camera fov_y_deg={self.fov_y_deg} is outside (0, 180)")
-        if self.ortho_height is not None and not self.ortho_height > 0.0:
-            raise FrameError(f"camera ortho_height={self.ortho_height} must be > 0")
+        if self.fov_y_deg is not None and not MIN_FOV_DEG <= self.fov_y_deg < 180.0:
+            raise FrameError(f"camera fov_y_deg={self.fov_y_deg} is outside [{MIN_FOV_DEG}, 180)")
+        low, high = ORTHO_HEIGHTS
+        if self.ortho_height is not None and not low <= self.ortho_height <= high:
+            raise FrameError(  # (1e-300 gave pixel sizes of 0, 1e300 inf in the header)
+                f"camera ortho_height={self.ortho_height} is outside [{low:g}, {high:g}] scene "
+                "units"
+            )
 
     # -- intrinsics ---------------------------------------------------------------------------
 

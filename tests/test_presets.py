@@ -521,6 +521,18 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
     rows = [list(r) for r in cam_dict(scene)["world_to_camera"][:3]] + [[0.0, 0.0, 0.0, 0.0]]
     with pytest.raises(FrameError, match=r"last row must be \[0, 0, 0, 1\]"):
         read(path, camera={**cam_dict(scene), "world_to_camera": rows})
+    # numbers the header's float32 cannot hold (written as inf), or a pixel size of 0
+    far = [list(r) for r in cam_dict(scene)["world_to_camera"]]
+    far[2][3] = -1e300
+    ortho = {"projection": "orthographic"}
+    for cam, words in [
+        ({**cam_dict(scene), "world_to_camera": far}, "numbers finite in float32"),
+        ({**cam_dict(scene), **ortho, "ortho_height": 1e300}, r"ortho_height=1e\+300 is outside"),
+        ({**cam_dict(scene), **ortho, "ortho_height": 1e-300}, "ortho_height=1e-300 is outside"),
+        ({**cam_dict(scene), "fov_y_deg": 1e-297}, r"fov_y_deg=1e-297 is outside \[1e-06, 180\)"),
+    ]:
+        with pytest.raises(FrameError, match=words):
+            read(path, camera=cam)
 
 
 # -- a real Blender render ------------------------------------------------------------------------
