@@ -156,6 +156,13 @@ def _pixels(frame: Frame, layer: Layer, channel: str) -> np.ndarray:
     return np.asarray(getattr(value, "pixels", value))
 
 
+def _coverage(frame: Frame, layer: Layer, channel: str) -> np.ndarray:
+    """A coverage channel as float32, NaN or Inf read as 0 (a damaged file's: they made every
+    pixel a mask touched NaN)."""
+    coverage = _pixels(frame, layer, channel).astype(np.float32)
+    return np.where(np.isfinite(coverage), coverage, np.float32(0.0))
+
+
 def matte(frame: Frame, layer: Layer, ids: list[int]) -> np.ndarray:
     """(H, W) float32: the coverage of the ids (uint32 bit patterns) in ``layer``, in [0, 1]."""
     wanted = np.asarray(sorted(set(ids)), np.uint32)
@@ -163,9 +170,7 @@ def matte(frame: Frame, layer: Layer, ids: list[int]) -> np.ndarray:
     for id_channel, coverage_channel in layer.ranks:
         bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         hit = np.isin(bits, wanted)
-        out += np.where(
-            hit, _pixels(frame, layer, coverage_channel).astype(np.float32), np.float32(0)
-        )
+        out += np.where(hit, _coverage(frame, layer, coverage_channel), np.float32(0))
     return np.clip(out, 0.0, 1.0)
 
 
@@ -209,7 +214,7 @@ def coverage_by_name(frame: Frame, layer: Layer) -> dict[str, float]:
     for id_channel, coverage_channel in layer.ranks:
         bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         values, inverse = np.unique(bits.ravel(), return_inverse=True)
-        sums = np.bincount(inverse, weights=_pixels(frame, layer, coverage_channel).ravel())
+        sums = np.bincount(inverse, weights=_coverage(frame, layer, coverage_channel).ravel())
         for value, total in zip(values.tolist(), sums.tolist(), strict=True):
             totals[value] = totals.get(value, 0.0) + total
     named = {name: round(totals.get(bits, 0.0), 2) for name, bits in layer.manifest.items()}
@@ -231,6 +236,6 @@ def id_picture(frame: Frame, layer: Layer) -> np.ndarray:
     for id_channel, coverage_channel in layer.ranks:
         bits = np.ascontiguousarray(_pixels(frame, layer, id_channel), np.float32).view(np.uint32)
         rgb = np.dstack([(bits >> s) & 0xFF for s in (0, 8, 16)]).astype(np.float32) / 255.0
-        coverage = _pixels(frame, layer, coverage_channel).astype(np.float32)[..., None]
+        coverage = _coverage(frame, layer, coverage_channel)[..., None]
         out += (0.25 + 0.75 * rgb) * np.where(bits[..., None] == 0, 0.0, coverage)
     return np.clip(out, 0.0, 1.0)

@@ -212,6 +212,24 @@ def test_unknown_names_and_layers_list_what_the_file_has(blender: Frame) -> None
         cryptomatte.find_layer(plain, None, ["Suzanne"])
 
 
+def test_nan_coverage_is_no_coverage(blender: Frame, tmp_path: Path) -> None:
+    """A damaged file's NaN in a coverage channel: a mask of it made the enhanced beauty NaN
+    wherever the mask touched (3130 pixels of the fixture), without a word."""
+    with OpenEXR.File(str(FIXTURE), separate_channels=True) as f:
+        part = f.parts[0]
+        header = {k: v for k, v in part.header.items() if k not in ("channels", "chunkCount")}
+        channels = {k: c.pixels.copy() for k, c in part.channels.items()}
+    channels["ViewLayer.CryptoObject00.g"][:] = np.nan
+    damaged, out = tmp_path / "damaged.exr", tmp_path / "out.exr"
+    exr_factory.write_exr(damaged, header, channels)
+    mask = ["--set", "mask=cryptomatte:Suzanne"]
+    assert cli(["enhance", str(damaged), "-o", str(out), "--op", "radiance_scaling", *mask]) == 0
+    with OpenEXR.File(str(out), separate_channels=True) as f:
+        result = {k: c.pixels for k, c in f.parts[-1].channels.items() if ".Depict." in k}
+    assert sorted(result) == [f"ViewLayer.Depict.{c}" for c in "ABGR"]
+    assert all(np.isfinite(v).all() for v in result.values())
+
+
 def test_id_picture_colours_each_object(blender: Frame) -> None:
     picture = cryptomatte.id_picture(blender, cryptomatte.layers(blender)[0])
     assert picture.shape == (*blender.shape, 3) and picture.dtype == np.float32
