@@ -179,6 +179,7 @@ def write(frame: Frame, path: str | Path, layout: str = DEFAULT_LAYOUT) -> list[
     # a part that is re-encoded anyway (an output replaces one of its channels) takes the new
     # layers too, so that its header and theirs cannot disagree
     own_part = layout == "part" and not any(name in channels for name in frame.outputs)
+    over_half: list[str] = []  # outputs into HALF channels with values half cannot hold
     for name, arr in frame.outputs.items():
         pixels = _output_array(name, arr, shape)
         old = channels.get(name)
@@ -190,10 +191,17 @@ def write(frame: Frame, path: str | Path, layout: str = DEFAULT_LAYOUT) -> list[
             if getattr(old, "xSampling", 1) != 1 or getattr(old, "ySampling", 1) != 1:
                 raise FrameError(f"output '{name}' would overwrite a subsampled channel")
             if old_type == np.float16:
-                pixels = pixels.astype(np.float16)
+                pixels, over = _to_half(pixels)
+                over_half += [f"{name} ({over})"] if over else []
             channels[name] = OpenEXR.Channel(name, pixels, 1, 1, bool(getattr(old, "pLinear", 0)))
         else:
             (added if own_part else channels)[name] = OpenEXR.Channel(name, pixels)
+    if over_half:
+        warnings.append(
+            f"values beyond HALF's largest, {HALF_MAX:g}, clamped to it in the input's HALF "
+            f"channels: {', '.join(over_half)} (the part or sidecar layout writes the result "
+            "as FLOAT)"
+        )
     compression = header.get("compression")
     if not added and frame.outputs and compression is not None:
         if int(compression) in exr.LOSSY_COMPRESSIONS:
@@ -209,6 +217,19 @@ def write(frame: Frame, path: str | Path, layout: str = DEFAULT_LAYOUT) -> list[
     new_pt = dataclasses.replace(pt, parts=parts)
     warnings += exr.write_parts(new_pt, path)
     return warnings
+
+
+#: The largest finite HALF value.
+HALF_MAX = float(np.finfo(np.float16).max)
+
+
+def _to_half(pixels: np.ndarray) -> tuple[np.ndarray, int]:
+    """``pixels`` as HALF, finite values beyond :data:`HALF_MAX` clamped to it (the cast made
+    them inf), and how many were."""
+    over = int(np.count_nonzero(np.isfinite(pixels) & (np.abs(pixels) > HALF_MAX)))
+    if over:
+        pixels = np.where(np.isfinite(pixels), np.clip(pixels, -HALF_MAX, HALF_MAX), pixels)
+    return pixels.astype(np.float16), over
 
 
 def _added_part(

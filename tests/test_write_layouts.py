@@ -102,6 +102,32 @@ SHM = Path("/dev/shm")
 
 
 @pytest.mark.skipif(not SHM.is_dir(), reason="no /dev/shm: no second file system at hand")
+def test_a_result_over_half_in_a_half_file_is_clamped_with_a_word(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """--layout same writes the result into the input's HALF R,G,B: values past 65504 (a
+    sharpened highlight of 40000) became +inf, with a NumPy RuntimeWarning on stderr."""
+    frame = render(load_mesh(SPOT), 96, 72)
+    frame.buffers["beauty"][36:38, 40:44] = 40000.0
+    frame.outputs = {}
+    fresh = tmp_path / "float.exr"
+    gbuffer.write(frame, fresh)
+    (header, channels), *_ = parts(fresh)
+    half = tmp_path / "half.exr"
+    kept = {k: v for k, v in header.items() if k not in ("channels", "chunkCount")}
+    with OpenEXR.File(kept, {k: v.astype(np.float16) for k, v in channels.items()}) as f:
+        f.write(str(half))
+    out = tmp_path / "out.exr"
+    usm = ("--op", "unsharp_masking", "--set", "amount=2")
+    assert depict("enhance", half, "-o", out, "--layout", "same", *usm) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and err[0].startswith("depict: warning: values beyond HALF's largest")
+    (_, result), *_ = parts(out)
+    for c in "RGB":
+        assert result[c].dtype == np.float16 and np.isfinite(result[c]).all()
+        assert result[c].max() == np.float16(65504)
+
+
 def test_part_layout_copies_chunks_across_file_systems(
     outputs: dict[str, Path], tmp_path: Path
 ) -> None:
