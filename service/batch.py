@@ -287,9 +287,10 @@ def _load_pinned(path: Path) -> dict[str, float]:
         why = (exc.strerror if isinstance(exc, OSError) else None) or exc
         raise BatchError(f"cannot read pinned statistics {path}: {why}") from None
     if not isinstance(data, dict) or not all(_statistic(v) for v in data.values()):
-        raise BatchError(  # (true was taken as 1, and 1e308 became inf in float32)
-            f"pinned statistics {path} must be a JSON object of numbers, each finite in "
-            "float32 (not true or false)"
+        raise BatchError(  # (true was taken as 1, 1e308 became inf in float32, and 0 or -1
+            # failed every frame, naming an operator's inner parameter)
+            f"pinned statistics {path} must be a JSON object of numbers (white levels, sizes), "
+            "each positive and finite in float32 (not true or false)"
         )
     return {str(k): float(v) for k, v in data.items()}
 
@@ -308,11 +309,12 @@ def _whole_exr(path: str) -> bool:
 
 
 def _statistic(value: object) -> bool:
-    """Whether a pinned value is a number the operators can use (float32, finite)."""
+    """Whether a pinned value is a number the operators can use: every statistic they measure
+    (white levels, sizes, norms) is positive, finite in float32."""
     return (
         isinstance(value, int | float)
         and not isinstance(value, bool)
-        and abs(float(value)) <= float(np.finfo(np.float32).max)
+        and float(np.finfo(np.float32).tiny) <= float(value) <= float(np.finfo(np.float32).max)
     )
 
 

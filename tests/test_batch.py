@@ -282,11 +282,16 @@ def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixtu
     assert "output layer '' is not a layer name" in capsys.readouterr().err
     assert cli(["batch", src, "-o", out, "--frames="]) == 2  # (it was every frame)
     assert "--frames '': '' is not FRAME" in capsys.readouterr().err
-    for value in ("true", "1e308"):  # (true was 1; 1e308 became inf in float32)
+    with pytest.raises(SystemExit) as stop:  # (it started a local one)
+        cli(["batch", src, "-o", out, "--scheduler", ""])
+    assert stop.value.code == 2
+    assert "--scheduler: is empty; give the scheduler's address" in capsys.readouterr().err
+    # (true was 1; 1e308 became inf in float32; 0, -1, 1e-300 failed every frame)
+    for value in ("true", "1e308", "0", "-1", "1e-300"):
         pinned = sequence / "pinned.json"
         pinned.write_text(f'{{"radiance_scaling.white": {value}}}')
         assert cli(["batch", src, "-o", out, "--pinned", str(pinned)]) == 2
-        assert "each finite in float32 (not true or false)" in capsys.readouterr().err
+        assert "each positive and finite in float32" in capsys.readouterr().err
         pinned.unlink()
     assert not (sequence / "o.0001.exr").exists()
 

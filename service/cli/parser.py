@@ -16,6 +16,7 @@ from service.cli.args import (
     add_write_options,
     bounded,
     named_path,
+    not_blank,
 )
 from service.version import version
 
@@ -290,7 +291,10 @@ def add_service_commands(sub: Any) -> None:
     p.add_argument("--frames", help="frames: 1-100, 1-100x2, 1,5,9 (default: existing inputs)")
     add_pipeline_options(p)
     p.add_argument(
-        "--scheduler", metavar="tcp://HOST:8786", help="Dask scheduler (default: local cluster)"
+        "--scheduler",
+        metavar="tcp://HOST:8786",
+        type=not_blank("give the scheduler's address, or leave --scheduler out for a local one"),
+        help="Dask scheduler (default: local cluster)",
     )
     p.add_argument("--workers", type=int, help="local cluster worker processes (default: cores)")
     p.add_argument("--skip-existing", action="store_true", help="skip frames whose output exists")
