@@ -241,6 +241,20 @@ def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> N
 
 
 @pytest.mark.parametrize(
+    ("route", "data", "words"),
+    [  # (each answered 200: the default pipeline; a score of the whole frame)
+        ("/v1/enhance", {"pipline": "{}"}, "unknown form field 'pipline'; /v1/enhance takes: "),
+        ("/v1/enhance?exposur=2", {}, "unknown query parameter 'exposur'"),
+        ("/v1/score", {"mask": "AO.X", "light": "1,1,1"}, "unknown form fields 'light', 'mask'"),
+        ("/v1/relief/pick", {"x": "1", "y": "1", "scale": "2"}, "unknown form field 'scale'"),
+    ],
+)
+def test_unknown_fields_422(client: Any, route: str, data: dict[str, str], words: str) -> None:
+    r = client.post(route, headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
+    problem(r, 422, words)
+
+
+@pytest.mark.parametrize(
     ("query", "words"),
     [("view=nope", "view 'nope' is not a view of display"), ("display=nope", "display 'nope'")],
 )

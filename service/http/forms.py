@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Annotated, Any
 
 import anyio
-from fastapi import Form, Query
+from fastapi import Form, Query, Request
 from pydantic import ValidationError
 
 from gbuffer.camera import Camera
@@ -163,3 +163,37 @@ def preview_view(display: str | None, view: str | None) -> View:
         except OptionError as exc:
             raise Problem("invalid-request", str(exc)) from None
     return chosen
+
+
+def _declared(dependant: Any) -> tuple[set[str], set[str]]:
+    """The form fields and query parameters a route (and its dependencies) declares."""
+    form = {str(f.alias) for f in dependant.body_params}
+    query = {str(f.alias) for f in dependant.query_params}
+    for sub in dependant.dependencies:
+        sub_form, sub_query = _declared(sub)
+        form |= sub_form
+        query |= sub_query
+    return form, query
+
+
+async def known_fields(request: Request) -> None:
+    """A 422 problem naming a form field or query parameter the route does not take: a
+    misspelt ``pipline`` ran the default pipeline, a misspelt ``mask`` scored the whole frame,
+    each answered 200. (FastAPI has parsed the form already: ``request.form()`` is its.)"""
+    dependant = getattr(request.scope.get("route"), "dependant", None)
+    if dependant is None:
+        return
+    form, query = _declared(dependant)
+    sent = await request.form() if form else {}
+    for kind, given, known in (
+        ("form field", sent, form),
+        ("query parameter", request.query_params, query),
+    ):
+        unknown = sorted(set(given) - known)
+        if unknown:
+            takes = ", ".join(sorted(known)) or "none"
+            raise Problem(
+                "invalid-request",
+                f"unknown {kind}{'s' * (len(unknown) > 1)} {', '.join(map(repr, unknown))}; "
+                f"{request.url.path} takes: {takes}",
+            )

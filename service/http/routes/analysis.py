@@ -8,7 +8,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, File, Form, UploadFile
+from fastapi import APIRouter, Depends, File, Form, UploadFile
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from service import jobs
@@ -21,7 +21,7 @@ from service.numbers import NumbersModel
 from service.problems import openapi_responses
 from service.registry import get
 
-router = APIRouter(tags=["analysis"])
+router = APIRouter(tags=["analysis"], dependencies=[Depends(forms.known_fields)])
 
 Preset = Annotated[str, Form(description="renderer preset (as for /v1/enhance)")]
 CameraField = Annotated[str | None, Form(description="camera JSON, overrides the file's")]

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, File, Form, Query, UploadFile
+from fastapi import APIRouter, Depends, File, Form, Query, UploadFile
 from pydantic import ConfigDict, Field, ValidationError
 from starlette.responses import FileResponse, Response
 
@@ -24,7 +24,7 @@ from service.output import LAYER_PATTERN
 from service.problems import openapi_responses
 from service.scene import RenderRequest
 
-router = APIRouter(tags=["frames"])
+router = APIRouter(tags=["frames"], dependencies=[Depends(forms.known_fields)])
 
 #: The error statuses of the routes that take an upload and run a job.
 COMMON = (400, 401, 408, 413, 415, 422, 429, 503, 504)
