@@ -483,6 +483,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "sigmas=[0, False]: expected a number, not true or false",
     ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
+    "no lobe": (  # (it scaled every lobe)
+        ["enhance", "{exr}", "-o", "{out}", "--op", "radiance_scaling", "--set", "lobes=[]"],
+        "lobes=[]: List should have at least 1 item",
+    ),
     "empty server": (  # (an unset variable in --server "$FARM": it ran here)
         ["enhance", "{exr}", "-o", "{out}", "--server", ""],
         "--server: is empty; give the server's URL, or leave --server out to run here",

@@ -293,6 +293,7 @@ def test_compare_options_and_content_types(server: Server, files: dict[str, Path
         ({"params": "x"}, "options.params"),
         ({"directions": 2, "colour": 1}, "options.colour"),
         ({"albedo": "green"}, "options.albedo"),
+        ({"methods": []}, "options.methods"),  # (it ran every method)
     ):
         response = httpx.post(
             url, files={"file": ("a.exr", data)}, data={"options": json.dumps(options)}

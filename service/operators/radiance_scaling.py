@@ -110,7 +110,9 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
         description="σ of the lighting kept by `keep_lighting`, relative to the image height",
     )
     lobes: list[str] | None = Field(
-        None, description="renderer lobes to scale (default: every lobe the frame has)"
+        None,
+        min_length=1,  # ([] scaled every lobe, as leaving it out does)
+        description="renderer lobes to scale (default: every lobe the frame has)",
     )
     ambient: float = Field(0.1, **checks.AMBIENT.bounds, description="k_a of Phong")
     specular: float = Field(0.3, **checks.WEIGHT.bounds, description="k_s of Phong")

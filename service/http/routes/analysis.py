@@ -77,7 +77,9 @@ class CompareOptions(NumbersModel):
     """The ``options`` form field of ``POST /v1/compare`` (JSON); unknown keys are refused."""
 
     model_config = ConfigDict(extra="forbid")
-    methods: list[str] | None = Field(None, max_length=16, description="methods to compare")
+    methods: list[str] | None = Field(  # ([] ran every method, as leaving it out does)
+        None, min_length=1, max_length=16, description="methods to compare (default: all)"
+    )
     directions: int | list[int] = Field(
         21, description="the first N directions of the sweep (1-21), or their numbers"
     )
