@@ -1,6 +1,7 @@
 """Holes: pixels whose radiance is NaN or Inf, the fireflies of a path-traced frame.
 
-A renderer that diverges on a few samples writes NaN or Inf into the beauty or a lobe. Such a
+A renderer that diverges on a few samples writes NaN or Inf (or a value past 1e18, which the
+operators' float32 cannot square) into the beauty or a lobe. Such a
 pixel says nothing about the shading there, so Depict does not refuse the frame: reading makes
 it a **hole**. The frame's ``coverage`` is 0 there (operators treat it as an uncovered pixel),
 its radiance buffers hold 0 (no NaN spreads through a filter), and after the operators have run
@@ -53,7 +54,8 @@ def hole_warnings(radiance: dict[str, int], data: dict[str, int], pixels: int) -
     out = []
     if radiance:
         out.append(
-            f"{pixels} pixel(s) with NaN/Inf radiance ({_counts(radiance)}) treated as holes: "
+            f"{pixels} pixel(s) with NaN/Inf radiance (or beyond 1e18) ({_counts(radiance)}) "
+            "treated as holes: "
             "left out of the operators and written back unchanged"
         )
     if data:

@@ -245,9 +245,9 @@ def test_nan_and_inf_radiance_are_holes_passed_through(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
     holes = {
-        "beauty": [(36, 48, 0, np.nan), (30, 40, 1, np.inf)],
+        "beauty": [(36, 48, 0, np.nan), (30, 40, 1, np.inf), (33, 44, 2, 1e20)],
         "diffuse": [(40, 50, 2, np.nan)],
-    }
+    }  # (1e20: finite, but its square overflows float32: NaN in the results around it)
     src = render_with_nan(tmp_path / "fireflies.exr", (96, 72), holes)
     with OpenEXR.File(str(src), separate_channels=True) as f:
         original = {n: c.pixels.copy() for n, c in f.channels().items()}
@@ -255,17 +255,16 @@ def test_nan_and_inf_radiance_are_holes_passed_through(
     assert depict("enhance", src, "-o", out, "--op", "unsharp_masking") == 0
     err = capfd.readouterr().err.splitlines()
     assert err == [
-        "depict: warning: 3 pixel(s) with NaN/Inf radiance (G: 1, R: 1, diffuse.B: 1) treated "
-        "as holes: left out of the operators and written back unchanged"
+        "depict: warning: 4 pixel(s) with NaN/Inf radiance (or beyond 1e18) (B: 1, G: 1, R: 1, "
+        "diffuse.B: 1) treated as holes: left out of the operators and written back unchanged"
     ]
     with OpenEXR.File(str(out), separate_channels=True) as f:
         result = {n: c.pixels for n, c in f.channels().items()}
     rgb = np.dstack([result[c] for c in "RGB"])
-    assert np.isnan(rgb[36, 48, 0]) and np.isposinf(rgb[30, 40, 1])
-    assert np.isfinite(
-        np.delete(rgb.reshape(-1), [(36 * 96 + 48) * 3, (30 * 96 + 40) * 3 + 1])
-    ).all()
-    for y, x in ((36, 48), (30, 40), (40, 50)):  # the holes: every channel as it was
+    assert np.isnan(rgb[36, 48, 0]) and np.isposinf(rgb[30, 40, 1]) and rgb[33, 44, 2] == 1e20
+    others = np.delete(rgb.reshape(-1), [(36 * 96 + 48) * 3, (30 * 96 + 40) * 3 + 1])
+    assert np.isfinite(others).all() and np.count_nonzero(others > 1e18) == 1
+    for y, x in ((36, 48), (30, 40), (40, 50), (33, 44)):  # the holes: every channel as it was
         for c in "RGB":
             assert result[c][y, x].tobytes() == original[c][y, x].tobytes()
     assert not np.array_equal(result["R"], original["R"])  # the operator did work elsewhere

@@ -222,6 +222,12 @@ def find_channels(
     return None
 
 
+#: The largest radiance read as one: beyond it a value is a hole as NaN and Inf are (the
+#: operators square radiance in float32, where squares of 1.8e19 and more overflow: a firefly of
+#: 1e20 made the score and several operators NaN).
+RADIANCE_MAX = 1e18
+
+
 def check_finite(
     reader: ChannelReader,
     names: Sequence[str],
@@ -229,11 +235,15 @@ def check_finite(
     background: np.ndarray | None,
     radiance: bool = False,
 ) -> None:
-    """NaN/Inf on covered pixels: a hole for radiance (and, when the reader is not strict, for
-    data), else a FrameError naming the channel; the values become 0 either way."""
-    if np.isfinite(arr).all():
+    """NaN/Inf on covered pixels (and, for radiance, values beyond ±:data:`RADIANCE_MAX`): a
+    hole for radiance (and, when the reader is not strict, for data), else a FrameError naming
+    the channel; the values become 0 either way."""
+    limit = RADIANCE_MAX if radiance else np.inf
+    if radiance and (arr.size == 0 or (arr.max() <= limit and arr.min() >= -limit)):
+        return  # (a NaN fails both comparisons)
+    if not radiance and np.isfinite(arr).all():
         return
-    bad = ~np.isfinite(arr)
+    bad = ~(np.abs(arr) <= limit)
     for k, name in enumerate(names):
         bad_k = bad if arr.ndim == 2 else bad[..., k]
         if background is not None:
