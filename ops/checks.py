@@ -137,8 +137,9 @@ FRACTION = Range(0.0, 1.0)
 PERCENTILE = Range(0.0, 100.0, lo_open=True)
 #: A size or level that only has to be positive (scene units, pixels).
 POSITIVE = Range(0.0, math.inf, lo_open=True)
-#: A linear white level (the radiance mapped to 1).
-WHITE = POSITIVE
+#: A linear white level (the radiance mapped to 1): within float32's reach both ways (1e-45
+#: overflowed its reciprocal; radiance past 1e18 is a hole, :mod:`gbuffer.holes`).
+WHITE = Range(1e-30, 1e18)
 
 # -- Radiance Scaling (Vergne et al. 2010) ----------------------------------------------------
 #: α of Eq. 2: the scaling-invariant point, strictly inside (0, 1).

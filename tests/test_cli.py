@@ -483,6 +483,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "sigmas=[0, False]: expected a number, not true or false",
     ),
     "empty output (render)": (["render", "{exr}", "-o", " "], "-o/--output: is empty"),
+    "a white past float32's reach": (  # (exit 0, NumPy overflow warnings, an inf scaling)
+        ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", "--set", "white=1e-40"],
+        "white=1e-40 is outside the allowed range [1e-30, 1e+18]",
+    ),
     "no lobe": (  # (it scaled every lobe)
         ["enhance", "{exr}", "-o", "{out}", "--op", "radiance_scaling", "--set", "lobes=[]"],
         "lobes=[]: List should have at least 1 item",
