@@ -264,6 +264,18 @@ def test_set_lights_takes_one_light_as_written(
     np.testing.assert_allclose(np.dstack([got[f"lit.{c}"] for c in "RGB"]), made, atol=2e-3)
 
 
+@pytest.mark.parametrize("op", ["light_warping", "exaggerated_shading"])
+def test_set_light_takes_the_baselines_light_as_written(exr: Path, tmp_path: Path, op: str) -> None:
+    """``--set light=-1,1,1`` was refused ('Input should be a valid string': the comma list
+    arrived as three numbers), the default's own form included."""
+    out = tmp_path / "lit.exr"
+    assert depict("enhance", exr, "-o", out, "--op", op, "--set", "light=-1,1,1") == 0
+    made = pipeline.run(gbuffer.read(exr), [{"op": op, "params": {"light": "-1,1,1"}}])
+    got = channels(out)
+    beauty = np.dstack([got[f"Depict.{c}"] for c in "RGB"])
+    np.testing.assert_allclose(beauty, made.buffers["beauty"], atol=2e-3)
+
+
 def test_enhance_with_a_pipeline_file(
     exr: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

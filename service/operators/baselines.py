@@ -5,7 +5,7 @@ writes the beauty (× the frame's albedo, or a constant)."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -27,6 +27,17 @@ class OneLightParams(Params):
     albedo: float | None = Field(
         None, **checks.WEIGHT.bounds, description="constant albedo (default: the frame's, else 0.8)"
     )
+
+    @field_validator("light", mode="before")
+    @classmethod
+    def _joined(cls, value: Any) -> Any:
+        """The light as ``--set light=X,Y,Z`` makes of it (its comma-separated pieces, numbers
+        or not: ``-1,1,1`` was refused as 'not a valid string') joined back into its text."""
+        if isinstance(value, list) and all(
+            isinstance(v, int | float | str) and not isinstance(v, bool) for v in value
+        ):
+            return ",".join(str(v) for v in value)
+        return value
 
     @field_validator("light")
     @classmethod
