@@ -247,9 +247,12 @@ def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> N
         ("/v1/enhance?exposur=2", {}, "unknown query parameter 'exposur'"),
         ("/v1/score", {"mask": "AO.X", "light": "1,1,1"}, "unknown form fields 'light', 'mask'"),
         ("/v1/relief/pick", {"x": "1", "y": "1", "scale": "2"}, "unknown form field 'scale'"),
+        ("/v1/enhance?preview=png&exposure=nan", {}, "finite number"),  # (it said "<= 20")
     ],
 )
-def test_unknown_fields_422(client: Any, route: str, data: dict[str, str], words: str) -> None:
+def test_unknown_fields_and_odd_queries_422(
+    client: Any, route: str, data: dict[str, str], words: str
+) -> None:
     r = client.post(route, headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
     problem(r, 422, words)
 

@@ -124,7 +124,8 @@ async def enhance(
         Literal["png"] | None, Query(description="png: answer a tone-mapped PNG preview")
     ] = None,
     exposure: Annotated[
-        float, Query(ge=-20.0, le=20.0, description="preview exposure, stops")
+        float,
+        Query(ge=-20.0, le=20.0, allow_inf_nan=False, description="preview exposure, stops"),
     ] = 0.0,
     display: forms.DisplayQuery = None,
     view: forms.ViewQuery = None,
