@@ -45,11 +45,16 @@ def channels(path: Path) -> dict[str, np.ndarray]:
         }
 
 
-@pytest.fixture(scope="module")
-def exr(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("cli") / "spot.exr"
+def render_spot(folder: Path) -> Path:
+    """A W×H render of examples/spot.obj in ``folder``."""
+    path = folder / "spot.exr"
     assert depict("render", SPOT, "-o", path, "--width", W, "--height", H) == 0
     return path
+
+
+@pytest.fixture(scope="module")
+def exr(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return render_spot(tmp_path_factory.mktemp("cli"))
 
 
 @pytest.fixture(scope="module")

@@ -12,14 +12,12 @@ import pytest
 
 from service.scene import NOTHING_SEEN
 from tests.exr_factory import TORN_MESH
-from tests.test_cli import SPOT, H, W, depict
+from tests.test_cli import SPOT, H, W, depict, render_spot
 
 
 @pytest.fixture(scope="module")
 def exr(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    path = tmp_path_factory.mktemp("cli") / "spot.exr"
-    assert depict("render", SPOT, "-o", path, "--width", W, "--height", H) == 0
-    return path
+    return render_spot(tmp_path_factory.mktemp("cli"))
 
 
 # -- errors -------------------------------------------------------------------------------------
