@@ -31,14 +31,13 @@ import numpy as np
 
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
-from ops.checks import holds_truth_value
+from ops.checks import FLOAT32_MAX, holds_truth_value
 
 Projection = Literal["perspective", "orthographic"]
 
 #: OpenEXR camera space (+z forward) <-> OpenGL camera space (-z forward).
 FLIP_Z = np.diag([1.0, 1.0, -1.0, 1.0])
 
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
 #: The narrowest vertical field of view, degrees (a focal length of ~1e8 image heights).
 MIN_FOV_DEG = 1e-6
 #: The orthographic heights a camera may have, scene units.
@@ -80,7 +79,7 @@ class Camera:
             )
         if self.world_to_camera is not None:
             m = np.asarray(self.world_to_camera, dtype=np.float64)
-            if m.shape != (4, 4) or not np.all(np.abs(m) <= _FLOAT32_MAX):
+            if m.shape != (4, 4) or not np.all(np.abs(m) <= FLOAT32_MAX):
                 raise FrameError(  # (over float32, the header's type: written as inf)
                     "camera world_to_camera must be a 4x4 matrix (4 rows) of numbers finite in "
                     "float32"

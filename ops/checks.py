@@ -131,6 +131,11 @@ def check_sequence(values: Sequence[float], rng: Range, name: str) -> list[float
     return [rng.check(v, f"{name} values") for v in values]
 
 
+#: The largest finite float32 and its smallest normal number (``numpy.finfo(numpy.float32)``'s
+#: ``max`` and ``tiny``): numbers the operators and the EXR headers hold as float32.
+FLOAT32_MAX = 3.4028234663852886e38
+FLOAT32_TINY = 1.1754943508222875e-38
+
 #: A fraction of something, end points included (f0, thresholds, foreshortening, ζ...).
 FRACTION = Range(0.0, 1.0)
 #: A percentile of a distribution.

@@ -53,7 +53,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from distributed import Client, Future, LocalCluster, as_completed, wait
 from rich.progress import (
     BarColumn,
@@ -68,6 +67,7 @@ from gbuffer.atomic import atomic_path, output_target, partial_files, read_text
 from gbuffer.errors import FrameError, OutputError
 from gbuffer.exr import read_layout
 from gbuffer.frame import Frame
+from ops.checks import FLOAT32_MAX, FLOAT32_TINY
 from service import allocator
 from service.enhance import ReadRequest, WriteRequest, enhance_frame, read_for
 from service.pipeline import Pipeline
@@ -310,11 +310,12 @@ def _whole_exr(path: str) -> bool:
 
 def _statistic(value: object) -> bool:
     """Whether a pinned value is a number the operators can use: every statistic they measure
-    (white levels, sizes, norms) is positive, finite in float32."""
+    (white levels, sizes, norms) is positive, finite in float32. (Compared as it is: float() of
+    a 400-digit integer raised OverflowError, a traceback.)"""
     return (
         isinstance(value, int | float)
         and not isinstance(value, bool)
-        and float(np.finfo(np.float32).tiny) <= float(value) <= float(np.finfo(np.float32).max)
+        and FLOAT32_TINY <= value <= FLOAT32_MAX
     )
 
 

@@ -286,8 +286,9 @@ def test_batch_refuses_bad_arguments(sequence: Path, capsys: pytest.CaptureFixtu
         cli(["batch", src, "-o", out, "--scheduler", ""])
     assert stop.value.code == 2
     assert "--scheduler: is empty; give the scheduler's address" in capsys.readouterr().err
-    # (true was 1; 1e308 became inf in float32; 0, -1, 1e-300 failed every frame)
-    for value in ("true", "1e308", "0", "-1", "1e-300"):
+    # (true was 1; 1e308 became inf in float32; 0, -1, 1e-300 failed every frame; a 401-digit
+    # integer was an OverflowError traceback)
+    for value in ("true", "1e308", "0", "-1", "1e-300", "1" + "0" * 400):
         pinned = sequence / "pinned.json"
         pinned.write_text(f'{{"radiance_scaling.white": {value}}}')
         assert cli(["batch", src, "-o", out, "--pinned", str(pinned)]) == 2

@@ -52,6 +52,11 @@ def test_range_refuses_what_is_not_one_number(value: object) -> None:
         Range(0.0, 10.0).check(value, "x")
 
 
+def test_float32_limits_are_numpys() -> None:
+    assert checks.FLOAT32_MAX == float(np.finfo(np.float32).max)
+    assert checks.FLOAT32_TINY == float(np.finfo(np.float32).tiny)
+
+
 def test_bounds_are_pydantic_keywords() -> None:
     assert Range(0.0, 1.0).bounds == {"ge": 0.0, "le": 1.0}
     assert Range(0.0, 1.0, lo_open=True, hi_open=True).bounds == {"gt": 0.0, "lt": 1.0}

@@ -5,7 +5,6 @@ from __future__ import annotations
 from typing import Any
 
 import cv2
-import numpy as np
 
 #: cv2 for calls with Python scalars or None where its stubs only list arrays (Scalar arguments,
 #: default kernels); same module, untyped.
@@ -24,7 +23,6 @@ DEFAULT_DEPTH_JUMP = 0.03
 #: near-linear range, where 0.1 saturated over half of their pixels (|κ| > 0.75).
 DEFAULT_GAIN = 0.03
 
-_FLT_MAX = float(np.finfo(np.float32).max)
 _NZ_MIN = 1e-2  # n_z is clamped to this before n_z^f (f > 0); |q| ≤ 1 / _NZ_MIN^f
 _TARGET_SIGMA = 1.5  # downsample while σ stays >= this many working pixels
 _MIN_SIDE = 16  # never downsample below this many pixels per side

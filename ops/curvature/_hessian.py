@@ -12,7 +12,8 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ops.curvature._common import _FLT_MAX, _NZ_MIN
+from ops.checks import FLOAT32_MAX
+from ops.curvature._common import _NZ_MIN
 from ops.curvature._jumps import _jump_band, _mask_u8
 from ops.jit import inline_kernel, kernel
 from ops.pyramid.reduce import box_downsample
@@ -32,7 +33,7 @@ def _working_coverage(
     # survives when the whole block is 255.
     dbox = cv2.resize(depth, size, interpolation=cv2.INTER_AREA)
     depth_l = cv2.resize(depth, size, interpolation=cv2.INTER_NEAREST)
-    cov = cv2.inRange(dbox, 1e-30, _FLT_MAX)
+    cov = cv2.inRange(dbox, 1e-30, FLOAT32_MAX)
     if mask is not None:
         m = box_downsample(_mask_u8(mask), level, size)
         cv2.bitwise_and(cov, _cv.compare(m, 250, cv2.CMP_GT), dst=cov)
@@ -101,7 +102,7 @@ def _block_coverage(depth, m8, k, cov, depth_l):  # type: ignore[no-untyped-def]
     wid = depth.shape[1]
     wl = wid // k
     inv = np.float32(1.0 / (k * k))
-    lo, hi = np.float32(1e-30), np.float32(_FLT_MAX)
+    lo, hi = np.float32(1e-30), np.float32(FLOAT32_MAX)
     has_mask = m8.shape[0] > 0
     full, empty = np.uint8(255), np.uint8(0)
     acc = np.empty(wid, np.float32)
