@@ -226,9 +226,10 @@ HALF_MAX = float(np.finfo(np.float16).max)
 def _to_half(pixels: np.ndarray) -> tuple[np.ndarray, int]:
     """``pixels`` as HALF, finite values beyond :data:`HALF_MAX` clamped to it (the cast made
     them inf), and how many were."""
-    over = int(np.count_nonzero(np.isfinite(pixels) & (np.abs(pixels) > HALF_MAX)))
+    beyond = np.isfinite(pixels) & (np.abs(pixels) > HALF_MAX)
+    over = int(np.count_nonzero(beyond))
     if over:
-        pixels = np.where(np.isfinite(pixels), np.clip(pixels, -HALF_MAX, HALF_MAX), pixels)
+        pixels = np.where(beyond, np.copysign(np.float32(HALF_MAX), pixels), pixels)
     return pixels.astype(np.float16), over
 
 

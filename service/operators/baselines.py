@@ -16,7 +16,7 @@ from ops.baselines import ES_SCALES, exaggerated_shading, light_warping
 from ops.curvature import isotropic
 from ops.shading import parse_light
 from service.operators.base import Context, Params, register
-from service.operators.common import frame_albedo, surface_normals
+from service.operators.common import frame_albedo, joined_light, surface_normals
 from service.operators.curvature import CurvatureParams, frame_curvature
 
 
@@ -33,11 +33,8 @@ class OneLightParams(Params):
     def _joined(cls, value: Any) -> Any:
         """The light as ``--set light=X,Y,Z`` makes of it (its comma-separated pieces, numbers
         or not: ``-1,1,1`` was refused as 'not a valid string') joined back into its text."""
-        if isinstance(value, list) and all(
-            isinstance(v, int | float | str) and not isinstance(v, bool) for v in value
-        ):
-            return ",".join(str(v) for v in value)
-        return value
+        joined = joined_light(value)
+        return value if joined is None else joined
 
     @field_validator("light")
     @classmethod

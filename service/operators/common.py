@@ -51,15 +51,12 @@ class LightsParams(Params):
         lights each stay several lights."""
         if isinstance(value, str):
             return [value]
-        if not isinstance(value, list) or not value:
+        joined = joined_light(value)
+        if joined is None:
             return value
-        if not all(isinstance(v, int | float | str) and not isinstance(v, bool) for v in value):
-            return value
-        pieces = [str(v) for v in value]
-        joined = ",".join(pieces)
         if not all(isinstance(v, str) for v in value):  # (numbers: pieces of one light)
             return [joined]
-        if not all(_is_light(p) for p in pieces) and _is_light(joined):
+        if not all(_is_light(p) for p in value) and _is_light(joined):
             return [joined]
         return value
 
@@ -72,6 +69,16 @@ class LightsParams(Params):
 
     def parsed_lights(self) -> list[Light]:
         return [parse_light(text) for text in self.lights]
+
+
+def joined_light(value: Any) -> str | None:
+    """The text of a light that ``--set NAME=X,Y,Z`` split into its comma-separated pieces
+    (numbers or text), joined again; None unless ``value`` is a non-empty list of such pieces."""
+    if not isinstance(value, list) or not value:
+        return None
+    if not all(isinstance(v, int | float | str) and not isinstance(v, bool) for v in value):
+        return None
+    return ",".join(str(v) for v in value)
 
 
 def _is_light(text: str) -> bool:
@@ -105,9 +112,10 @@ def surface_normals(frame: Frame, why: str) -> np.ndarray:
     hold anything there; files are read with 0): a :class:`PipelineError` counts the covered
     pixels whose normal is NaN or Inf (a file's are refused as it is read)."""
     normal = frame.need("normal", why)
-    if np.isfinite(normal).all():
+    finite = np.isfinite(normal)
+    if finite.all():
         return normal
-    bad = ~np.isfinite(normal).all(axis=2)
+    bad = ~finite.all(axis=2)
     covered = int(np.count_nonzero(bad & frame.covered()))
     if covered:
         raise PipelineError(
