@@ -53,6 +53,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from distributed import Client, Future, LocalCluster, as_completed, wait
 from rich.progress import (
     BarColumn,
@@ -67,7 +68,6 @@ from gbuffer.atomic import atomic_path, output_target, partial_files, read_text
 from gbuffer.errors import FrameError, OutputError
 from gbuffer.exr import read_layout
 from gbuffer.frame import Frame
-from ops.checks import FLOAT32_MAX, FLOAT32_TINY
 from service import allocator
 from service.enhance import ReadRequest, WriteRequest, enhance_frame, read_for
 from service.pipeline import Pipeline
@@ -315,8 +315,14 @@ def _statistic(value: object) -> bool:
     return (
         isinstance(value, int | float)
         and not isinstance(value, bool)
-        and FLOAT32_TINY <= value <= FLOAT32_MAX
+        and _FLOAT32_TINY <= value <= _FLOAT32_MAX
     )
+
+
+#: float32's limits, as Python floats (numbers of any size compare with them exactly); numpy's:
+#: the front ends do not import ``ops``, where the operators' are.
+_FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 
 def _cluster(scheduler: str | None, workers: int | None) -> tuple[Client, LocalCluster | None]:
