@@ -1,7 +1,7 @@
 """The HTTP app in process (Starlette's TestClient): contract, settings, auth, errors, metrics.
 
 The real-server behaviour (bit-for-bit outputs, saturation, time limit) is in
-tests/test_e2e_server.py; here every answer still goes through the real app, its middleware and
+tests/e2e/; here every answer still goes through the real app, its middleware and
 its worker pool.
 """
 
