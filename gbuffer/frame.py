@@ -76,6 +76,18 @@ RENDER_BUFFERS: tuple[str, ...] = (
 LOBES: tuple[str, ...] = ("ambient", "diffuse", "specular", "transmission")
 
 
+#: Largest component of a normal taken as one (a unit vector's are at most 1): the readers
+#: renormalise a file's normals, a frame built in Python holds what its script put there.
+NORMAL_COMPONENT_MAX = 2.0
+
+
+def normals_in_range(normal: np.ndarray) -> bool:
+    """Whether no component of ``normal`` (H, W, 3) is past ±:data:`NORMAL_COMPONENT_MAX` (NaN
+    does not count): one OpenCV pass."""
+    n = np.ascontiguousarray(normal, np.float32)
+    return bool(cv2.norm(n.reshape(n.shape[0], -1), cv2.NORM_INF) <= NORMAL_COMPONENT_MAX)
+
+
 def _on_surface(depth: np.ndarray) -> np.ndarray:
     """Where a depth is a surface's: finite and positive (0 or below is no surface, as files are
     read)."""

@@ -27,7 +27,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from gbuffer import holes
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
-from gbuffer.frame import Frame
+from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normals_in_range
 from service.output import finish as finish  # pipeline.finish: the result placed for writing
 from service.registry import Context, Operator, Params, PipelineError, get
 
@@ -184,12 +184,34 @@ def run_timed(
     out = frame.copy()
     op_s: list[tuple[str, float]] = []
     holes.fill(out)  # pixels of NaN/Inf radiance: uncovered for the operators (gbuffer.holes)
+    check_normals(out)
     for step in pipeline.steps:
         t0 = time.perf_counter()
         _apply(out, step, context)
         op_s.append((step.op.name, time.perf_counter() - t0))
     holes.restore(out)  # and given back unchanged
     return out, op_s
+
+
+def check_normals(frame: Frame) -> None:
+    """A :class:`PipelineError` counting the covered pixels whose normal is nowhere near a unit
+    vector, a component past ±2 (:data:`gbuffer.frame.NORMAL_COMPONENT_MAX`): normals of 1e20
+    made curvature, Light Alignment and Apparent Relief NaN, and unsharp masking blame a gain
+    map it was not given. One OpenCV pass where every normal is in range; what lies off the
+    surface is not counted, and NaN is left to the operators that read it (they ignore it off
+    the surface)."""
+    normal = frame.buffers.get("normal")
+    if normal is None or normal.size == 0 or normals_in_range(normal):
+        return
+    peak = np.abs(np.asarray(normal, np.float32)).max(axis=2)
+    far = (peak > NORMAL_COMPONENT_MAX) & frame.covered()
+    count = int(np.count_nonzero(far))
+    if count:
+        raise PipelineError(
+            f"the normal is not a unit vector at {count} covered pixel{'s' * (count != 1)} "
+            f"(components up to {float(peak[far].max()):.3g}): give unit camera-space normals "
+            "there, or coverage 0"
+        )
 
 
 def _apply(frame: Frame, step: CompiledStep, context: Context) -> None:

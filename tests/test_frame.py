@@ -99,3 +99,27 @@ def test_nan_normals_on_the_surface_are_counted(op: str) -> None:
     buffers["normal"][ys[:3], xs[:3]] = [np.nan, 0.0, np.inf]
     with pytest.raises(Exception, match=f"{op}: the normal is NaN or Inf at 3 covered pixels"):
         pipeline.run(Frame(buffers=buffers), [{"op": op}])
+
+
+@pytest.mark.parametrize(
+    "op", ["curvature", "light_alignment", "apparent_relief", "unsharp_masking"]
+)
+def test_normals_far_from_unit_on_the_surface_are_counted(op: str) -> None:
+    """Normals of 1e20 made curvature, Light Alignment and Apparent Relief NaN, and unsharp
+    masking say 'gain_map must be finite' (it was given none); off the surface they may be
+    anything, and normals a little longer than 1 (a renderer's interpolated ones) are taken."""
+    buffers = sphere()
+    on = np.isfinite(buffers["depth"])
+    ys, xs = np.nonzero(on)
+    far = buffers["normal"].copy()
+    far[ys[:5], xs[:5]] *= np.float32(1e20)
+    with pytest.raises(Exception, match=r"the normal is not a unit vector at 5 covered pixels"):
+        pipeline.run(Frame(buffers={**buffers, "normal": far}), [{"op": op}])
+    want = pipeline.run(Frame(buffers=buffers), [{"op": op}]).buffers["beauty"]
+    off = buffers["normal"].copy()
+    off[~on] = np.float32(1e30)
+    got = pipeline.run(Frame(buffers={**buffers, "normal": off}), [{"op": op}]).buffers["beauty"]
+    assert np.array_equal(got, want)
+    longer = buffers["normal"] * np.float32(1.05)
+    out = pipeline.run(Frame(buffers={**buffers, "normal": longer}), [{"op": op}])
+    assert np.isfinite(out.buffers["beauty"]).all()

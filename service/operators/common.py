@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from pydantic import Field, field_validator
 
-from gbuffer.frame import Frame
+from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normals_in_range
 from ops import checks
 from ops.color import luminance
 from ops.lighting import luminance_gain
@@ -108,14 +108,14 @@ def user_image(ctx: Context, path: str, what: str, **kwargs: Any) -> np.ndarray:
 
 
 def surface_normals(frame: Frame, why: str) -> np.ndarray:
-    """The frame's normals, with NaN or Inf off the surface made 0 (a frame built in Python may
-    hold anything there; files are read with 0): a :class:`PipelineError` counts the covered
-    pixels whose normal is NaN or Inf (a file's are refused as it is read)."""
+    """The frame's normals, with what is no normal off the surface (NaN, Inf, a component past
+    ±2: a frame built in Python may hold anything there; files are read with 0) made 0: a
+    :class:`PipelineError` counts the covered pixels whose normal is NaN or Inf (a file's are
+    refused as it is read; ``pipeline.run`` refuses those past ±2)."""
     normal = frame.need("normal", why)
-    finite = np.isfinite(normal)
-    if finite.all():
+    if normals_in_range(normal) and np.isfinite(normal).all():
         return normal
-    bad = ~finite.all(axis=2)
+    bad = ~(np.abs(normal) <= NORMAL_COMPONENT_MAX).all(axis=2)  # (NaN: not <=)
     covered = int(np.count_nonzero(bad & frame.covered()))
     if covered:
         raise PipelineError(
