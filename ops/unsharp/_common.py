@@ -87,13 +87,23 @@ def _with_lightness(
 ) -> Array:
     """Linear RGB with L* replaced by ``new_lum`` and (a*, b*) scaled by k = new/old (§4).
 
-    U is clamped at 0; k = U / max(L*, 1e-3) (below L* = 1e-3, black, the scaling saturates).
+    U is clamped at 0; k = U / max(L*, 1e-3) (below L* = 1e-3, black, the scaling saturates);
+    the changed values are clipped at 0 (:func:`_clip_new_negatives`).
     ``new_lum`` is consumed. Pixels where ``keep`` (uint8, non-zero) get ``beauty`` back bit
     for bit. ``out``: where to write (an (H, W, 3) view), else a new array.
     """
     _cv.max(new_lum, 0.0, dst=new_lum)
     k = _cv.divide(new_lum, _cv.max(lum, _L_EPS), dst=new_lum)
-    return color.scale_lab(beauty, k, white, keep=keep, out=out, rgb_to_xyz=space.matrix)
+    res = color.scale_lab(beauty, k, white, keep=keep, out=out, rgb_to_xyz=space.matrix)
+    return _clip_new_negatives(res, beauty)
+
+
+def _clip_new_negatives(out: Array, beauty: Array) -> Array:
+    """``out`` with its changed values below 0 made 0, in place: a saturated colour can leave the
+    RGB cube below 0 when its lightness drops (and the CIELAB round trip rounds a black channel
+    to −1e-9); the values kept bit for bit, negative ones included, are left as they came."""
+    np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != beauty))
+    return out
 
 
 def _normals(normal: Array, shape: tuple[int, int]) -> Array:

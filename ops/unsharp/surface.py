@@ -24,7 +24,17 @@ from ops import color
 from ops.checks import POSITIVE, UNSHARP_AMOUNT, UNSHARP_SIGMA
 from ops.colorspace import LINEAR_REC709, ColorSpace
 from ops.pyramid.masked import masked_gaussian
-from ops.unsharp._common import _L_EPS, _LEVEL_SIGMA, _ONE, Array, _mask, _normals, _plane, _rgb
+from ops.unsharp._common import (
+    _L_EPS,
+    _LEVEL_SIGMA,
+    _ONE,
+    Array,
+    _clip_new_negatives,
+    _mask,
+    _normals,
+    _plane,
+    _rgb,
+)
 from ops.unsharp._levels import _sub_resize
 from ops.unsharp._pyramid import _fade, _surface_pyramid
 from ops.unsharp._surface import _box, _outside, _Surface, _surface, _valid, _write
@@ -443,7 +453,4 @@ def unsharp_masking(
     else:
         out = _outside(img, box)
         color.scale_lab(img_box, k_rows, wl, out=out[box], rgb_to_xyz=space.matrix)
-    # saturated colours can leave the RGB cube below 0 when their lightness drops: clip the
-    # changed values (the pixels kept bit for bit are left as they came)
-    np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != img))
-    return out
+    return _clip_new_negatives(out, img)
