@@ -28,7 +28,7 @@ import PyOpenColorIO as ocio
 import gbuffer
 from analysis.score import score_frame
 from bench import corpus
-from bench.gallery import save, sheet
+from bench.sheets import save, sheet
 from gbuffer.colorspace import BUILTIN_CONFIG, View
 from gbuffer.frame import Frame
 from gbuffer.preview import picture

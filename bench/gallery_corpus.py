@@ -32,7 +32,8 @@ import cv2
 import numpy as np
 
 from bench import corpus, quality
-from bench.gallery import DEFAULT_OUT, Box, Tile, change_pic, pic, save, sheet
+from bench.gallery import DEFAULT_OUT
+from bench.sheets import Box, Tile, change_pic, pic, save, sheet
 from gbuffer.colorspace import View
 from gbuffer.frame import Frame
 from ops.color import luminance

@@ -21,18 +21,8 @@ from typing import Any
 import numpy as np
 
 import gbuffer
-from bench.gallery import (
-    BLENDER,
-    DEFAULT_OUT,
-    apply,
-    blender_lights,
-    change_pic,
-    crop,
-    crop_box,
-    rgb_pic,
-    save,
-    sheet,
-)
+from bench.gallery import BLENDER, DEFAULT_OUT, apply, blender_lights
+from bench.sheets import change_pic, crop, crop_box, rgb_pic, save, sheet
 from gbuffer.frame import Frame
 from gbuffer.preview import picture
 from service.masks import matte
