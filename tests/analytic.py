@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ops.curvature import DEFAULT_GAIN, Curvature, principal_curvatures
+
 #: (u, v) float64 arrays -> (normal (..., 3), depth, covered, segment id) float64/bool/int arrays.
 SceneFn = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]
 
@@ -84,6 +86,17 @@ class Scene:
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Reference (k1, k2, dir_x, dir_y) per unit image height at the given foreshortening."""
         return _reference(self.fn, self.u, self.v, foreshortening)
+
+    def curvature(self, **kw: float) -> Curvature:
+        """:func:`ops.curvature.principal_curvatures` of the scene's normals, depth and mask."""
+        return principal_curvatures(self.normal, self.depth, self.mask, **kw)  # type: ignore[arg-type]
+
+    def ring(self, h_map: np.ndarray) -> float:
+        """Largest excess of a curvature map |H| (``tanh`` of the default gain) over the
+        analytic |H| anywhere on the surfaces: what a depth jump counted as curvature adds."""
+        ref = np.tanh(DEFAULT_GAIN * (self.k1 + self.k2))
+        ok = np.isfinite(ref)
+        return float((np.abs(h_map) - np.abs(ref))[ok].max())
 
     def interior(self, margin: float) -> np.ndarray:
         """Covered pixels at least ``margin`` image heights (centre to centre) from any pixel of
