@@ -9,8 +9,9 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -111,3 +112,27 @@ def live_servers(envs: dict[str, dict[str, str]]) -> Iterator[dict[str, Server]]
     finally:
         for server in servers.values():
             stop_server(server)
+
+
+def burst_watching_health(server: Server, job: Callable[[], object], count: int) -> list[int]:
+    """``job`` on ``count`` threads at once while another thread polls ``/healthz`` until they
+    are all done: the health statuses it saw."""
+    health: list[int] = []
+    done = threading.Event()
+
+    def watch() -> None:
+        with httpx.Client(timeout=30) as client:
+            while not done.is_set():
+                health.append(client.get(f"{server.url}/healthz").status_code)
+                time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch)
+    watcher.start()
+    burst = [threading.Thread(target=job) for _ in range(count)]
+    for t in burst:
+        t.start()
+    for t in burst:
+        t.join()
+    done.set()
+    watcher.join()
+    return health

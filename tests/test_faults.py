@@ -25,7 +25,13 @@ import trimesh
 from gbuffer.io import write as write_exr
 from gbuffer.render import render
 from tests.exr_factory import write_corrupt, write_decode_bomb, write_raw_exr
-from tests.live_server import Server, live_server, live_servers, wait_ready
+from tests.live_server import (
+    Server,
+    burst_watching_health,
+    live_server,
+    live_servers,
+    wait_ready,
+)
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -260,25 +266,11 @@ def test_large_pipelines_are_validated_off_the_event_loop(
     text = json.dumps(bulk)
     assert 500_000 < len(text) < 600_000
     statuses: list[int] = []
-    health: list[int] = []
-    done = threading.Event()
 
     def post() -> None:
         statuses.append(enhance(server, files["small"], pipeline=text).status_code)
 
-    def watch() -> None:
-        while not done.is_set():
-            health.append(httpx.get(f"{server.url}/healthz", timeout=30).status_code)
-
-    watcher = threading.Thread(target=watch)
-    watcher.start()
-    posts = [threading.Thread(target=post) for _ in range(20)]
-    for t in posts:
-        t.start()
-    for t in posts:
-        t.join()
-    done.set()
-    watcher.join()
+    health = burst_watching_health(server, post, 20)
     assert statuses == [422] * 20
     assert health and set(health) == {200}
 

@@ -32,6 +32,7 @@ from tests.e2e.common import AUTH, BLENDER, KEY, assert_problem
 from tests.exr_factory import TORN_MESH, render_with_nan
 from tests.live_server import (
     Server,
+    burst_watching_health,
     free_port,
     start_server,
     stop_server,
@@ -373,9 +374,7 @@ def test_saturation_only_200_and_429_health_answers_memory_returns(
 
     statuses: list[int] = []
     retry_after: list[str] = []
-    health: list[int] = []
     barrier = threading.Barrier(16)
-    burst_done = threading.Event()
 
     def one() -> None:
         barrier.wait()
@@ -384,21 +383,7 @@ def test_saturation_only_200_and_429_health_answers_memory_returns(
         if r.status_code == 429:
             retry_after.append(r.headers.get("retry-after", ""))
 
-    def watch_health() -> None:
-        with httpx.Client(timeout=10) as client:
-            while not burst_done.is_set():
-                health.append(client.get(f"{server.url}/healthz").status_code)
-                time.sleep(0.05)
-
-    watcher = threading.Thread(target=watch_health)
-    watcher.start()
-    burst = [threading.Thread(target=one) for _ in range(16)]
-    for t in burst:
-        t.start()
-    for t in burst:
-        t.join()
-    burst_done.set()
-    watcher.join()
+    health = burst_watching_health(server, one, 16)
 
     assert len(statuses) == 16
     assert set(statuses) <= {200, 429}, statuses
