@@ -12,6 +12,8 @@ its error; the tests compare them with NumPy's float64 functions.
 * :func:`dot3_row`: a row of interleaved triples dotted with constant weights (luminance);
 * :func:`finite_quotient`: a plane divided by a number where finite, inf elsewhere (pixel
   sizes from depth), on row strips;
+* :func:`clip_new_negatives`: the values an operation made negative set to 0 (the others bit
+  for bit), on row strips;
 * :func:`put_points`: values at scattered pixels written into a window of planes (a strip's
   sparse upsampled values), without Python's lock, where NumPy's fancy indexing holds it.
 
@@ -33,6 +35,7 @@ from ops.parallel import run_strips, strip_rows
 __all__ = [
     "EXPF_MAX",
     "atan2_upper",
+    "clip_new_negatives",
     "dot3_row",
     "exp_neg",
     "expf",
@@ -260,3 +263,60 @@ def put_points(stack, ys, xs, vals, i0, i1, origin, width):
             yy = ys[n] - r0
             for ch in range(stack.shape[0]):
                 stack[ch, yy, xx + c] = vals[n, ch]
+
+
+def clip_new_negatives(after: np.ndarray, before: np.ndarray) -> np.ndarray:
+    """``after`` with the values an operation made negative set to 0: those below 0 where
+    ``before`` (the same shape) holds another value. What it left as it was, negative or not,
+    stays bit for bit, and NaN is left alone. ``after`` itself where nothing is to be clipped
+    (one compiled read-only pass on row strips), else a new float32 array.
+
+    A result rebuilt as Σ scaled lobes + (beauty − Σ lobes) goes below 0 where that rest is
+    (a half-float beauty, a path tracer's noise) and the lobes are scaled towards 0."""
+    a = np.ascontiguousarray(after, np.float32)
+    b = np.ascontiguousarray(before, np.float32)
+    if a.shape != b.shape:
+        raise ValueError(f"after {a.shape} and before {b.shape} must have the same shape")
+    if a.size == 0:
+        return a
+    flat_a, flat_b = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
+    rows = strip_rows(flat_a.shape[1])
+    found = np.zeros(-(-flat_a.shape[0] // rows), np.int64)
+
+    def count(r0: int, r1: int) -> None:
+        found[r0 // rows] = _new_negatives_rows(flat_a[r0:r1], flat_b[r0:r1])
+
+    run_strips(flat_a.shape[0], count, rows)
+    if not found.any():
+        return a
+    out = a.copy() if a is after else a
+    flat_o = out.reshape(flat_a.shape)
+
+    def clip(r0: int, r1: int) -> None:
+        _clip_new_negatives_rows(flat_o[r0:r1], flat_b[r0:r1])
+
+    run_strips(flat_o.shape[0], clip, rows)
+    return out
+
+
+@kernel
+def _new_negatives_rows(a, b):
+    """How many values of rows ``a`` are below 0 and unlike ``b``'s."""
+    zero = np.float32(0.0)
+    n = 0
+    for i in range(a.shape[0]):
+        ra, rb = a[i], b[i]
+        for j in range(ra.shape[0]):
+            n += (ra[j] < zero) & (ra[j] != rb[j])
+    return n
+
+
+@kernel
+def _clip_new_negatives_rows(a, b):
+    """Rows ``a`` with their values below 0 and unlike ``b``'s set to 0."""
+    zero = np.float32(0.0)
+    for i in range(a.shape[0]):
+        ra, rb = a[i], b[i]
+        for j in range(ra.shape[0]):
+            if (ra[j] < zero) & (ra[j] != rb[j]):
+                ra[j] = zero

@@ -10,6 +10,7 @@ from ops.jit import kernel
 from ops.numerics import (
     EXPF_MAX,
     atan2_upper,
+    clip_new_negatives,
     dot3_row,
     exp_neg,
     expf,
@@ -164,3 +165,28 @@ def test_magnitude_keeps_empty_and_scalar_shapes(shape: tuple[int, ...]) -> None
     got = magnitude(x, y)
     assert got.shape == shape and got.dtype == np.float32
     np.testing.assert_array_equal(got, np.full(shape, 5.0, np.float32))
+
+
+@pytest.mark.parametrize("shape", [(37, 53, 3), (300, 700), (1, 1, 3)])
+def test_clip_new_negatives_is_the_where_of_numpy(shape: tuple[int, ...]) -> None:
+    """0 where the result is below 0 and not what it was, the rest bit for bit (negative values
+    left as they were, NaN, -inf made by the operation alike: -inf is clipped, NaN is not)."""
+    rng = np.random.default_rng(5)
+    before = rng.normal(size=shape).astype(np.float32)
+    after = before + rng.normal(scale=0.5, size=shape).astype(np.float32)
+    after.flat[::7] = before.flat[::7]  # left as they were, some of them negative
+    after.flat[3::11] = np.nan
+    after.flat[5::13] = -np.inf
+    want = np.where((after < 0) & (after != before), np.float32(0.0), after)
+    kept = after.copy()
+    got = clip_new_negatives(after, before)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(after, kept)  # a new array: the operation's own is not changed
+    assert got is not after and got.dtype == np.float32
+    clean = np.abs(after)
+    assert clip_new_negatives(clean, before) is clean  # nothing to clip: the same array
+
+
+def test_clip_new_negatives_refuses_arrays_that_do_not_match() -> None:
+    with pytest.raises(ValueError, match="same shape"):
+        clip_new_negatives(np.zeros((4, 5, 3), np.float32), np.zeros((4, 5), np.float32))

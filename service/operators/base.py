@@ -15,6 +15,7 @@ import numpy as np
 from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gbuffer.frame import Frame
+from ops.numerics import clip_new_negatives
 from service.errors import PipelineError
 from service.masks import MASK_SYNTAX, blend_layers, matte
 from service.masks import parse as parse_mask
@@ -124,7 +125,17 @@ class Operator:
     def run(self, frame: Frame, params: Params, context: Context) -> None:
         """``apply``, restricted to the step's ``mask`` when it has one (:mod:`service.masks`):
         every array the step replaced, added or dropped is blended with the one before.
-        Operators do not change arrays in place, so an array the step kept is the same object."""
+        Operators do not change arrays in place, so an array the step kept is the same object.
+        A beauty the step made has the values it made negative set to 0
+        (:func:`ops.numerics.clip_new_negatives`): radiance is never negative, and Σ scaled
+        lobes + (beauty − Σ lobes) goes below 0 where that rest does."""
+        before = frame.buffers.get("beauty")
+        self._run_masked(frame, params, context)
+        after = frame.buffers.get("beauty")
+        if after is not None and before is not None and after is not before:
+            frame.buffers["beauty"] = clip_new_negatives(after, before)
+
+    def _run_masked(self, frame: Frame, params: Params, context: Context) -> None:
         if params.mask is None:
             self.apply(frame, params, context)
             return
