@@ -90,26 +90,32 @@ _BRADFORD = np.array(
 
 
 def _xyz(x: float, y: float) -> np.ndarray:
-    """XYZ of chromaticity (x, y) at Y = 1."""
-    return np.array([x / y, 1.0, (1.0 - x - y) / y], dtype=np.float64)
+    """XYZ of chromaticity (x, y) at X + Y + Z = 1 (a primary may have y = 0: the CIE XYZ
+    space's blue is (0, 0))."""
+    return np.array([x, y, 1.0 - x - y], dtype=np.float64)
 
 
 def rgb_to_xyz(chroma: Sequence[float]) -> np.ndarray:
-    """The 3×3 RGB-to-XYZ matrix (float64) of a space's chromaticities (SMPTE RP 177).
+    """The 3×3 RGB-to-XYZ matrix (float64) of a space's chromaticities (SMPTE RP 177): the
+    primaries' XYZ scaled so that RGB (1, 1, 1) is the white at Y = 1.
 
-    Rec.709 within 1e-4 of its standard chromaticities gives IEC 61966-2-1's rounded matrix.
+    Rec.709 within 1e-4 of its standard chromaticities gives IEC 61966-2-1's rounded matrix;
+    the CIE XYZ primaries ((1, 0), (0, 1), (0, 0), white E (⅓, ⅓), as OpenEXR writes XYZ
+    images) the identity.
     """
     c = tuple(float(v) for v in chroma)
     if len(c) != 8 or not all(np.isfinite(c)):
         raise ValueError(f"chromaticities must be 8 finite numbers, got {chroma!r}")
     if max(abs(a - b) for a, b in zip(c, REC709, strict=True)) < 1e-4:
         return REC709_RGB_TO_XYZ.copy()
-    if min(c[1], c[3], c[7]) <= 0.0 or c[5] == 0.0:
-        raise ValueError(f"chromaticities {c} have a y of 0 (not a colour space)")
+    if c[7] <= 0.0:
+        raise ValueError(f"chromaticities {c}: the white has a y of 0 (not a colour space)")
     p = np.stack([_xyz(c[0], c[1]), _xyz(c[2], c[3]), _xyz(c[4], c[5])], axis=1)
     if abs(np.linalg.det(p)) < 1e-9:
         raise ValueError(f"chromaticities {c}: the primaries are on one line")
-    s = np.linalg.solve(p, _xyz(c[6], c[7]))
+    s = np.linalg.solve(p, _xyz(c[6], c[7]) / c[7])
+    if not (s > 0.0).all():
+        raise ValueError(f"chromaticities {c}: the white is outside the primaries' triangle")
     return np.asarray(p * s[None, :], np.float64)
 
 

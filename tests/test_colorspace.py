@@ -333,3 +333,40 @@ def test_an_unreadable_parameter_image_is_a_frame_error(tmp_path: Path) -> None:
     (tmp_path / "bad.png").write_bytes(b"not a picture")
     with pytest.raises(FrameError, match="cannot read image"):
         load_image(tmp_path / "bad.png")
+
+
+#: The chromaticities OpenEXR writes with CIE XYZ images (its sample ``Chromaticities/XYZ.exr``):
+#: X, Y and Z as R, G and B, white E.
+XYZ_E = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0 / 3.0, 1.0 / 3.0)
+
+
+def test_a_cie_xyz_file_reads_and_enhances_as_its_rec709_original(tmp_path: Path) -> None:
+    """The XYZ primaries' blue has y = 0: such a file was refused as "not a colour space". Its
+    matrix is the identity and its luminance Y itself; the operators change its copy of the
+    Blender fixture as they change the original (compared in Rec.709)."""
+    xyz = from_chromaticities("XYZ", XYZ_E, "test")
+    np.testing.assert_allclose(xyz.matrix, np.eye(3), atol=1e-15)
+    assert xyz.weights == (0.0, 1.0, 0.0)
+    with OpenEXR.File(str(FIXTURE)) as f:
+        header = dict(f.header())
+        channels = {name: np.array(c.pixels) for name, c in f.channels().items()}
+    for name, pixels in channels.items():
+        if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
+            out = pixels.astype(np.float32)
+            out[..., :3] = convert(out[..., :3], LINEAR_REC709, xyz)
+            channels[name] = out
+    header["chromaticities"] = XYZ_E
+    OpenEXR.File(header, channels).write(str(tmp_path / "xyz.exr"))
+    code, text = _cli("inspect", str(tmp_path / "xyz.exr"))
+    assert code == 0 and "luminance weights 0.0000, 1.0000, 0.0000, white xy 0.3333 0.3333" in text
+    original, copy = gbuffer.read(FIXTURE), gbuffer.read(tmp_path / "xyz.exr")
+    covered = original.mask > 0
+    for step in ({"op": "radiance_scaling"}, {"op": "unsharp_masking"}):
+        d0 = pipeline.run(original, [step]).buffers["beauty"] - original.buffers["beauty"]
+        after = pipeline.run(copy, [step]).buffers["beauty"]
+        d1 = convert(after, xyz, LINEAR_REC709) - convert(
+            copy.buffers["beauty"], xyz, LINEAR_REC709
+        )
+        d0, d1 = d0[covered], d1[covered]
+        assert np.abs(d0).mean() > 1e-4
+        assert np.abs(d1 - d0).sum() / np.abs(d0).sum() < 0.03, step
