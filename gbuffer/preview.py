@@ -118,8 +118,7 @@ def picture(
         return _grey_or_signed(data)
     channels = frame.layer(layer)
     if not channels:
-        have = sorted(set(frame.buffers) | {c.split(".")[0] for c in frame.outputs})
-        raise FrameError(f"no layer '{layer}' in the frame; available: {', '.join(have)}")
+        raise FrameError(f"no layer '{layer}' in the frame; {_what_there_is(frame)}")
     names = list(channels)
     for trio in (("R", "G", "B"), ("X", "Y", "Z")):
         if all(c in channels for c in trio):
@@ -148,3 +147,16 @@ def write_png(rgb: np.ndarray, path: str | Path) -> None:
         out.close()
         if not ok:
             raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")
+
+
+def _what_there_is(frame: Frame) -> str:
+    """The buffers and layers a picture can be made of, for an error naming one that is not:
+    the buffers Depict mapped, else the file's layers (a luminance-only or luminance/chroma
+    image maps none: ``--layer Y`` shows its Y)."""
+    have = sorted(set(frame.buffers) | {c.split(".")[0] for c in frame.outputs})
+    if have:
+        return f"available: {', '.join(have)}"
+    layers = {c.rpartition(".")[0] or c for _, chans in frame.passthrough.parts for c in chans}
+    if not layers:
+        return "it holds no channel"
+    return f"no buffer mapped; the file's layers: {', '.join(sorted(layers))} (--layer NAME)"

@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import OpenEXR
 import pytest
 
 from service.scene import NOTHING_SEEN
@@ -212,3 +214,18 @@ def test_compare_says_which_flags_its_input_does_not_use(
     assert capsys.readouterr().err.splitlines() == [
         f"depict: warning: --preset, --map: for an EXR input; it is a mesh ({SPOT}): ignored"
     ]
+
+
+def test_a_preview_of_a_file_without_a_beauty_names_its_layers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A luminance-only image (OpenEXR's Y, as its sample GrayRamps and LuminanceChroma files):
+    the error listed the mapped buffers, none, so it ended in "available: " and nothing."""
+    path = tmp_path / "grey.exr"
+    ramp = np.tile(np.linspace(0.0, 1.0, 16, dtype=np.float32), (8, 1))
+    OpenEXR.File({}, {"Y": ramp, "right.Y": ramp}).write(str(path))
+    assert depict("preview", path, "-o", tmp_path / "p.png") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("no buffer mapped; the file's layers: Y, right (--layer NAME)"), err
+    assert depict("preview", path, "-o", tmp_path / "p.png", "--layer", "Y") == 0
+    assert (tmp_path / "p.png").stat().st_size > 0
