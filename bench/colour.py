@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -53,19 +53,31 @@ def ocio_convert(rgb: np.ndarray, src: str, dst: str) -> np.ndarray:
     return x
 
 
-def acescg_copy(src: str | Path, dst: str | Path) -> None:
-    """Write ``src`` (linear Rec.709) as ACEScg: every RGB(A) layer converted (normals, depth
-    and positions are stored as separate X/Y/Z channels and stay), chromaticities = AP1."""
+def space_copy(
+    src: str | Path,
+    dst: str | Path,
+    convert: Callable[[np.ndarray], np.ndarray],
+    chromaticities: Sequence[float],
+) -> None:
+    """Write ``src`` (linear Rec.709) in another space: every RGB(A) layer's colours through
+    ``convert`` (normals, depth and positions are stored as separate X/Y/Z channels and stay),
+    the header's ``chromaticities`` those of the space."""
     with OpenEXR.File(str(src)) as f:
         header = dict(f.header())
         channels = {name: np.array(c.pixels) for name, c in f.channels().items()}
     for name, pixels in channels.items():
         if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
             out = pixels.astype(np.float32)
-            out[..., :3] = ocio_convert(out[..., :3], "lin_rec709", "ACEScg")
+            out[..., :3] = convert(out[..., :3])
             channels[name] = out
-    header["chromaticities"] = ACES_AP1
+    header["chromaticities"] = tuple(chromaticities)
     OpenEXR.File(header, channels).write(str(dst))
+
+
+def acescg_copy(src: str | Path, dst: str | Path) -> None:
+    """Write ``src`` (linear Rec.709) as ACEScg, every colour converted by OpenColorIO,
+    chromaticities = AP1 (:func:`space_copy`)."""
+    space_copy(src, dst, lambda rgb: ocio_convert(rgb, "lin_rec709", "ACEScg"), ACES_AP1)
 
 
 def _rec709(frame: Frame, rgb: np.ndarray) -> np.ndarray:

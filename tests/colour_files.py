@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import OpenEXR
 
-from bench.colour import acescg_copy, ocio_convert
+from bench.colour import acescg_copy, ocio_convert, space_copy
 
-__all__ = ["MACBETH_SRGB", "acescg_copy", "chart", "ocio_convert", "srgb_decode"]
+__all__ = ["MACBETH_SRGB", "acescg_copy", "chart", "ocio_convert", "space_copy", "srgb_decode"]
 
 #: The 24 patches of the ColorChecker Classic, 8-bit sRGB (BabelColor's averages), row by row.
 MACBETH_SRGB = np.array(

@@ -36,7 +36,14 @@ from ops.colorspace import (
 from service import pipeline
 from service.cli import main
 from service.images import load_image
-from tests.colour_files import MACBETH_SRGB, acescg_copy, chart, ocio_convert, srgb_decode
+from tests.colour_files import (
+    MACBETH_SRGB,
+    acescg_copy,
+    chart,
+    ocio_convert,
+    space_copy,
+    srgb_decode,
+)
 
 FIXTURE = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
 ACESCG = from_chromaticities("ACEScg", ACES_AP1, "test")
@@ -347,16 +354,7 @@ def test_a_cie_xyz_file_reads_and_enhances_as_its_rec709_original(tmp_path: Path
     xyz = from_chromaticities("XYZ", XYZ_E, "test")
     np.testing.assert_allclose(xyz.matrix, np.eye(3), atol=1e-15)
     assert xyz.weights == (0.0, 1.0, 0.0)
-    with OpenEXR.File(str(FIXTURE)) as f:
-        header = dict(f.header())
-        channels = {name: np.array(c.pixels) for name, c in f.channels().items()}
-    for name, pixels in channels.items():
-        if pixels.ndim == 3 and pixels.shape[2] in (3, 4):
-            out = pixels.astype(np.float32)
-            out[..., :3] = convert(out[..., :3], LINEAR_REC709, xyz)
-            channels[name] = out
-    header["chromaticities"] = XYZ_E
-    OpenEXR.File(header, channels).write(str(tmp_path / "xyz.exr"))
+    space_copy(FIXTURE, tmp_path / "xyz.exr", lambda rgb: convert(rgb, LINEAR_REC709, xyz), XYZ_E)
     code, text = _cli("inspect", str(tmp_path / "xyz.exr"))
     assert code == 0 and "luminance weights 0.0000, 1.0000, 0.0000, white xy 0.3333 0.3333" in text
     original, copy = gbuffer.read(FIXTURE), gbuffer.read(tmp_path / "xyz.exr")
