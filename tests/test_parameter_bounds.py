@@ -1,8 +1,8 @@
-"""Every operator at both ends of every number parameter's range, on a real path-traced frame
-(the glass corpus frame: lobes, a rest below 0 at most pixels, transmission): a finite beauty
-with no value the operator made negative and finite layers on the surface, or a refusal in one
-line. Radiance Scaling with γ = 10 or more left negative pixels where the lobes it scaled
-towards 0 met that rest."""
+"""Every operator at both ends of every number parameter's range, and every pair of operators one
+after the other, on a real path-traced frame (the glass corpus frame: lobes, a rest below 0 at
+most pixels, transmission): a finite beauty with no value an operator made negative and finite
+layers on the surface, or a refusal in one line. Radiance Scaling with γ = 10 or more left
+negative pixels where the lobes it scaled towards 0 met that rest."""
 
 from __future__ import annotations
 
@@ -68,3 +68,18 @@ def test_every_operator_is_tried() -> None:
     parameters out of the sweep unnoticed)."""
     assert {case.values[0] for case in _cases()} == set(REGISTRY)
     assert len(_cases()) > 150
+
+
+@pytest.mark.parametrize("second", sorted(REGISTRY))
+@pytest.mark.parametrize("first", sorted(REGISTRY))
+def test_two_operators_one_after_the_other(first: str, second: str) -> None:
+    """Each operator on the result of each other (the second reads the lobes, lights and layers
+    the first wrote) with their defaults: the same guarantees as one operator."""
+    frame = _frame()
+    out = pipeline.run(frame, [{"op": first}, {"op": second}])
+    before, after = frame.buffers["beauty"], out.buffers["beauty"]
+    assert np.isfinite(after).all()
+    assert not ((after < 0) & (after != before)).any()
+    covered = frame.mask > 0
+    for name, layer in out.outputs.items():
+        assert np.isfinite(layer[covered]).all(), name
