@@ -50,6 +50,7 @@ import threading
 import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
+from multiprocessing import resource_tracker
 from pathlib import Path
 from typing import Any
 
@@ -333,16 +334,26 @@ def _cluster(scheduler: str | None, workers: int | None) -> tuple[Client, LocalC
         except OSError as exc:
             raise BatchError(f"cannot reach the Dask scheduler {scheduler}: {exc}") from None
     n = workers or os.cpu_count() or 1
-    with _sigint_ignored():  # (what the worker processes start with: Ctrl-C is ours to handle)
-        cluster = LocalCluster(
-            n_workers=n,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            scheduler_kwargs={"dashboard_address": ":0"},  # its health routes: any free port
-            silence_logs=40,  # logging.ERROR
-        )
-    return Client(cluster), cluster
+    cluster: LocalCluster | None = None
+    try:
+        with _sigint_ignored():  # (what the worker processes start with: Ctrl-C is ours)
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                scheduler_kwargs={"dashboard_address": ":0"},  # its health routes: any port
+                # logging.CRITICAL: what failed is in the summary, frame by frame; distributed's
+                # ERROR lines were its shutdown races after a Ctrl-C (a worker's heartbeat to the
+                # scheduler just closed), with a traceback
+                silence_logs=50,
+            )
+        return Client(cluster), cluster
+    except BaseException:  # (a Ctrl-C held while the workers started comes as the hold ends)
+        if cluster is not None:
+            with contextlib.suppress(Exception):
+                cluster.close()
+        raise
 
 
 @contextlib.contextmanager
@@ -350,15 +361,26 @@ def _sigint_ignored() -> Iterator[None]:
     """SIGINT ignored while the local cluster starts its processes, which keep that (Python
     does not install its Ctrl-C handler where SIGINT is ignored): Ctrl-C in a terminal, sent to
     every process of the group, stops the batch through this process, which closes the
-    cluster, instead of printing each worker's KeyboardInterrupt traceback."""
+    cluster, instead of printing each worker's KeyboardInterrupt traceback.
+
+    A Ctrl-C meanwhile is held, not lost: SIGINT is blocked too, in this thread and the
+    threads started meanwhile (the command line's other threads block it from their start:
+    :func:`service.cli._sigint_held`), and a signal every thread blocks stays pending until
+    the handler is back and it is unblocked. multiprocessing's resource tracker is started
+    first: starting it unblocks SIGINT in the thread that does (CPython's bpo-33613 mask)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    resource_tracker.ensure_running()  # (started later, it unblocks SIGINT in its thread)
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # blocked too, in this thread and the threads started meanwhile: a Ctrl-C now waits (a
+    # signal blocked everywhere is kept, not ignored) and comes once the handler is back
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 @dataclass

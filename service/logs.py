@@ -71,8 +71,15 @@ def end_process(code: int) -> NoReturn:
     """Flush the logs and the standard streams, then end the process without the interpreter's
     teardown: for a process whose files are all written and closed (the ``depict`` executable, a
     worker), where the teardown only frees memory object by object, unloads Numba's compiler and
-    has the OpenImageIO binding print "nanobind: leaked ..." lines."""
+    has the OpenImageIO binding print "nanobind: leaked ..." lines. multiprocessing's own exit
+    handler runs first where it was used (the one ``atexit`` would run): it stops the daemon
+    processes left and unregisters the semaphores still held, which its resource tracker
+    otherwise reports as "leaked" on stderr once the process is gone (a batch stopped by
+    Ctrl-C while Dask's nannies held their workers' queues)."""
     logging.shutdown()
+    mp_util = sys.modules.get("multiprocessing.util")
+    if mp_util is not None:
+        mp_util._exit_function()  # (what multiprocessing registers with atexit)
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)

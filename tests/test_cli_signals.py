@@ -101,7 +101,9 @@ def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
     frame: Path, tmp_path: Path, signum: int
 ) -> None:
     """To the whole process group, as a farm's SIGTERM or a terminal's Ctrl-C: no partial
-    frame, and one line at most (the Dask workers printed KeyboardInterrupt tracebacks)."""
+    frame, and nothing on stderr (the Dask workers printed KeyboardInterrupt tracebacks, and
+    multiprocessing's resource tracker a warning of leaked semaphores, two lines, where the
+    process ended without running multiprocessing's exit handlers)."""
     shots = tmp_path / "shots"
     shots.mkdir()
     for i in range(1, 5):  # (stopped after the first output appears: three still to do)
@@ -112,7 +114,7 @@ def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
     done = _stop_while_writing(argv, outs, signum, group=True)
     assert done.returncode == 128 + signum, done.stderr
     assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
-    assert "Traceback" not in done.stderr, done.stderr
+    assert done.stderr == ""  # (no traceback, no "leaked semaphore objects" warning)
 
 
 def test_partial_files_are_exactly_the_temporary_outputs(tmp_path: Path) -> None:
@@ -131,3 +133,64 @@ def test_partial_files_are_exactly_the_temporary_outputs(tmp_path: Path) -> None
     # an output through a link is written beside its target; one path alone is one path
     (tmp_path / "link.exr").symlink_to(tmp_path / "o.exr")
     assert [p.name for p in partial_files(tmp_path / "link.exr")] == [".o.5e6f7a8b.tmp.exr"]
+
+
+def _ignores_sigint(pid: int) -> bool:
+    """Whether process ``pid`` has SIGINT ignored now (``SigIgn`` in /proc/PID/status)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("SigIgn:"):
+            return bool(int(line.split()[1], 16) >> (signal.SIGINT - 1) & 1)
+    return False
+
+
+def test_a_ctrl_c_while_the_batch_starts_its_workers_stops_it(frame: Path, tmp_path: Path) -> None:
+    """SIGINT is ignored while the local cluster starts its worker processes (they keep that, so
+    that Ctrl-C reaches them through this process); a Ctrl-C in that second was lost and the
+    batch ran to its end with exit 0. Sent the moment the batch ignores SIGINT, it now stops it
+    before any frame, with 130 and nothing on stderr."""
+    shots, outs = tmp_path / "shots", tmp_path / "out"
+    shots.mkdir()
+    for i in range(1, 4):
+        (shots / f"shot.{i:04d}.exr").symlink_to(frame)
+    argv = ["batch", str(shots / "shot.####.exr"), "-o", str(outs / "o.####.exr")]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from service.cli import run; run()", *argv, "--no-progress"],
+        env=dict(os.environ, PYOPENGL_PLATFORM="osmesa"),
+        start_new_session=True,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 300
+    try:
+        while not _ignores_sigint(proc.pid):
+            assert proc.poll() is None, f"ended first: {proc.stderr.read()}"  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "SIGINT was never ignored"
+            time.sleep(0.0005)
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, err
+    assert err == ""
+    assert not outs.exists() or list(outs.iterdir()) == []
+
+
+#: A process that ends as the ``depict`` executable does while it holds a semaphore of
+#: multiprocessing's (as Dask's nannies hold their workers' queues while a stopped batch ends).
+HOLDS_A_SEMAPHORE = """
+import multiprocessing
+from service.logs import end_process
+lock = multiprocessing.get_context("spawn").Lock()
+end_process(0)
+"""
+
+
+def test_a_process_ended_without_teardown_leaves_no_semaphore_behind() -> None:
+    """The ``depict`` executable ends without the interpreter's teardown; it skipped
+    multiprocessing's exit handlers too, and the resource tracker printed "There appear to be 6
+    leaked semaphore objects to clean up at shutdown" (two lines) after some stopped batches."""
+    done = subprocess.run(
+        [sys.executable, "-c", HOLDS_A_SEMAPHORE], capture_output=True, text=True, timeout=120
+    )
+    assert (done.returncode, done.stderr) == (0, "")
