@@ -375,12 +375,14 @@ def _sigint_ignored() -> Iterator[None]:
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
     # blocked too, in this thread and the threads started meanwhile: a Ctrl-C now waits (a
     # signal blocked everywhere is kept, not ignored) and comes once the handler is back
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    mask = hasattr(signal, "pthread_sigmask")  # (POSIX)
+    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if mask else set()
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)
+        if mask:
+            signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 @dataclass

@@ -32,6 +32,8 @@ from service.logs import end_process
 
 __all__ = ["build_parser", "main", "run"]
 
+_SIGMASK = hasattr(signal, "pthread_sigmask")  # (POSIX)
+
 
 def command(args: argparse.Namespace) -> Callable[[argparse.Namespace], int]:
     """The function of the parsed command: its ``--server`` form when a server is given."""
@@ -49,7 +51,7 @@ def _sigint_held() -> Iterator[None]:
     this thread, and where a command ignores SIGINT for a while (``depict batch`` starting its
     workers, :func:`service.batch._sigint_ignored`) a Ctrl-C meanwhile waits instead of being
     lost in one of them. One that came during the import comes when it is done."""
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or not _SIGMASK:
         yield
         return
     before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
