@@ -47,6 +47,17 @@ def _frame() -> Frame:
     return found.read()
 
 
+def assert_clean(frame: Frame, out: Frame) -> None:
+    """A finite beauty with no value the pipeline made negative, and finite layers on the
+    surface."""
+    before, after = frame.buffers["beauty"], out.buffers["beauty"]
+    assert np.isfinite(after).all()
+    assert not ((after < 0) & (after != before)).any()
+    covered = frame.mask > 0
+    for name, layer in out.outputs.items():
+        assert np.isfinite(layer[covered]).all(), name
+
+
 @pytest.mark.parametrize(("op", "field", "value"), _cases())
 def test_an_operator_at_the_end_of_a_range(op: str, field: str, value: float) -> None:
     frame = _frame()
@@ -55,12 +66,7 @@ def test_an_operator_at_the_end_of_a_range(op: str, field: str, value: float) ->
     except PipelineError as exc:  # (a value that needs another to go with it)
         assert "\n" not in str(exc)
         return
-    before, after = frame.buffers["beauty"], out.buffers["beauty"]
-    assert np.isfinite(after).all()
-    assert not ((after < 0) & (after != before)).any()
-    covered = frame.mask > 0
-    for name, layer in out.outputs.items():
-        assert np.isfinite(layer[covered]).all(), name
+    assert_clean(frame, out)
 
 
 def test_every_operator_is_tried() -> None:
@@ -77,9 +83,4 @@ def test_two_operators_one_after_the_other(first: str, second: str) -> None:
     the first wrote) with their defaults: the same guarantees as one operator."""
     frame = _frame()
     out = pipeline.run(frame, [{"op": first}, {"op": second}])
-    before, after = frame.buffers["beauty"], out.buffers["beauty"]
-    assert np.isfinite(after).all()
-    assert not ((after < 0) & (after != before)).any()
-    covered = frame.mask > 0
-    for name, layer in out.outputs.items():
-        assert np.isfinite(layer[covered]).all(), name
+    assert_clean(frame, out)
