@@ -45,7 +45,6 @@ import glob
 import json
 import os
 import re
-import signal
 import threading
 import time
 from collections.abc import Iterator, Sequence
@@ -73,6 +72,7 @@ from service import allocator
 from service.enhance import ReadRequest, WriteRequest, enhance_frame, read_for
 from service.pipeline import Pipeline
 from service.problems import from_exception
+from service.signals import sigint_held
 
 _TOKEN = re.compile(r"#+|@+|%(0?)(\d*)d")
 
@@ -363,26 +363,14 @@ def _sigint_ignored() -> Iterator[None]:
     every process of the group, stops the batch through this process, which closes the
     cluster, instead of printing each worker's KeyboardInterrupt traceback.
 
-    A Ctrl-C meanwhile is held, not lost: SIGINT is blocked too, in this thread and the
-    threads started meanwhile (the command line's other threads block it from their start:
-    :func:`service.cli._sigint_held`), and a signal every thread blocks stays pending until
-    the handler is back and it is unblocked. multiprocessing's resource tracker is started
-    first: starting it unblocks SIGINT in the thread that does (CPython's bpo-33613 mask)."""
-    if threading.current_thread() is not threading.main_thread():
+    A Ctrl-C meanwhile is held, not lost (:func:`service.signals.sigint_held`: the threads
+    started before it, the command line's, block SIGINT from their start). multiprocessing's
+    resource tracker is started first: starting it unblocks SIGINT in the thread that does
+    (CPython's bpo-33613 mask), and a thread that does not block it would drop it."""
+    if threading.current_thread() is threading.main_thread():
+        resource_tracker.ensure_running()
+    with sigint_held(ignored=True):
         yield
-        return
-    resource_tracker.ensure_running()  # (started later, it unblocks SIGINT in its thread)
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    # blocked too, in this thread and the threads started meanwhile: a Ctrl-C now waits (a
-    # signal blocked everywhere is kept, not ignored) and comes once the handler is back
-    mask = hasattr(signal, "pthread_sigmask")  # (POSIX)
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT}) if mask else set()
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if mask:
-            signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 @dataclass

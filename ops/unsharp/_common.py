@@ -10,6 +10,7 @@ import numpy as np
 
 from ops import color
 from ops.colorspace import ColorSpace
+from ops.numerics import clip_new_negatives
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
@@ -99,10 +100,13 @@ def _with_lightness(
 
 
 def _clip_new_negatives(out: Array, beauty: Array) -> Array:
-    """``out`` with its changed values below 0 made 0, in place: a saturated colour can leave the
-    RGB cube below 0 when its lightness drops (and the CIELAB round trip rounds a black channel
-    to −1e-9); the values kept bit for bit, negative ones included, are left as they came."""
-    np.maximum(out, np.float32(0.0), out=out, where=(out < 0) & (out != beauty))
+    """``out`` with its changed values below 0 made 0, in place
+    (:func:`ops.numerics.clip_new_negatives`): a saturated colour can leave the RGB cube below 0
+    when its lightness drops (and the CIELAB round trip rounds a black channel to −1e-9); the
+    values kept bit for bit, negative ones included, are left as they came."""
+    clipped = clip_new_negatives(out, beauty)
+    if clipped is not out:  # (some were clipped, in a new array)
+        out[...] = clipped
     return out
 
 

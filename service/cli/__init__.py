@@ -16,49 +16,30 @@ line ``depict: error: ...`` on stderr and exits with code 2; no traceback.
 from __future__ import annotations
 
 import argparse
-import contextlib
 import importlib
 import os
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from service import allocator
 from service.cli.args import error_line, fail
 from service.cli.parser import build_parser
 from service.logs import end_process
+from service.signals import sigint_held
 
 __all__ = ["build_parser", "main", "run"]
-
-_SIGMASK = hasattr(signal, "pthread_sigmask")  # (POSIX)
 
 
 def command(args: argparse.Namespace) -> Callable[[argparse.Namespace], int]:
     """The function of the parsed command: its ``--server`` form when a server is given."""
     target = args.remote if getattr(args, "server", None) and "remote" in args else args.command
     module, _, name = target.partition(":")
-    with _sigint_held():
+    with sigint_held():  # (the threads the imports start keep SIGINT blocked: service.signals)
         found: Callable[[argparse.Namespace], int] = getattr(importlib.import_module(module), name)
     return found
-
-
-@contextlib.contextmanager
-def _sigint_held() -> Iterator[None]:
-    """SIGINT blocked in this (the main) thread while the command's module is imported: the
-    threads the imports start (OpenBLAS's, NumPy's) keep it blocked, so Ctrl-C always comes to
-    this thread, and where a command ignores SIGINT for a while (``depict batch`` starting its
-    workers, :func:`service.batch._sigint_ignored`) a Ctrl-C meanwhile waits instead of being
-    lost in one of them. One that came during the import comes when it is done."""
-    if threading.current_thread() is not threading.main_thread() or not _SIGMASK:
-        yield
-        return
-    before = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    try:
-        yield
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, before)
 
 
 class _Stopped(BaseException):
