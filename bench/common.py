@@ -47,14 +47,19 @@ _RING_CACHES = 4
 
 def last_level_cache_bytes(default: int = 64 << 20) -> int:
     """The largest CPU cache's size in bytes (Linux sysfs), ``default`` where it cannot be read."""
-    sizes = []
-    for path in Path("/sys/devices/system/cpu/cpu0/cache").glob("index*/size"):
-        text = path.read_text().strip().upper()
-        scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(text[-1:], 1)
-        digits = text.rstrip("KMG")
-        if digits.isdigit():
-            sizes.append(int(digits) * scale)
-    return max(sizes, default=default)
+    sizes = [
+        cache_size(path.read_text())
+        for path in Path("/sys/devices/system/cpu/cpu0/cache").glob("index*/size")
+    ]
+    return max((size for size in sizes if size), default=default)
+
+
+def cache_size(text: str) -> int:
+    """A sysfs cache size ("32768K", "2M", "512") in bytes; 0 for anything else."""
+    text = text.strip().upper()
+    scale = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}.get(text[-1:], 1)
+    digits = text[:-1] if scale > 1 else text
+    return int(digits) * scale if digits.isdigit() else 0
 
 
 class _Copy:

@@ -1,4 +1,5 @@
-"""3D unsharp masking (Ritschel et al. 2008), its baselines, and linear RGB <-> CIELAB.
+"""3D unsharp masking (Ritschel et al. 2008) and linear RGB <-> CIELAB (the baselines:
+test_unsharp_baselines.py).
 
 Scenes are built inline: fronto-parallel or slanted planes and a square in front of a plane,
 seen through a perspective camera (pixel_size = depth / focal_px) unless stated otherwise.
@@ -19,7 +20,6 @@ from ops.color import (
     rgb_to_lab_phi,
 )
 from ops.unsharp import (
-    depth_unsharp_masking,
     plain_unsharp_mask,
     surface_blur,
     surface_blurs,
@@ -27,8 +27,7 @@ from ops.unsharp import (
     unsharp_masking,
 )
 from tests import analytic
-
-FOCAL = 400.0  # pixels
+from tests.unsharp_scenes import FOCAL, grey, lightness, plane, square_scene
 
 # ------------------------------------------------------------------------------------------------
 # helpers
@@ -49,35 +48,6 @@ def _lab_ref(rgb: np.ndarray, white: float = 1.0) -> np.ndarray:
     return np.stack(
         [116 * f[..., 1] - 16, 500 * (f[..., 0] - f[..., 1]), 200 * (f[..., 1] - f[..., 2])], -1
     )
-
-
-def _plane(h: int, w: int, z: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    depth = np.full((h, w), z, np.float32)
-    normal = np.zeros((h, w, 3), np.float32)
-    normal[..., 2] = 1.0
-    mask = np.ones((h, w), bool)
-    return depth, normal, mask, depth / np.float32(FOCAL)
-
-
-def _grey(lum: np.ndarray) -> np.ndarray:
-    return np.repeat(lum[..., None], 3, axis=2).astype(np.float32)
-
-
-def _lightness(rgb: np.ndarray) -> np.ndarray:
-    return rgb_to_lab(rgb, 1.0)[..., 0]
-
-
-def _square_scene(
-    h: int = 160, w: int = 160
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """A bright square at depth 2 in front of a darker plane at depth 4 (all covered)."""
-    depth, normal, mask, _ = _plane(h, w, 4.0)
-    beauty = np.full((h, w, 3), 0.15, np.float32)
-    fg = np.zeros((h, w), bool)
-    fg[50:110, 50:110] = True
-    depth[fg] = 2.0
-    beauty[fg] = 0.7
-    return beauty, depth, normal, mask, depth / np.float32(FOCAL), fg
 
 
 # ------------------------------------------------------------------------------------------------
@@ -148,9 +118,9 @@ def test_white_level_auto_and_pinned() -> None:
 @pytest.mark.parametrize("with_normals", [True, False])
 def test_step_edge_gets_cornsweet_profile(with_normals: bool) -> None:
     h, w = 96, 256
-    depth, normal, mask, ps = _plane(h, w, 3.0)
+    depth, normal, mask, ps = plane(h, w, 3.0)
     lum = np.where(np.arange(w) < w // 2, 0.08, 0.3).astype(np.float32)
-    beauty = _grey(np.broadcast_to(lum, (h, w)))
+    beauty = grey(np.broadcast_to(lum, (h, w)))
     out = unsharp_masking(
         beauty,
         depth,
@@ -161,7 +131,7 @@ def test_step_edge_gets_cornsweet_profile(with_normals: bool) -> None:
         pixel_size=ps,
         white=1.0,
     )
-    l0, l1 = _lightness(beauty)[h // 2], _lightness(out)[h // 2]
+    l0, l1 = lightness(beauty)[h // 2], lightness(out)[h // 2]
     c = l1 - l0
     e = w // 2
     assert c[e - 3 : e].max() < -3.0  # dark side darker next to the edge
@@ -176,7 +146,7 @@ def test_step_edge_gets_cornsweet_profile(with_normals: bool) -> None:
 
 def test_hue_and_saturation_unchanged_on_coloured_ramp() -> None:
     h, w = 64, 192
-    depth, normal, mask, ps = _plane(h, w, 3.0)
+    depth, normal, mask, ps = plane(h, w, 3.0)
     x = np.linspace(0.0, 1.0, w, dtype=np.float32)
     y = np.linspace(0.0, 1.0, h, dtype=np.float32)[:, None]
     beauty = np.stack(
@@ -204,7 +174,7 @@ def _textured_square_scene() -> tuple[
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
 ]:
     """The square scene with a lightness step on the square and one on the plane."""
-    beauty, depth, normal, mask, ps, fg = _square_scene()
+    beauty, depth, normal, mask, ps, fg = square_scene()
     beauty[50:110, 80:110] = 0.35
     beauty[:, 130:] = 0.4
     return beauty, depth, normal, mask, ps, fg
@@ -227,16 +197,16 @@ def test_gain_map_scales_and_flips_the_contrast() -> None:
     beauty, depth, normal, mask, ps, _ = _textured_square_scene()
     kw = dict(amount=1.0, sigma_scene=0.1, pixel_size=ps, white=1.0, adaptive=False)
     gain = np.full(depth.shape, -1.0, np.float32)
-    pos = _lightness(unsharp_masking(beauty, depth, normal, mask, **kw)) - _lightness(beauty)
-    neg = _lightness(unsharp_masking(beauty, depth, normal, mask, gain_map=gain, **kw))
-    neg -= _lightness(beauty)
+    pos = lightness(unsharp_masking(beauty, depth, normal, mask, **kw)) - lightness(beauty)
+    neg = lightness(unsharp_masking(beauty, depth, normal, mask, gain_map=gain, **kw))
+    neg -= lightness(beauty)
     sel = np.abs(pos) > 0.5
     assert sel.sum() > 50
     np.testing.assert_allclose(neg[sel], -pos[sel], rtol=0.02, atol=0.05)
 
 
 def test_no_halo_across_depth_discontinuity() -> None:
-    beauty, depth, normal, mask, ps, fg = _square_scene()
+    beauty, depth, normal, mask, ps, fg = square_scene()
     out = unsharp_masking(
         beauty, depth, normal, mask, amount=2.0, sigma_scene=0.1, pixel_size=ps, white=1.0
     )
@@ -254,7 +224,7 @@ def test_no_halo_across_depth_discontinuity() -> None:
 
 
 def test_halo_free_against_empty_background_and_nan_depth() -> None:
-    beauty, depth, normal, mask, ps, fg = _square_scene()
+    beauty, depth, normal, mask, ps, fg = square_scene()
     mask = fg.copy()
     depth[~fg] = np.inf
     ps = np.where(fg, ps, np.nan).astype(np.float32)
@@ -267,7 +237,7 @@ def test_halo_free_against_empty_background_and_nan_depth() -> None:
     )
     assert np.all(np.isfinite(out))
     assert np.array_equal(out[~fg], beauty[~fg])  # background bit for bit
-    c = _lightness(out) - _lightness(beauty)
+    c = lightness(out) - lightness(beauty)
     assert c[80, 80:83].min() > 2.0 and c[80, 77:80].max() < -2.0  # the step is enhanced
     # the signal is constant down each column of the square, so is the enhancement: the black
     # background above and below does not darken the square's rim
@@ -282,7 +252,7 @@ def test_no_halo_from_thin_object_in_front(width: int, z_front: float, depth_sig
     # a bright bar `width` pixels wide in front of a dark plane at depth 4; σ = 0.1, so the gap
     # is 4 σ (default depth_sigma keeps > ~3 σ apart) or 1 σ (depth_sigma = 0.25: > ~0.75 σ)
     h, w = 128, 192
-    depth, normal, mask, _ = _plane(h, w, 4.0)
+    depth, normal, mask, _ = plane(h, w, 4.0)
     beauty = np.full((h, w, 3), 0.15, np.float32)
     bar = np.zeros((h, w), bool)
     bar[20:108, 90 : 90 + width] = True
@@ -376,10 +346,10 @@ def test_same_gradient_same_width_at_two_distances() -> None:
     h, w = 64, 384
     widths = []
     for z in (2.0, 4.0):
-        depth, normal, mask, ps = _plane(h, w, z)
+        depth, normal, mask, ps = plane(h, w, z)
         x_scene = (np.arange(w) + 0.5 - w / 2) * z / FOCAL
         lum = 0.1 + 0.4 * (0.5 + 0.5 * np.tanh(x_scene / 0.02))
-        beauty = _grey(np.broadcast_to(lum, (h, w)))
+        beauty = grey(np.broadcast_to(lum, (h, w)))
         out = unsharp_masking(
             beauty,
             depth,
@@ -391,7 +361,7 @@ def test_same_gradient_same_width_at_two_distances() -> None:
             white=1.0,
             adaptive=False,
         )
-        c = (_lightness(out) - _lightness(beauty))[h // 2]
+        c = (lightness(out) - lightness(beauty))[h // 2]
         # width of the bright overshoot lobe, in scene units (pixels x pixel size)
         widths.append((c > 0.1 * c.max()).sum() * z / FOCAL)
     assert widths[0] > 0.05  # a real lobe, several pixels wide at both distances
@@ -400,7 +370,7 @@ def test_same_gradient_same_width_at_two_distances() -> None:
 
 def test_surface_blur_sigma_is_in_scene_units_and_follows_surfaces() -> None:
     h, w = 128, 384
-    depth, normal, mask, ps = _plane(h, w, 4.0)
+    depth, normal, mask, ps = plane(h, w, 4.0)
     xx = np.arange(w, dtype=np.float32)
     sig = np.broadcast_to(50 + 4e-4 * (xx - w / 2) ** 2, (h, w)).astype(np.float32)
     for sigma_px in (3.0, 6.0, 11.0, 16.0):
@@ -421,7 +391,7 @@ def test_surface_blurs_is_surface_blur_of_each_signal(sigma_scene: float) -> Non
     # a square in front of a plane, a band uncovered; σ_px 4 and 8 (0.04: the far plane fades
     # to the signal itself below level 1) or 30 and 60: two signals on one pyramid come out
     # bit for bit as each smoothed alone
-    beauty, depth, normal, mask, ps, _ = _square_scene()
+    beauty, depth, normal, mask, ps, _ = square_scene()
     mask[:, :12] = False
     mask[40:44, 60:70] = False  # a hole inside the surface's bounding box
     first = beauty[..., 0] + np.float32(0.01) * np.arange(160, dtype=np.float32)
@@ -444,11 +414,11 @@ def test_orthographic_pixel_size_and_slanted_plane() -> None:
     normal[..., 1:] = [-np.sqrt(0.5), np.sqrt(0.5)]
     mask = np.ones((h, w), bool)
     lum = np.where(np.arange(w) < w // 2, 0.1, 0.4).astype(np.float32)
-    beauty = _grey(np.broadcast_to(lum, (h, w)))
+    beauty = grey(np.broadcast_to(lum, (h, w)))
     out = unsharp_masking(
         beauty, depth, normal, mask, amount=1.0, sigma_scene=0.05, pixel_size=0.01, white=1.0
     )
-    c = _lightness(out) - _lightness(beauty)
+    c = lightness(out) - lightness(beauty)
     assert c[:, w // 2 - 1].max() < -2.0 and c[:, w // 2].min() > 2.0
     assert np.abs(c[:, :20]).max() < 0.1
 
@@ -457,30 +427,30 @@ def test_fused_unsharp_masking_is_eq1_on_the_surface_blur() -> None:
     """The strip-fused operator gives the lightness of Eq. 1 written plainly
     (:func:`unsharp_lightness`) with L_σ from :func:`surface_blur` of the same surfaces."""
     h, w = 96, 160
-    depth, normal, mask, ps = _plane(h, w, 3.0)
-    beauty = _grey(np.where(np.arange(w) < w // 2, 0.1, 0.4).astype(np.float32)[None, :] + 0 * ps)
+    depth, normal, mask, ps = plane(h, w, 3.0)
+    beauty = grey(np.where(np.arange(w) < w // 2, 0.1, 0.4).astype(np.float32)[None, :] + 0 * ps)
     kw = dict(sigma_scene=0.05, pixel_size=ps)
     out = unsharp_masking(beauty, depth, normal, mask, amount=1.5, adaptive=False, white=1.0, **kw)
-    lum = _lightness(beauty).astype(np.float32)
+    lum = lightness(beauty).astype(np.float32)
     smooth = surface_blur(lum, depth, normal, mask, **kw)
     expect = unsharp_lightness(lum, smooth, 1.5)
     assert np.abs(lum - expect).max() > 5.0  # the case has contrast to add
-    np.testing.assert_allclose(_lightness(out), expect, atol=1e-3)
+    np.testing.assert_allclose(lightness(out), expect, atol=1e-3)
 
 
 def test_adaptive_gain_raises_enhancement_on_texture() -> None:
     h, w = 128, 256
-    depth, normal, mask, ps = _plane(h, w, 3.0)
+    depth, normal, mask, ps = plane(h, w, 3.0)
     rng = np.random.default_rng(3)
     lum = np.where(np.arange(w) < w // 2, 0.1, 0.4) + 0 * np.arange(h)[:, None]
     noise = rng.random((h, w)) < 0.5
     lum[: h // 2] = np.where(noise[: h // 2], 0.02, 0.9)  # black and white texture on top
-    beauty = _grey(lum.astype(np.float32))
+    beauty = grey(lum.astype(np.float32))
     kw = dict(amount=1.5, sigma_scene=0.08, pixel_size=ps, white=1.0)
     plain = unsharp_masking(beauty, depth, normal, mask, adaptive=False, **kw)
     adapt = unsharp_masking(beauty, depth, normal, mask, adaptive=True, **kw)
-    l0 = _lightness(beauty)
-    cp, ca = _lightness(plain) - l0, _lightness(adapt) - l0
+    l0 = lightness(beauty)
+    cp, ca = lightness(plain) - l0, lightness(adapt) - l0
     big = np.abs(cp) > 1.0
     ratio = np.where(big, ca / np.where(big, cp, 1.0), np.nan)
     assert np.nanmin(ratio) > 0.999  # λ_adapt ≥ λ
@@ -492,9 +462,9 @@ def test_adaptive_gain_raises_enhancement_on_texture() -> None:
 
 def test_hdr_values_above_white_are_enhanced_not_clipped() -> None:
     h, w = 48, 160
-    depth, normal, mask, ps = _plane(h, w, 3.0)
+    depth, normal, mask, ps = plane(h, w, 3.0)
     lum = np.where(np.arange(w) < w // 2, 2.0, 6.0).astype(np.float32)
-    beauty = _grey(np.broadcast_to(lum, (h, w)))
+    beauty = grey(np.broadcast_to(lum, (h, w)))
     out = unsharp_masking(
         beauty, depth, normal, mask, amount=1.0, sigma_scene=0.05, pixel_size=ps, white=1.0
     )
@@ -503,7 +473,7 @@ def test_hdr_values_above_white_are_enhanced_not_clipped() -> None:
 
 
 def test_unsharp_masking_validates_parameters() -> None:
-    beauty, depth, normal, mask, ps, _ = _square_scene(32, 32)
+    beauty, depth, normal, mask, ps, _ = square_scene(32, 32)
     good = dict(sigma_scene=0.1, pixel_size=ps)
     for bad, name in [
         (dict(amount=float("nan")), "amount"),
@@ -524,81 +494,6 @@ def test_unsharp_masking_validates_parameters() -> None:
         unsharp_masking(beauty[..., 0], depth, normal, mask, **good)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="normal"):
         unsharp_masking(beauty, depth, normal[..., :2], mask, **good)  # type: ignore[arg-type]
-
-
-# ------------------------------------------------------------------------------------------------
-# baselines
-
-
-def test_plain_unsharp_mask_sharpens_across_everything() -> None:
-    beauty, *_ = _square_scene()
-    out = plain_unsharp_mask(beauty, sigma=0.03, amount=1.0, white=1.0)
-    c = _lightness(out) - _lightness(beauty)
-    assert c[80, 48] < -3.0 and c[80, 51] > 3.0
-    np.testing.assert_allclose(
-        plain_unsharp_mask(beauty, sigma=0.03, amount=0.0, white=1.0), beauty, rtol=1e-5
-    )
-    with pytest.raises(ValueError, match="sigma"):
-        plain_unsharp_mask(beauty, sigma=0.0, amount=1.0)
-    with pytest.raises(ValueError, match="amount"):
-        plain_unsharp_mask(beauty, sigma=0.01, amount=float("inf"))
-
-
-def test_depth_unsharp_masking_darkens_behind_silhouettes_only() -> None:
-    beauty, depth, _, mask, _, fg = _square_scene()
-    out = depth_unsharp_masking(beauty, depth, mask, amount=1.0, sigma=0.03, white=1.0)
-    c = _lightness(out) - _lightness(beauty)
-    ring = np.zeros_like(fg)
-    ring[46:114, 46:114] = True
-    ring &= ~fg
-    assert c[ring].max() < -1.0  # the plane just behind the square darkens (ΔD < 0)
-    assert np.abs(c[fg]).max() < 1e-3  # darken mode: nearer side untouched (ΔD > 0 there)
-    assert np.abs(c[:10, :10]).max() < 1e-3  # far from the silhouette: ΔD = 0
-    both = depth_unsharp_masking(
-        beauty, depth, mask, amount=1.0, sigma=0.03, mode="both", white=1.0
-    )
-    cb = _lightness(both) - _lightness(beauty)
-    assert cb[fg].max() > 1.0  # "both" brightens the nearer side
-    # a flat plane is left unchanged, fronto-parallel or slanted (ΔD = G∗D − D = 0)
-    h, w = 96, 128
-    pd, _, pm, _ = _plane(h, w, 3.0)
-    flat_img = _grey(np.full((h, w), 0.3, np.float32))
-    np.testing.assert_allclose(
-        depth_unsharp_masking(flat_img, pd, pm, amount=2.0, sigma=0.05, white=1.0),
-        flat_img,
-        rtol=1e-4,
-    )
-    slanted = (3.0 + 0.02 * np.arange(h, dtype=np.float32)[:, None] + 0 * pd).astype(np.float32)
-    res = depth_unsharp_masking(
-        flat_img, slanted, pm, amount=2.0, sigma=0.05, mode="both", white=1.0
-    )
-    # G∗D − D = 0 on a linear ramp, away from the image's top and bottom rows (replicated border)
-    np.testing.assert_allclose(res[16:-16], flat_img[16:-16], rtol=1e-3)
-    # background (mask 0) pixels are returned unchanged
-    m2 = fg.copy()
-    d2 = np.where(fg, depth, np.inf).astype(np.float32)
-    out2 = depth_unsharp_masking(beauty, d2, m2, amount=1.0, sigma=0.03, white=1.0)
-    assert np.array_equal(out2[~fg], beauty[~fg])
-    with pytest.raises(ValueError, match="mode"):
-        depth_unsharp_masking(beauty, depth, mask, mode="lighten")  # type: ignore[arg-type]
-    with pytest.raises(ValueError, match="sigma"):
-        depth_unsharp_masking(beauty, depth, mask, sigma=2.0)
-
-
-def test_depth_unsharp_masking_leaves_the_far_edge_of_a_floor_alone() -> None:
-    """A floor receding to the top of the frame, with sky above it: its far edge borders the
-    background, which lies beyond it, so the blur pulls the edge back and darkening (ΔD < 0)
-    must not appear there (it did when the background took the farthest surface's depth)."""
-    h, w = 96, 128
-    rows = np.arange(h, dtype=np.float32)[:, None]
-    floor = np.broadcast_to(10.0 - 0.06 * rows, (h, w)).astype(np.float32)  # far at the top
-    sky = rows < 24
-    depth = np.where(sky, np.inf, floor).astype(np.float32)
-    mask = ~np.broadcast_to(sky, (h, w))
-    img = _grey(np.full((h, w), 0.3, np.float32))
-    out = depth_unsharp_masking(img, depth, mask, amount=2.0, sigma=0.05, white=1.0)
-    change = _lightness(out) - _lightness(img)
-    assert np.abs(change[24:-16]).max() < 1e-2  # the whole floor, its far edge included
 
 
 @pytest.mark.parametrize("background", [(0.6, 0.0, 0.8), (5.0, -3.0, 0.0), "noise"])
