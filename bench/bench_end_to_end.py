@@ -14,7 +14,8 @@ Rows, each a ratio to its reference measured just before or after it:
 * ``depict enhance IN -o OUT`` (defaults: Radiance Scaling; a new process, start-up included) vs
   ``oiiotool IN -o OUT`` (OpenImageIO's copy: decode every channel, encode every channel), for
   each ``--layout``; also the output's size and the peak memory of ``depict enhance`` against the
-  decoded size of the buffers it reads plus the layers it writes; and ``depict enhance`` of 4
+  decoded size of the buffers it reads plus the layers it writes; the same for Light Alignment
+  and unsharp masking alone (``--op``, layout ``part``, no target); and ``depict enhance`` of 4
   files in one process vs 4 oiiotool copies;
 * the HTTP service (``depict serve``, 2 workers, 2 clients) vs 2 ``oiiotool`` copies in parallel
   (throughput);
@@ -143,14 +144,15 @@ def oiio_copy(src: Path, dst: Path) -> None:
     subprocess.run([OIIOTOOL, str(src), "-o", str(dst)], check=True, capture_output=True)
 
 
-def decoded_bytes(path: Path) -> tuple[int, int]:
+def decoded_bytes(path: Path, op: str | None = None) -> tuple[int, int]:
     """Bytes of the buffers ``depict enhance`` reads from ``path`` and of the layers it writes
-    (float32, the default pipeline)."""
+    (float32; the default pipeline, or operator ``op`` with its defaults)."""
     from gbuffer.io import read
     from service import pipeline
 
     frame = read(path)
-    out = pipeline.finish(pipeline.run(frame, pipeline.DEFAULT))
+    steps = pipeline.DEFAULT if op is None else [{"op": op}]
+    out = pipeline.finish(pipeline.run(frame, steps))
     reads = sum(a.nbytes for a in frame.buffers.values())
     writes = sum(np.asarray(a).nbytes for a in out.outputs.values())
     return reads, writes
@@ -172,6 +174,25 @@ def enhance_rows(name: str, path: Path, work: Path) -> None:
             f"{ratio:5.2f}x (target <= 1.0x: {verdict}); output {size:.0f} MB; "
             f"peak {peak / 2**20:.0f} MiB = {peak / (reads + writes):.2f}x the decoded "
             f"reads {reads / 2**20:.0f} MiB + writes {writes / 2**20:.0f} MiB"
+        )
+
+
+#: Operators run alone through ``depict enhance --op`` (rows without a target: the defaults are
+#: Radiance Scaling's).
+OTHER_OPS = ("light_alignment", "unsharp_masking")
+
+
+def other_op_rows(path: Path, work: Path) -> None:
+    """``depict enhance --op OP`` (layout ``part``) vs an oiiotool copy, and its peak memory."""
+    copy = [OIIOTOOL or "oiiotool", str(path), "-o", str(work / "copy.exr")]
+    for op in OTHER_OPS:
+        reads, writes = decoded_bytes(path, op)
+        cmd = [DEPICT, "enhance", str(path), "-o", str(work / f"out_{op}.exr"), "--op", op]
+        seconds, oiio_s, ratio, peak = paired_runs(cmd, copy)
+        print(
+            f"depict enhance --op {op:<16s} {seconds:6.2f} s, oiiotool {oiio_s:5.2f} s: "
+            f"{ratio:5.2f}x; peak {peak / 2**20:.0f} MiB = {peak / (reads + writes):.2f}x the "
+            f"decoded reads {reads / 2**20:.0f} MiB + writes {writes / 2**20:.0f} MiB"
         )
 
 
@@ -302,6 +323,7 @@ def main(argv: Sequence[str] = ()) -> None:
         main_frame = cycles or depict_frame()
         for name, path in frames if "enhance" in sections else ():
             enhance_rows(name, path, work)
+            other_op_rows(path, work)
             several_row(path, work)
         if "http" in sections:
             http_row(main_frame, work)
