@@ -39,7 +39,15 @@ from pydantic import Field, model_validator
 from gbuffer.frame import LOBES, Frame
 from ops import checks, filtering
 from ops.light_alignment import DEFAULT_GAMMA, align_lights
-from ops.shading import Light, Shading, apply_gain, lobe_radiance, ratio_relight, shading
+from ops.shading import (
+    Light,
+    Relit,
+    Shading,
+    apply_gain,
+    lobe_radiance,
+    ratio_relight,
+    shading,
+)
 from service.operators.base import Context, register
 from service.operators.common import (
     LightsParams,
@@ -218,13 +226,31 @@ def _light_layer(k: int, component: str) -> str:
     ),
 )
 def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -> None:
-    normal = surface_normals(frame, "light_alignment")
-    depth = frame.need("depth", "light_alignment")
-    mask = frame.mask
     form = _form(frame, p)
+    lights = p.parsed_lights()
+    aligned, relit, debug_normals = _align_and_shade(frame, p, form, lights, ctx.debug_layers)
+    # (the normals' pyramid and the view vectors are let go by now: the ratio form's kept
+    # lighting builds a pyramid of its own, and Light Alignment's peak memory is there)
+    if relit is not None:
+        _keep_lighting(frame, p, *relit)
+    for k in range(len(lights)):
+        for c, fields in aligned.items():
+            frame.set_layer(_light_layer(k, c), channels(fields[k], copy=False))
+    for i, n_i in enumerate(debug_normals, start=1):
+        frame.set_layer(f"lla_n{i}", channels(n_i))
+
+
+def _align_and_shade(
+    frame: Frame, p: LightAlignmentParams, form: str, lights: list[Light], debug: bool
+) -> tuple[dict[str, list[np.ndarray]], tuple[Relit, list[str]] | None, list[np.ndarray]]:
+    """The lights aligned per component (LLA §4-6), and the frame relit with them: the relight
+    form is done; the ratio form's relit lobes and beauty are returned with the relit lobes'
+    names, for the kept lighting. Also the multi-scale normals when ``debug``."""
+    normal = surface_normals(frame, "light_alignment")
+    mask = frame.mask
     pyramid = filtering.normal_pyramid(
         normal,
-        depth,
+        frame.need("depth", "light_alignment"),
         mask,
         scales=len(p.sigmas) + 1,
         base=p.base,
@@ -232,7 +258,6 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         depth_sigma=p.depth_sigma,
     )
     view = frame.view_vectors()
-    lights = p.parsed_lights()
     # (camera-space positions: only point lights read them)
     position = frame.positions() if any(li.kind != "directional" for li in lights) else None
     components: dict[str, list[float]] = {
@@ -269,16 +294,12 @@ def apply_light_alignment(frame: Frame, p: LightAlignmentParams, ctx: Context) -
         )
 
     directions: dict[str, Sequence[np.ndarray]] = {c: list(v) for c, v in aligned.items()}
+    debug_normals = pyramid.full_list() if debug else []
     if form == "relight":
         _relight(frame, p, shade(directions).arrays())
-    else:
-        _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
-    for k in range(len(lights)):
-        for c, fields in aligned.items():
-            frame.set_layer(_light_layer(k, c), channels(fields[k], copy=False))
-    if ctx.debug_layers:
-        for i, n_i in enumerate(pyramid.full_list(), start=1):
-            frame.set_layer(f"lla_n{i}", channels(n_i))
+        return aligned, None, debug_normals
+    relit = _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
+    return aligned, relit, debug_normals
 
 
 def lights_power(lights: list[Light]) -> float:
@@ -327,8 +348,9 @@ def _ratio(
     original: Shading,
     aligned: Shading,
     power: float,
-) -> None:
-    """Each renderer lobe × (shade(aligned) + ε)/(shade(original) + ε), clamped to ratio_max."""
+) -> tuple[Relit, list[str]]:
+    """Each renderer lobe × (shade(aligned) + ε)/(shade(original) + ε), clamped to ratio_max:
+    the relit lobes (with their lights) and beauty, and the lobes' names."""
     eps = cast(float, np.float32(p.ratio_floor * power))  # float32 on purpose, as the lobes
     lobes = [lobe for lobe in aligned.lobes if lobe in frame.buffers]
     if not lobes:
@@ -336,9 +358,14 @@ def _ratio(
     beauty = frame.need("beauty", "form 'ratio' rebuilds the beauty")
     given = {lobe: (frame.buffers[lobe], frame.buffers.get(f"{lobe}.light")) for lobe in lobes}
     weights = frame.colorspace.weights if p.keep_lighting else None
-    out, new, new_light, before, after = ratio_relight(
-        beauty, given, original, aligned, eps, p.ratio_max, weights
-    )
+    return ratio_relight(beauty, given, original, aligned, eps, p.ratio_max, weights), lobes
+
+
+def _keep_lighting(frame: Frame, p: LightAlignmentParams, relit: Relit, lobes: list[str]) -> None:
+    """The ratio form's result into the frame, with the lighting kept (``keep_lighting``: the
+    relit lobes, their lights and the beauty by the gain that gives the lobes' sum the input's
+    low-frequency luminance)."""
+    out, new, new_light, before, after = relit
     if before is not None and after is not None:  # (keep_lighting)
         gain = kept_lighting_gain(frame, before, after, p.lighting_scale, "light_alignment")
         apply_gain(out, gain, [new[lobe] for lobe in lobes], list(new_light.values()))
