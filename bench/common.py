@@ -66,9 +66,10 @@ class _Copy:
     """(H, W, 3) float32 frames and their destinations, each copied in turn (one per timed copy),
     so many that a frame has left the last-level cache when its turn comes again."""
 
-    def __init__(self, shape: tuple[int, int]) -> None:
+    def __init__(self, shape: tuple[int, int], cache_bytes: int | None = None) -> None:
         frame = np.random.default_rng(0).random((*shape, 3), dtype=np.float32)
-        pairs = max(2, -(-_RING_CACHES * last_level_cache_bytes() // (2 * frame.nbytes)))
+        cache = last_level_cache_bytes() if cache_bytes is None else cache_bytes
+        pairs = max(2, -(-_RING_CACHES * cache // (2 * frame.nbytes)))
         self.ring = [(frame.copy(), frame.copy()) for _ in range(pairs)]  # (pages touched)
         self.src, self.dst = frame, frame.copy()  # (the copy in cache, for comparison)
         self._next = 0
