@@ -7,7 +7,7 @@ Ratios are what the issues' targets are written in; absolute times vary from mac
 Memory to memory: a 1080p frame (23.7 MiB) and its copy (47 MiB together) fit in large part in a
 32 MiB last-level cache, so the same array copied again and again runs partly from the cache, by
 as much as the machine's other tenants leave it (1.2-2.5 ms on a 2-core machine whose copies of
-arrays many times its cache take 2.2-3.0 ms per frame). The unit therefore copies a different
+arrays many times its cache take 2.2-3.1 ms per frame). The unit therefore copies a different
 frame each time, from a ring of frames holding several times the last-level cache, as an
 operator's own arrays (tens of frames) are read from memory; the same copy in cache is printed
 beside it.
