@@ -265,11 +265,14 @@ def put_points(stack, ys, xs, vals, i0, i1, origin, width):
                 stack[ch, yy, xx + c] = vals[n, ch]
 
 
-def clip_new_negatives(after: np.ndarray, before: np.ndarray) -> np.ndarray:
+def clip_new_negatives(
+    after: np.ndarray, before: np.ndarray, *, in_place: bool = False
+) -> np.ndarray:
     """``after`` with the values an operation made negative set to 0: those below 0 where
     ``before`` (the same shape) holds another value. What it left as it was, negative or not,
     stays bit for bit, and NaN is left alone. ``after`` itself where nothing is to be clipped
-    (one compiled read-only pass on row strips), else a new float32 array.
+    (one compiled read-only pass on row strips), else a new float32 array; with ``in_place``,
+    ``after`` itself clipped where it is a C-contiguous float32 array.
 
     A result rebuilt as Σ scaled lobes + (beauty − Σ lobes) goes below 0 where that rest is
     (a half-float beauty, a path tracer's noise) and the lobes are scaled towards 0."""
@@ -289,7 +292,7 @@ def clip_new_negatives(after: np.ndarray, before: np.ndarray) -> np.ndarray:
     run_strips(flat_a.shape[0], count, rows)
     if not found.any():
         return a
-    out = a.copy() if a is after else a
+    out = a.copy() if a is after and not in_place else a
     flat_o = out.reshape(flat_a.shape)
 
     def clip(r0: int, r1: int) -> None:

@@ -185,6 +185,8 @@ def test_clip_new_negatives_is_the_where_of_numpy(shape: tuple[int, ...]) -> Non
     assert got is not after and got.dtype == np.float32
     clean = np.abs(after)
     assert clip_new_negatives(clean, before) is clean  # nothing to clip: the same array
+    assert clip_new_negatives(after, before, in_place=True) is after  # clipped where it is
+    np.testing.assert_array_equal(after, want)
 
 
 def test_clip_new_negatives_refuses_arrays_that_do_not_match() -> None:

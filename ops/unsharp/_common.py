@@ -104,8 +104,8 @@ def _clip_new_negatives(out: Array, beauty: Array) -> Array:
     (:func:`ops.numerics.clip_new_negatives`): a saturated colour can leave the RGB cube below 0
     when its lightness drops (and the CIELAB round trip rounds a black channel to −1e-9); the
     values kept bit for bit, negative ones included, are left as they came."""
-    clipped = clip_new_negatives(out, beauty)
-    if clipped is not out:  # (some were clipped, in a new array)
+    clipped = clip_new_negatives(out, beauty, in_place=True)
+    if clipped is not out:  # (a view that is not C-contiguous float32: clipped in a copy)
         out[...] = clipped
     return out
 
