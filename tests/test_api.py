@@ -26,6 +26,7 @@ from service.openapi import DEFAULT_PATH, dumps
 from service.registry import PipelineError, operators
 from service.settings import Settings
 from tests.exr_factory import cropped, make_scene, write_canonical
+from tests.problem_json import assert_problem
 
 pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
 
@@ -60,16 +61,6 @@ def gate() -> Iterator[Any]:
 
     settings = Settings(api_key=KEY, metrics_public=True, max_upload_mb=0.05)
     yield TestClient(wrap(inner, settings=settings, metrics=Metrics()))  # no lifespan needed
-
-
-def problem(response: Any, status: int, words: str = "") -> dict:
-    assert response.status_code == status, response.text
-    assert response.headers["content-type"] == "application/problem+json"
-    body = response.json()
-    assert {"type", "title", "status", "detail", "instance", "request_id"} <= set(body)
-    assert body["status"] == status
-    assert words.lower() in body["detail"].lower(), body["detail"]
-    return body
 
 
 def exr_bytes() -> bytes:
@@ -163,19 +154,19 @@ def test_api_key(client: Any) -> None:
     c = client
     assert c.get("/healthz").status_code == 200
     assert c.get("/readyz").json()["osmesa"] is True
-    problem(c.get("/v1/operators"), 401, "Authorization: Bearer")
+    assert_problem(c.get("/v1/operators"), 401, "Authorization: Bearer")
     wrong = c.get("/v1/operators", headers={"Authorization": "Bearer x"})
-    problem(wrong, 401, "wrong")
+    assert_problem(wrong, 401, "wrong")
     basic = c.get("/v1/operators", headers={"Authorization": f"Basic {KEY}"})
-    problem(basic, 401)
+    assert_problem(basic, 401)
     assert c.get("/v1/operators", headers=AUTH).status_code == 200
-    problem(c.get("/metrics"), 401)
+    assert_problem(c.get("/metrics"), 401)
     assert c.get("/metrics", headers=AUTH).status_code == 200
 
 
 def test_metrics_public_without_key(gate: Any) -> None:
     assert gate.get("/metrics").text == "inner"  # let through without the key
-    problem(gate.get("/v1/operators"), 401)  # the key is still needed elsewhere
+    assert_problem(gate.get("/v1/operators"), 401)  # the key is still needed elsewhere
 
 
 # -- bad requests ------------------------------------------------------------------------------
@@ -183,34 +174,34 @@ def test_metrics_public_without_key(gate: Any) -> None:
 
 def test_content_type_415(client: Any) -> None:
     r = client.post("/v1/enhance", headers=AUTH, content=b"x")
-    problem(r, 415, "multipart/form-data")
+    assert_problem(r, 415, "multipart/form-data")
     r = client.post("/v1/render", headers=AUTH, json={"mesh": 1})
-    problem(r, 415, "application/json")
+    assert_problem(r, 415, "application/json")
     # the viewer's upload too (it answered 422 "file: Field required")
     r = client.post("/v1/frames", headers={**AUTH, "Content-Type": "image/x-exr"}, content=b"x")
-    problem(r, 415, "/v1/frames takes multipart/form-data")
+    assert_problem(r, 415, "/v1/frames takes multipart/form-data")
 
 
 def test_body_limit_413(gate: Any) -> None:
     r = gate.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", b"\0" * 60_000)})
-    problem(r, 413, "DEPICT_MAX_UPLOAD_MB")
+    assert_problem(r, 413, "DEPICT_MAX_UPLOAD_MB")
     r = gate.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", b"\0" * 1_000)})
     assert r.text == "inner"
 
 
 def test_not_found_and_method_problems(client: Any) -> None:
-    problem(client.get("/nope", headers=AUTH), 404, "no route")
-    problem(client.get("/v1/enhance", headers=AUTH), 405, "does not accept GET")
+    assert_problem(client.get("/nope", headers=AUTH), 404, "no route")
+    assert_problem(client.get("/v1/enhance", headers=AUTH), 405, "does not accept GET")
 
 
 def test_not_an_exr_400(client: Any) -> None:
     r = client.post("/v1/enhance", headers=AUTH, files={"file": ("x.exr", b"hello")})
-    body = problem(r, 400, "x.exr is not an OpenEXR file")
+    body = assert_problem(r, 400, "x.exr is not an OpenEXR file")
     assert body["type"] == "urn:depict:problem:bad-file"
     r = client.post("/v1/enhance", headers=AUTH, files={"file": ("e.exr", b"")})
-    problem(r, 400, "empty file")
+    assert_problem(r, 400, "empty file")
     r = client.post("/v1/enhance", headers=AUTH, files={"file": ("h.exr", exr_bytes())})
-    body = problem(r, 400, "h.exr")
+    body = assert_problem(r, 400, "h.exr")
     assert "/tmp" not in body["detail"]
 
 
@@ -237,7 +228,7 @@ def test_not_an_exr_400(client: Any) -> None:
 )
 def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> None:
     r = client.post("/v1/enhance", headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
-    problem(r, 422, words)
+    assert_problem(r, 422, words)
 
 
 @pytest.mark.parametrize(
@@ -254,7 +245,7 @@ def test_unknown_fields_and_odd_queries_422(
     client: Any, route: str, data: dict[str, str], words: str
 ) -> None:
     r = client.post(route, headers=AUTH, files={"file": ("a.exr", exr_bytes())}, data=data)
-    problem(r, 422, words)
+    assert_problem(r, 422, words)
 
 
 @pytest.mark.parametrize(
@@ -265,21 +256,21 @@ def test_unknown_preview_view_422(client: Any, query: str, words: str) -> None:
     r = client.post(
         f"/v1/enhance?preview=png&{query}", headers=AUTH, files={"file": ("a.exr", exr_bytes())}
     )
-    problem(r, 422, words)
+    assert_problem(r, 422, words)
 
 
 def test_missing_file_field_422(client: Any) -> None:
     r = client.post("/v1/enhance", headers=AUTH, files={"other": ("a", b"x")})
-    problem(r, 422, "file")
+    assert_problem(r, 422, "file")
 
 
 def test_render_requests(client: Any) -> None:
     mesh = ("m.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     r = client.post("/v1/render", headers=AUTH, files={"mesh": ("m.txt", b"x")})
-    problem(r, 415, ".obj")
+    assert_problem(r, 415, ".obj")
     big = {"scene": '{"width": 1000, "height": 1000}'}
     r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data=big)
-    problem(r, 413, "DEPICT_MAX_PIXELS")
+    assert_problem(r, 413, "DEPICT_MAX_PIXELS")
     for scene, words in [
         ("{", "scene"),
         ('{"width": 0}', "width"),
@@ -288,17 +279,17 @@ def test_render_requests(client: Any) -> None:
         ('{"camera": {"fov_y_deg": -1}}', "scene.camera"),
     ]:
         r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data={"scene": scene})
-        problem(r, 422, words)
+        assert_problem(r, 422, words)
     r = client.post(
         "/v1/render",
         headers=AUTH,
         files={"mesh": mesh},
         data={"scene": '{"width": 32, "height": 24, "lights": ["sideways"]}'},
     )
-    problem(r, 422, "scene.lights")
+    assert_problem(r, 422, "scene.lights")
     small = {"scene": '{"width": 32, "height": 24}'}
     r = client.post("/v1/render", headers=AUTH, files={"mesh": ("bad.ply", b"garbage")}, data=small)
-    problem(r, 400, "bad.ply")
+    assert_problem(r, 400, "bad.ply")
     r = client.post(
         "/v1/render",
         headers=AUTH,
@@ -317,7 +308,9 @@ def test_each_request_workspace_is_removed_after_its_answer(client: Any) -> None
     scene = {"scene": '{"width": 32, "height": 24}'}
     r = client.post("/v1/render", headers=AUTH, files={"mesh": mesh}, data=scene)
     assert r.status_code == 200 and r.content[:4] == b"\x76\x2f\x31\x01"
-    problem(client.post("/v1/score", headers=AUTH, files={"file": ("h.exr", exr_bytes())}), 400)
+    assert_problem(
+        client.post("/v1/score", headers=AUTH, files={"file": ("h.exr", exr_bytes())}), 400
+    )
     assert root is not None and root.is_dir() and not list(root.iterdir())
 
 
@@ -367,5 +360,5 @@ def test_a_frame_of_one_pixel_422_and_the_worker_stays(client: Any, tmp_path: An
     data = write_canonical(tmp_path / "px.exr", px).read_bytes()
     for _ in range(2):
         r = client.post("/v1/enhance", headers=AUTH, files={"file": ("px.exr", data)})
-        problem(r, 422, "the frame is 1x1 pixels")
+        assert_problem(r, 422, "the frame is 1x1 pixels")
     assert client.get("/readyz").status_code == 200

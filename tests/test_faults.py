@@ -32,6 +32,7 @@ from tests.live_server import (
     live_servers,
     wait_ready,
 )
+from tests.problem_json import assert_problem
 
 SPOT = Path(__file__).resolve().parents[1] / "examples" / "spot.obj"
 
@@ -60,14 +61,6 @@ def metric(server: Server, line_start: str) -> float:
         if line.startswith(line_start):
             return float(line.rsplit(" ", 1)[1])
     return 0.0
-
-
-def assert_problem(response: httpx.Response, status: int, words: str) -> dict:
-    assert response.status_code == status, response.text
-    assert response.headers["content-type"].startswith("application/problem+json")
-    body = response.json()
-    assert words.lower() in body["detail"].lower(), body["detail"]
-    return body
 
 
 def json_log_only(server: Server) -> None:

@@ -22,6 +22,7 @@ from PIL import Image
 from service.cli import main as cli
 from tests.exr_factory import cropped, make_scene, write_canonical
 from tests.live_server import Server, live_server
+from tests.problem_json import assert_problem
 
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
 CRYPTO = BLENDER.with_name("cryptomatte.exr")
@@ -57,14 +58,6 @@ def png(data: bytes) -> np.ndarray:
     return np.asarray(Image.open(io.BytesIO(data)).convert("RGB"))
 
 
-def problem(r: httpx.Response, status: int, words: str) -> dict[str, Any]:
-    assert r.status_code == status, r.text
-    assert r.headers["content-type"].startswith("application/problem+json")
-    body = r.json()
-    assert words.lower() in body["detail"].lower(), body["detail"]
-    return body
-
-
 def test_upload_answers_what_inspect_finds(frame: dict[str, Any], api: httpx.Client) -> None:
     info = frame["info"]
     assert frame["name"] == BLENDER.name and info["file"] == BLENDER.name
@@ -85,7 +78,9 @@ def test_layer_pictures(frame: dict[str, Any], api: httpx.Client) -> None:
     assert not np.array_equal(png(normal.content), depth)
     score = png(api.get(f"/v1/frames/{frame['id']}/layers/score_map.png?height=60").content)
     assert score.shape == (60, 80, 3) and score.std() > 0
-    problem(api.get(f"/v1/frames/{frame['id']}/layers/nothing.png"), 404, "no layer 'nothing'")
+    assert_problem(
+        api.get(f"/v1/frames/{frame['id']}/layers/nothing.png"), 404, "no layer 'nothing'"
+    )
 
 
 def test_preview_is_downscaled_scored_and_follows_the_parameters(
@@ -149,15 +144,17 @@ def test_enhanced_exr_is_the_clis_bit_for_bit(
 
 
 def test_errors_are_problems(frame: dict[str, Any], api: httpx.Client, server: Server) -> None:
-    problem(api.get("/v1/frames/AAAAAAAAAAAAAAAAAAAAAA"), 404, "no frame")
-    problem(api.get("/v1/frames/bad!id"), 422, "")
+    assert_problem(api.get("/v1/frames/AAAAAAAAAAAAAAAAAAAAAA"), 404, "no frame")
+    assert_problem(api.get("/v1/frames/bad!id"), 422, "")
     url = f"/v1/frames/{frame['id']}/preview"
-    problem(api.post(url, json={"pipeline": {"steps": [{"op": "nope"}]}}), 422, "nope")
-    problem(api.post(url, json={"pipeline": RS, "size": 3}), 422, "")
+    assert_problem(api.post(url, json={"pipeline": {"steps": [{"op": "nope"}]}}), 422, "nope")
+    assert_problem(api.post(url, json={"pipeline": RS, "size": 3}), 422, "")
     bad = api.get(f"/v1/frames/{frame['id']}/enhanced.exr", params={"pipeline": "{"})
-    problem(bad, 422, "not valid JSON")
-    problem(api.post("/v1/frames", files={"file": ("x.exr", b"hello")}), 400, "not an OpenEXR")
-    problem(httpx.get(f"{server.url}/v1/frames/{frame['id']}"), 401, "API key")
+    assert_problem(bad, 422, "not valid JSON")
+    assert_problem(
+        api.post("/v1/frames", files={"file": ("x.exr", b"hello")}), 400, "not an OpenEXR"
+    )
+    assert_problem(httpx.get(f"{server.url}/v1/frames/{frame['id']}"), 401, "API key")
 
 
 def test_ui_is_public_and_self_contained(server: Server) -> None:
@@ -189,7 +186,7 @@ def test_superseded_previews_are_dropped_and_a_full_pool_is_busy(api: httpx.Clie
     running = _post_later(api, url, {"pipeline": HEAVY, "height": 720}, heavy)
     time.sleep(1.0)  # the heavy preview is on the only worker now
     busy = api.get(f"/v1/frames/{example.json()['id']}/layers/beauty.png")
-    body = problem(busy, 429, "busy")
+    body = assert_problem(busy, 429, "busy")
     assert body["type"].endswith("busy") and int(busy.headers["retry-after"]) >= 1
     waiting: list[Any] = []
     threads = [_post_later(api, url, {"pipeline": RS, "height": 120}, waiting) for _ in range(2)]
@@ -198,7 +195,7 @@ def test_superseded_previews_are_dropped_and_a_full_pool_is_busy(api: httpx.Clie
     assert heavy[0].status_code == 200, heavy[0].text
     statuses = sorted(r.status_code for r in waiting)
     assert statuses == [200, 409], [r.text for r in waiting]
-    problem(next(r for r in waiting if r.status_code == 409), 409, "newer preview")
+    assert_problem(next(r for r in waiting if r.status_code == 409), 409, "newer preview")
 
 
 def test_a_kept_frames_errors_name_the_upload_not_the_servers_files(
@@ -216,7 +213,7 @@ def test_a_kept_frames_errors_name_the_upload_not_the_servers_files(
         api.post(f"/v1/frames/{fid}/preview", json={"pipeline": RS, "height": 48}),
         api.get(f"/v1/frames/{fid}/layers/depth.png"),
     ):
-        body = problem(answer, 400, "my shot.exr: channel 'N.X'")
+        body = assert_problem(answer, 400, "my shot.exr: channel 'N.X'")
         assert "/tmp" not in body["detail"] and "in.exr" not in body["detail"]
 
 

@@ -30,13 +30,3 @@ def post_enhance(
         headers=AUTH if headers is None else headers,
         timeout=60,
     )
-
-
-def assert_problem(response: httpx.Response, status: int, words: str) -> dict:
-    assert response.status_code == status, response.text
-    assert response.headers["content-type"].startswith("application/problem+json")
-    body = response.json()
-    assert body["status"] == status
-    assert words.lower() in body["detail"].lower(), body["detail"]
-    assert body["request_id"] == response.headers["x-request-id"]
-    return body

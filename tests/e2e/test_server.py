@@ -28,7 +28,7 @@ from service.cli import main as cli
 from service.client import Client, DepictError
 from service.headers import warning_text, warning_value
 from tests import exr_factory
-from tests.e2e.common import AUTH, BLENDER, KEY, assert_problem
+from tests.e2e.common import AUTH, BLENDER, KEY
 from tests.exr_factory import TORN_MESH, render_with_nan
 from tests.live_server import (
     Server,
@@ -38,6 +38,7 @@ from tests.live_server import (
     stop_server,
     wait_ready,
 )
+from tests.problem_json import assert_problem
 
 # -- the same bytes as the CLI ------------------------------------------------------------------
 

@@ -13,8 +13,9 @@ import httpx
 import pytest
 
 from tests import exr_factory
-from tests.e2e.common import AUTH, MAX_UPLOAD_MB, assert_problem, post_enhance
+from tests.e2e.common import AUTH, MAX_UPLOAD_MB, post_enhance
 from tests.live_server import Server
+from tests.problem_json import assert_problem
 
 
 def test_file_paths_in_parameters_are_refused_over_http(
