@@ -12,6 +12,7 @@ import cv2
 import numpy as np
 import pytest
 
+from ops.unsharp import _front, _levels
 from ops.unsharp._levels import _BLOCK, _block_flags, _front_most_cells
 from ops.unsharp._surface import _Level, _plane_slope, _Surface, _surface, _valid
 
@@ -124,9 +125,12 @@ def _surface_of(sc: dict[str, Any], squares: bool) -> tuple[_Surface, np.ndarray
 @pytest.mark.parametrize("shape", [(96, 128), (97, 131)])
 @pytest.mark.parametrize("pixel_size", ["perspective", "measured", "orthographic"])
 @pytest.mark.parametrize("squares", [False, True])
+@pytest.mark.parametrize("cells", [_front.CELLS, 37])  # 37: the cells in ranges on the pool
 def test_front_most_cells_are_the_numpy_rule(
-    shape: tuple[int, int], pixel_size: str, squares: bool
+    shape: tuple[int, int], pixel_size: str, squares: bool, cells: int, monkeypatch: Any
 ) -> None:
+    for module in (_front, _levels):
+        monkeypatch.setattr(module, "CELLS", cells)
     sc = _scene(shape, 7, pixel_size)
     others = () if squares else (sc["sigs"][1],)
     surf, sub, first = _surface_of(sc, squares)

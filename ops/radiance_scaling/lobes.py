@@ -74,7 +74,7 @@ def covered_percentile(
 
 
 _BAND_MIN = 1 << 16  # below this many values np.percentile is cheap enough
-_SAMPLE_ROWS = 128  # rows of the sample that brackets the percentile
+_SAMPLE_ROWS = 32  # rows of the sample that brackets the percentile
 _SAMPLE_MIN = 1024  # fewer sampled values than this bracket nothing
 _NO_MASK = np.empty((0, 0), np.uint8)
 _INF = float("inf")
@@ -131,7 +131,7 @@ def _banded_percentile(
     vals: np.ndarray, m8: np.ndarray, wid: int, p: float, lw: np.ndarray
 ) -> float | None:
     """``np.percentile`` (linear) of the counted values, exactly, without gathering them all:
-    the counted values of every (H / 128)-th row bracket the two order statistics the
+    the counted values of every (H / 32)-th row bracket the two order statistics the
     percentile interpolates; one pass counts the values and those below the bracket and keeps
     the few inside it, and only those are partitioned (numpy's own interpolation of the two
     gives the result). None when the frame is small or the bracket misses them."""

@@ -1,9 +1,10 @@
 """Compiled passes of the first level's front-most cells (``_levels._front_most_cells``): the
 cells that straddle a depth step, re-averaged from their 2×2 pixels keeping the front-most
 surface only. One pass finds each cell's pixels and their weights (:func:`front_weights`), one
-per field sums the weighted pixels into the level's cells (:func:`front_sums`). Both run on one
-thread (tens of thousands of cells at 1080p), with the numbers of the NumPy chain they replace:
-each product and sum rounded on its own, the four taps summed in order (tl, tr, bl, br).
+per field sums the weighted pixels into the level's cells (:func:`front_sums`). Both run on
+ranges of cells over the shared pool (tens of thousands of cells at 1080p; each cell is written
+by one range only), with the numbers of the NumPy chain they replace: each product and sum
+rounded on its own, the four taps summed in order (tl, tr, bl, br).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ops.jit import exact_kernel
+from ops.parallel import run_strips
 
 Array = np.ndarray
 
@@ -42,8 +44,19 @@ def front_taps(
     total = np.empty(n, np.float32)
     none = np.zeros((0, 0), np.float32)
     gx, gy = grad if grad is not None else (none, none)
-    front_weights(cx, cy, valid, iz, gx, gy, np.float32(thr), py, px, ok, wk, total)
+    t = np.float32(thr)
+
+    def cells(a: int, b: int) -> None:
+        at = slice(a, b)
+        outs = (py[at], px[at], ok[at], wk[at], total[at])
+        front_weights(cx[at], cy[at], valid, iz, gx, gy, t, *outs)
+
+    run_strips(n, cells, CELLS)
     return py, px, ok, wk, total
+
+
+#: Cells per range of :func:`front_taps` and of the callers of :func:`front_sums`.
+CELLS = 1 << 13
 
 
 @exact_kernel

@@ -12,9 +12,18 @@ from typing import Any
 import cv2
 import numpy as np
 
+from ops.parallel import run_strips
 from ops.unsharp._common import _DT_DEPTH_GAIN, _DT_MODE, _JUMP, _KNEE, _SIGMA_C, _WALL, Array
-from ops.unsharp._front import AS_IS, NAN_AS_ZERO, ON_SURFACE, SQUARED, front_sums, front_taps
-from ops.unsharp._reduce import block_average, block_weights, step_flags
+from ops.unsharp._front import (
+    AS_IS,
+    CELLS,
+    NAN_AS_ZERO,
+    ON_SURFACE,
+    SQUARED,
+    front_sums,
+    front_taps,
+)
+from ops.unsharp._reduce import block_averages, block_weights, step_flags
 from ops.unsharp._surface import _guide_gradient, _Level, _plane_slope, _Surface
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -62,34 +71,38 @@ def _front_most_cells(lv: _Level, surf: _Surface, sigs: list[Array]) -> None:
     # per cell (N, 4): its pixels (top-left, top-right, bottom-left, bottom-right), whether
     # each is on the surface, and its weight (ops.unsharp._front, compiled)
     py, px, ok, wk, n = front_taps(cx, cy, surf.valid, surf.iz, lv.grad, float(thr))
-
-    def taps(field: Array, mode: int, out: Array) -> None:  # into the level's cells
-        front_sums(field, py, px, ok, wk, mode, cy, cx, out)
-
-    lv.cov[cy, cx] = n * np.float32(0.25)
-    for i, sig in enumerate(sigs):
-        taps(sig, ON_SURFACE, lv.sig[i])
+    # (field at full resolution, how it is read, the level's array the cells are written in)
+    sums: list[tuple[Array, int, Array]] = [
+        (sig, ON_SURFACE, lv.sig[i]) for i, sig in enumerate(sigs)
+    ]
     if len(lv.sig) > len(sigs):  # and the square of the one signal
-        taps(sigs[-1], SQUARED, lv.sig[1])
-    taps(surf.iz, AS_IS, lv.iz)
+        sums.append((sigs[-1], SQUARED, lv.sig[1]))
+    sums.append((surf.iz, AS_IS, lv.iz))
     if surf.lps is not None:
-        taps(surf.lps, AS_IS, lv.lps)
-    else:
+        sums.append((surf.lps, AS_IS, lv.lps))
+    if lv.nrm is not None and surf.normal is not None:  # (normals off the surface: any)
+        sums += [(surf.normal[..., i], NAN_AS_ZERO, lv.nrm[i]) for i in range(3)]
+
+    def cells(a: int, b: int) -> None:  # every field, into the level's cells a … b − 1
+        at = slice(a, b)
+        for field, mode, out in sums:
+            front_sums(field, py[at], px[at], ok[at], wk[at], mode, cy[at], cx[at], out)
+
+    run_strips(cx.size, cells, CELLS)
+    lv.cov[cy, cx] = n * np.float32(0.25)
+    if surf.lps is None:
         a, b = surf.lps_from
         lv.lps[cy, cx] = a * lv.iz[cy, cx] + b
-    if lv.nrm is not None and surf.normal is not None:
-        for i in range(3):  # (normals off the surface: any)
-            taps(surf.normal[..., i], NAN_AS_ZERO, lv.nrm[i])
-        if lv.grad is not None:  # the re-averaged cells' slopes
-            nc = [q[cy, cx] for q in lv.nrm]
-            gx, gy = _plane_slope(
-                nc[0], nc[1], nc[2], cy.astype(np.float32), cx.astype(np.float32), 1, surf
-            )
-            bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
-            gx[bad] = 0.0
-            gy[bad] = 0.0
-            lv.grad[0][cy, cx] = gx
-            lv.grad[1][cy, cx] = gy
+    if lv.nrm is not None and surf.normal is not None and lv.grad is not None:
+        nc = [q[cy, cx] for q in lv.nrm]  # the re-averaged cells' slopes
+        gx, gy = _plane_slope(
+            nc[0], nc[1], nc[2], cy.astype(np.float32), cx.astype(np.float32), 1, surf
+        )
+        bad = ~(np.isfinite(gx) & np.isfinite(gy)) | (n == 0)
+        gx[bad] = 0.0
+        gy[bad] = 0.0
+        lv.grad[0][cy, cx] = gx
+        lv.grad[1][cy, cx] = gy
     lv._valid = None
 
 
@@ -114,24 +127,19 @@ def _reduce_selective(lv: _Level, surf: _Surface) -> _Level:
     c = np.ascontiguousarray
     grad = None if lv.grad is None else (c(lv.grad[0]), c(lv.grad[1]))
     sel, cov, inv = block_weights(c(lv.cov), c(lv.iz), grad, lv.k, _JUMP, float(_BIG))
-
-    def red(field: Array) -> Array:
-        return block_average(c(field, dtype=np.float32), sel, inv)
-
-    iz = red(lv.iz)
+    # every field in one pass of strips: the guide, its log pixel size (unless it is made from
+    # the guide), the signals and the normals
+    nrm = [] if lv.nrm is None else lv.nrm
+    own_lps = [] if surf.lps is None else [lv.lps]
+    fields = [lv.iz, *own_lps, *lv.sig, *nrm]
+    iz, *rest = block_averages([c(f, dtype=np.float32) for f in fields], sel, inv)
     if surf.lps is None:
         a, b = surf.lps_from
         lps = _cv.addWeighted(iz, a, iz, 0.0, b)
     else:
-        lps = red(lv.lps)
-    out = _Level(
-        lv.k + 1,
-        cov,
-        [red(s) for s in lv.sig],
-        iz,
-        lps,
-        None if lv.nrm is None else [red(n) for n in lv.nrm],
-    )
+        lps = rest.pop(0)
+    sig, reduced_nrm = rest[: len(lv.sig)], rest[len(lv.sig) :]
+    out = _Level(lv.k + 1, cov, sig, iz, lps, None if lv.nrm is None else reduced_nrm)
     out.grad = _guide_gradient(out, surf)
     return out
 

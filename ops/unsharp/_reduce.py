@@ -3,9 +3,9 @@ full-resolution rows (``_surface``), the selective reduction of the others
 (``_reduce_selective``: the weight each cell keeps in its 2×2 block, and the weighted block
 averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
-The first level's passes run on ``_surface``'s strips of rows, the block flags on strips of
-block rows, the selective reduction on one thread (the largest level it reads holds a quarter
-of the frame: a pass over it costs less than handing strips to the pool). Each replaces a chain
+The first level's passes run on ``_surface``'s strips of rows, the block flags and the
+selective reduction on strips of block rows over the shared pool (a level too small to share
+in one strip). Each replaces a chain
 of OpenCV and NumPy calls (:func:`ops.jit.exact_kernel`: each product and sum rounded on its
 own) with the same numbers:
 the 2×2 average is summed in pairs, ((a + b) + (c + d)) / 4, an odd level padded with zeros, as
@@ -46,16 +46,33 @@ def block_weights(
     gx, gy = grad if grad is not None else (none, none)
     half = np.float32(0.5 * jump * 2**k)
     offset = np.float32(0.5 * 2**k)  # a cell's distance from its block's centre, image pixels
-    _weights_rows(cov, iz, gx, gy, offset, half, np.float32(big), 0, hc, sel, cov_next, inv)
+    b = np.float32(big)
+    run_strips(
+        hc,
+        lambda r0, r1: _weights_rows(cov, iz, gx, gy, offset, half, b, r0, r1, sel, cov_next, inv),
+        _block_rows(wc),
+    )
     return sel, cov_next, inv
 
 
-def block_average(field: Array, sel: Array, inv: Array) -> Array:
-    """The next level of ``field``: its 2×2 block sums weighted by ``sel``, times ``inv``."""
+def block_averages(fields: list[Array], sel: Array, inv: Array) -> list[Array]:
+    """The next level of each of ``fields``: its 2×2 block sums weighted by ``sel``, times
+    ``inv``; every field on each strip of block rows."""
     hc, wc = int(inv.shape[0]), int(inv.shape[1])
-    out = np.empty((hc, wc), np.float32)
-    _average_rows(field, sel, inv, 0, hc, out)
-    return out
+    outs = [np.empty((hc, wc), np.float32) for _ in fields]
+
+    def strip(r0: int, r1: int) -> None:
+        for field, out in zip(fields, outs, strict=True):
+            _average_rows(field, sel, inv, r0, r1, out)
+
+    run_strips(hc, strip, _block_rows(wc))
+    return outs
+
+
+def _block_rows(blocks_per_row: int) -> int:
+    """Block rows per strip: at least 16 and about 2^16 blocks (a strip's work then outweighs
+    handing it to the pool)."""
+    return max(16, (1 << 16) // max(blocks_per_row, 1))
 
 
 @exact_kernel
@@ -96,8 +113,8 @@ def _weights_rows(cov, iz, gx, gy, offset, half, big, r0, r1, sel, cov_next, inv
 
 @exact_kernel
 def _average_rows(field, sel, inv, r0, r1, out):  # type: ignore[no-untyped-def]
-    """:func:`block_average` for blocks of rows r0 … r1 − 1 (the full blocks in a loop without
-    branches; a last odd row or column is padded with zeros)."""
+    """:func:`block_averages` of one field for blocks of rows r0 … r1 − 1 (the full blocks in a
+    loop without branches; a last odd row or column is padded with zeros)."""
     h, w = field.shape
     wf = w // 2  # blocks with both columns
     for bi in range(r0, r1):
@@ -135,7 +152,7 @@ def step_flags(
     none = np.zeros((0, 0), np.float32)
     gx, gy = grad if grad is not None else (none, none)
     hd, t = np.float32(0.5 * 2**k), np.float32(thr)
-    rows = max(16, (1 << 16) // (w + 1))
+    rows = _block_rows(w + 1)
     run_strips(h + 1, lambda a, b: _flags_rows(cov, iz, gx, gy, hd, t, a, b, out), rows)
     return out
 

@@ -91,11 +91,11 @@ class _Upsampler:
         self.coarse = coarse
         self.vals = []
         if self.taps is not None and self.idx is not None:
-            for arr, fb in zip(coarse, self.fallback, strict=True):
-                col = self.taps.apply(arr)
-                if self.taps.none is not None:
-                    col[self.taps.none] = fb.ravel()[self.idx[self.taps.none]]
-                self.vals.append(col)
+            self.vals = self.taps.apply(coarse)
+            if self.taps.none is not None:
+                at = self.idx[self.taps.none]
+                for col, fb in zip(self.vals, self.fallback, strict=True):
+                    col[self.taps.none] = fb.ravel()[at]
         return self
 
     def rows(self, r: slice, cols: slice | None = None) -> list[Array]:
@@ -189,11 +189,17 @@ class _FixupTaps:
     def _of(self, at: slice) -> tuple[Array, Array, Array]:
         return self.taps[at], self.wts[at], self.count[at]
 
-    def apply(self, arr: Array) -> Array:
-        """The interpolated values of ``arr`` (a channel of the level) at the points (NaN where
-        no compatible tap is found: see ``none``)."""
-        out = np.empty(self.count.size, np.float32)
-        apply_taps(
-            np.ascontiguousarray(arr, np.float32).ravel(), self.taps, self.wts, self.count, out
-        )
-        return out
+    def apply(self, arrs: list[Array]) -> list[Array]:
+        """The interpolated values of each of ``arrs`` (channels of the level) at the points
+        (NaN where no compatible tap is found: see ``none``); every channel on each range of
+        points."""
+        flat = [np.ascontiguousarray(arr, np.float32).ravel() for arr in arrs]
+        outs = [np.empty(self.count.size, np.float32) for _ in arrs]
+
+        def points(i0: int, i1: int) -> None:
+            at = slice(i0, i1)
+            for arr, out in zip(flat, outs, strict=True):
+                apply_taps(arr, *self._of(at), out[at])
+
+        run_strips(self.count.size, points, _FIXUP_POINTS)
+        return outs
