@@ -32,7 +32,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from analysis.compare import compare
+from analysis.compare import compare, frame_from_mesh
 from analysis.methods import LABELS, METHODS
 from analysis.pictures import contact_sheet, plot
 from analysis.result import ComparisonResult
@@ -154,7 +154,7 @@ def terms_markdown(terms: dict[str, dict[str, list[float]]], numbers: tuple[int,
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("out", type=Path, help="output folder (created)")
     ap.add_argument("--meshes", default=",".join(DEFAULT_MESHES), help="comma list of names")
@@ -185,63 +185,76 @@ def main(argv: list[str] | None = None) -> int:
         help="also write <mesh>_terms.md: Eq. 2's direction and magnitude factors separately",
     )
     ap.add_argument("--quiet", action="store_true", help="do not print the tables")
-    args = ap.parse_args(argv)
+    return ap
 
-    if not args.models.is_dir():
-        print(f"models folder {args.models} is absent: nothing to compare", file=sys.stderr)
-        return 2
-    from analysis.compare import frame_from_mesh
 
-    params = parse_sets(args.set)
-    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
-    args.out.mkdir(parents=True, exist_ok=True)
-    results: dict[str, ComparisonResult] = {}
-    for name in [m.strip() for m in args.meshes.split(",") if m.strip()]:
-        path = find_mesh(args.models, name)
-        az, el = VIEWS.get(name, (30.0, 20.0))
-        t0 = time.perf_counter()
-        frame = frame_from_mesh(path, args.size, args.size, azimuth_deg=az, elevation_deg=el)
-        t1 = time.perf_counter()
-        res = compare(
-            frame,
-            methods=methods,
-            directions=args.directions,
-            params=params,
-            albedo=args.albedo,
-            keep_images=not args.no_sheet,
-            label=name,
-            shading_norm=args.shading_norm,
+def compare_mesh(
+    args: argparse.Namespace, name: str, methods: list[str], params: dict[str, dict[str, Any]]
+) -> ComparisonResult:
+    """Render one mesh, compare the methods on it, write its files and print its timings."""
+    path = find_mesh(args.models, name)
+    az, el = VIEWS.get(name, (30.0, 20.0))
+    t0 = time.perf_counter()
+    frame = frame_from_mesh(path, args.size, args.size, azimuth_deg=az, elevation_deg=el)
+    t1 = time.perf_counter()
+    res = compare(
+        frame,
+        methods=methods,
+        directions=args.directions,
+        params=params,
+        albedo=args.albedo,
+        keep_images=not args.no_sheet,
+        label=name,
+        shading_norm=args.shading_norm,
+    )
+    t2 = time.perf_counter()
+    head = (
+        f"## {name} ({args.size}×{args.size}, view az {az:g}° el {el:g}°, albedo {args.albedo})\n\n"
+    )
+    view = {"azimuth_deg": az, "elevation_deg": el, "size": args.size}
+    write_mesh_files(args, name, res, head, view)
+    t3 = time.perf_counter()
+    if not args.quiet:
+        print(head + res.table_markdown() + "\n")
+    print(
+        f"[{name}] render {t1 - t0:.1f} s, compare {t2 - t1:.1f} s, pictures {t3 - t2:.1f} s",
+        flush=True,
+    )
+    return res
+
+
+def write_mesh_files(
+    args: argparse.Namespace,
+    name: str,
+    res: ComparisonResult,
+    head: str,
+    view: dict[str, float],
+) -> None:
+    """``<mesh>.md``, ``<mesh>.json``, the plot, the sheet and (``--terms``) the factors."""
+    (args.out / f"{name}.md").write_text(head + res.table_markdown() + "\n")
+    data = res.to_dict()
+    data["view"] = view
+    (args.out / f"{name}.json").write_text(json.dumps(data, indent=2))
+    plot(res, args.out / f"{name}_plot.png", title=f"Congruence scores - {name}")
+    if not args.no_sheet:
+        contact_sheet(res, args.out / f"{name}_sheet.png")
+    if args.terms:
+        terms = score_terms(res)
+        (args.out / f"{name}_terms.md").write_text(
+            f"## {name}: factors of Eq. 2 (diagnostic)\n\n"
+            + terms_markdown(terms, res.numbers)
+            + "\n"
         )
-        t2 = time.perf_counter()
-        results[name] = res
-        head = (
-            f"## {name} ({args.size}×{args.size}, view az {az:g}° el {el:g}°, "
-            f"albedo {args.albedo})\n\n"
-        )
-        (args.out / f"{name}.md").write_text(head + res.table_markdown() + "\n")
-        data = res.to_dict()
-        data["view"] = {"azimuth_deg": az, "elevation_deg": el, "size": args.size}
+        data["terms"] = terms
         (args.out / f"{name}.json").write_text(json.dumps(data, indent=2))
-        plot(res, args.out / f"{name}_plot.png", title=f"Congruence scores - {name}")
-        if not args.no_sheet:
-            contact_sheet(res, args.out / f"{name}_sheet.png")
-        if args.terms:
-            terms = score_terms(res)
-            (args.out / f"{name}_terms.md").write_text(
-                f"## {name}: factors of Eq. 2 (diagnostic)\n\n"
-                + terms_markdown(terms, res.numbers)
-                + "\n"
-            )
-            data["terms"] = terms
-            (args.out / f"{name}.json").write_text(json.dumps(data, indent=2))
-        t3 = time.perf_counter()
-        if not args.quiet:
-            print(head + res.table_markdown() + "\n")
-        print(
-            f"[{name}] render {t1 - t0:.1f} s, compare {t2 - t1:.1f} s, pictures {t3 - t2:.1f} s",
-            flush=True,
-        )
 
+
+def write_summary(
+    args: argparse.Namespace,
+    params: dict[str, dict[str, Any]],
+    results: dict[str, ComparisonResult],
+) -> str:
+    """``summary.md`` and ``summary.json``; returns the summary's tables."""
     summary = summary_markdown(results)
     (args.out / "summary.md").write_text(
         f"# Comparison bench ({args.size}×{args.size}, albedo {args.albedo}, "
@@ -264,7 +277,21 @@ def main(argv: list[str] | None = None) -> int:
             indent=2,
         )
     )
-    print(summary)
+    return summary
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    if not args.models.is_dir():
+        print(f"models folder {args.models} is absent: nothing to compare", file=sys.stderr)
+        return 2
+    params = parse_sets(args.set)
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    args.out.mkdir(parents=True, exist_ok=True)
+    results: dict[str, ComparisonResult] = {}
+    for name in [m.strip() for m in args.meshes.split(",") if m.strip()]:
+        results[name] = compare_mesh(args, name, methods, params)
+    print(write_summary(args, params, results))
     return 0
 
 

@@ -396,6 +396,15 @@ def apparent_relief(frames: dict[str, Frame], out: Path, written: list[Path]) ->
 # -- docs ----------------------------------------------------------------------------------------
 
 
+#: Sheet settings shared by the README pictures (small labels, square tiles).
+DOCS_SHEET_STYLE: dict[str, Any] = {
+    "gap": 2,
+    "label_scale": 0.5,
+    "title_scale": 0.55,
+    "square": True,
+}
+
+
 def docs_pictures(
     frames: dict[str, Frame],
     names: dict[str, str],
@@ -408,8 +417,14 @@ def docs_pictures(
     written: list[Path],
 ) -> None:
     """A few pictures (at least 800 px wide) for the README, one per operator family."""
-    kw: dict[str, Any] = {"gap": 2, "label_scale": 0.5, "title_scale": 0.55, "square": True}
+    docs_radiance_scaling(frames[names["rs"]], rs, out, written)
+    docs_light_alignment(frames[names["lla"]], la, out, written)
+    docs_unsharp(frames[names["usm"]], usm, out, written)
+    docs_relief(frames[names["relief"]], rel[f"{names['relief']}_runs"], out, written)
 
+
+def docs_radiance_scaling(mesh: Frame, rs: dict[str, Any], out: Path, written: list[Path]) -> None:
+    """``rs_scenarios.png`` (4 scenarios before / after) and ``rs_blender.png``."""
     chosen = ("lobes", "toon", "lit_sphere", "mirror")
     pairs = rs["pairs"]
     rows = [
@@ -418,7 +433,7 @@ def docs_pictures(
     ]
     title = f"Radiance Scaling, 4 of the 10 scenarios (gamma {RS_GAMMA:g})"
     save(
-        sheet(rows, title, height=204, frame=frames[names["rs"]], **kw),
+        sheet(rows, title, height=204, frame=mesh, **DOCS_SHEET_STYLE),
         out / "rs_scenarios.png",
         written,
     )
@@ -435,12 +450,15 @@ def docs_pictures(
             ],
             "Radiance Scaling of a Blender Cycles render's lobes (Eq. 4)",
             height=215,
-            **kw,
+            **DOCS_SHEET_STYLE,
         ),
         out / "rs_blender.png",
         written,
     )
 
+
+def docs_light_alignment(mesh: Frame, la: dict[str, Any], out: Path, written: list[Path]) -> None:
+    """``lla_scales.png`` (the σ settings) and ``lla_materials.png`` (specular, transmission)."""
     short = ("sigma = 0", "coarse scales", "fine scales", "paper's sigma_i")
     scales = [(img, text) for (img, _), text in zip(la["scale_tiles"], short, strict=True)]
     save(
@@ -448,8 +466,8 @@ def docs_pictures(
             [scales],
             "Light Alignment: diffuse, enhancing coarse, fine or all scales",
             height=213,
-            frame=frames[names["lla"]],
-            **kw,
+            frame=mesh,
+            **DOCS_SHEET_STYLE,
         ),
         out / "lla_scales.png",
         written,
@@ -468,13 +486,16 @@ def docs_pictures(
             ],
             "Light Alignment of specular and transmission (LLA Fig. 8)",
             height=213,
-            frame=frames[names["lla"]],
-            **kw,
+            frame=mesh,
+            **DOCS_SHEET_STYLE,
         ),
         out / "lla_materials.png",
         written,
     )
 
+
+def docs_unsharp(mesh: Frame, usm: dict[str, Any], out: Path, written: list[Path]) -> None:
+    """``usm.png``: the mesh's and the Cycles render's unsharp masks side by side."""
     labels = ("original", "plain 2-D USM", "3D USM", "depth USM")
     rows = [
         [(img, text) for (img, _), text in zip(src[0], labels, strict=True)]
@@ -485,22 +506,27 @@ def docs_pictures(
             rows,
             "Unsharp masking: plain 2-D, 3D (along surfaces), depth buffer",
             height=[213, 160],
-            frame=frames[names["usm"]],
-            **kw,
+            frame=mesh,
+            **DOCS_SHEET_STYLE,
         ),
         out / "usm.png",
         written,
     )
 
-    runs = rel[f"{names['relief']}_runs"]
+
+def docs_relief(
+    mesh: Frame, runs: list[tuple[np.ndarray, str, str]], out: Path, written: list[Path]
+) -> None:
+    """``relief_styles.png``: the descriptor colour code and the styles (``runs`` of
+    :func:`relief`, without the original and ES)."""
     picked = [(img, short) for img, _, short in runs if short not in ("original", "ES")]
     save(
         sheet(
             [picked[:3], picked[3:]],
             "Apparent Relief: descriptor colour code and styles",
             height=268,
-            frame=frames[names["relief"]],
-            **kw,
+            frame=mesh,
+            **DOCS_SHEET_STYLE,
         ),
         out / "relief_styles.png",
         written,
