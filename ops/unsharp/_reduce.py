@@ -4,8 +4,8 @@ full-resolution rows (``_surface``), the selective reduction of the others
 averages of each field) and the flags of the blocks that are not one surface (``_block_flags``).
 
 The first level's passes run on ``_surface``'s strips of rows, the block flags and the
-selective reduction on strips of block rows over the shared pool (a level too small to share
-in one strip). Each replaces a chain
+selective reduction on strips of block rows over the shared pool (a level too small to be
+shared is one strip). Each replaces a chain
 of OpenCV and NumPy calls (:func:`ops.jit.exact_kernel`: each product and sum rounded on its
 own) with the same numbers:
 the 2×2 average is summed in pairs, ((a + b) + (c + d)) / 4, an odd level padded with zeros, as
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ops.jit import exact_kernel
-from ops.parallel import run_strips
+from ops.parallel import run_strips, strip_rows
 
 Array = np.ndarray
 
@@ -72,7 +72,7 @@ def block_averages(fields: list[Array], sel: Array, inv: Array) -> list[Array]:
 def _block_rows(blocks_per_row: int) -> int:
     """Block rows per strip: at least 16 and about 2^16 blocks (a strip's work then outweighs
     handing it to the pool)."""
-    return max(16, (1 << 16) // max(blocks_per_row, 1))
+    return max(16, strip_rows(blocks_per_row, 1 << 16))
 
 
 @exact_kernel
