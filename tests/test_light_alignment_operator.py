@@ -19,6 +19,7 @@ from gbuffer.frame import Frame
 from ops.shading import parse_light, shade_directions
 from service import pipeline
 from service.operators.common import DEFAULT_LIGHTS
+from service.operators.light_alignment import holds_light
 from service.registry import PipelineError
 from tests import analytic
 from tests.test_operators import covered, field, remainder, run, spot_frame
@@ -171,6 +172,34 @@ def test_only_the_components_the_result_depends_on_are_aligned(spot: Frame) -> N
     }
     weighted = run(spot, "light_alignment", {"form": "relight", "transmission_weight": 0.5})
     assert _aligned(weighted) == both | {"lla_light.transmission", "lla_light2.transmission"}
+
+
+def test_a_lobe_without_light_is_left_as_it_is(spot: Frame) -> None:
+    # Blender writes transmission passes of a scene without glass: zeros. The ratio form leaves
+    # that lobe and its light as they are (ρ · 0 is 0) instead of shading it twice: the same
+    # pixels as a frame without it, the very arrays given back, and its component still aligned
+    # (the layers of a sequence do not depend on what a frame holds)
+    zero = np.zeros_like(spot.buffers["diffuse"])
+    dark = spot.copy()
+    dark.buffers.update({"transmission": zero, "transmission.light": zero.copy()})
+    out, without = run(dark, "light_alignment"), run(spot, "light_alignment")
+    for name in ("beauty", "diffuse", "specular", "diffuse.light", "specular.light"):
+        assert np.array_equal(out.buffers[name], without.buffers[name]), name
+    for name in ("transmission", "transmission.light"):
+        assert out.buffers[name] is dark.buffers[name]
+    assert "lla_light.transmission" in _aligned(out)
+    # light in the lobe's light alone (or a NaN) is light: the lobe is relit
+    lit = dark.copy()
+    lit.buffers["transmission.light"] = spot.buffers["diffuse.light"]
+    assert (
+        run(lit, "light_alignment").buffers["transmission.light"]
+        is not spot.buffers["diffuse.light"]
+    )
+    assert holds_light(lit, "transmission") and not holds_light(dark, "transmission")
+    nan = dark.copy()
+    nan.buffers["transmission"] = zero.copy()
+    nan.buffers["transmission"][3, 5, 1] = np.nan
+    assert holds_light(nan, "transmission") and not holds_light(spot, "transmission")
 
 
 @pytest.mark.parametrize("sigmas", [[0.5], [0.5, 0.3, 0.1, 0.2, 0.2]])

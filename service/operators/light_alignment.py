@@ -15,7 +15,8 @@ vector; transmission: refracted view vector, §6), then the frame is shaded with
     lights, so the renderer's textures, shadows and indirect light are kept and only the
     alignment is added; the beauty is rebuilt with the change of the lobes, emission and
     everything unmapped untouched. Right for production renders with lobes — with lights given
-    as the ones of the shot.
+    as the ones of the shot. A lobe with no light in it (0 everywhere, with its light) is left
+    as it is, not shaded (:func:`holds_light`).
 ``auto``
     ``ratio`` when the frame has a diffuse, specular or transmission lobe, else ``relight``.
 
@@ -270,9 +271,12 @@ def _align_and_shade(
         if components
         else {}
     )
+    # the ratio form shades the lobes that hold light: a lobe that is 0 everywhere, with its
+    # light (Blender's transmission passes of a scene without glass), stays as it is, as ρ · 0
     with_transmission = (
-        p.transmission_weight > 0.0 if form == "relight" else "transmission" in frame.buffers
+        p.transmission_weight > 0.0 if form == "relight" else holds_light(frame, "transmission")
     )
+    specular = p.specular if form == "relight" or holds_light(frame, "specular") else "none"
     roughness: float | np.ndarray = (
         p.roughness if p.roughness != "frame" else frame.need("roughness", "roughness='frame'")
     )
@@ -285,7 +289,7 @@ def _align_and_shade(
             lights,
             directions,
             diffuse=p.diffuse,
-            specular=p.specular,
+            specular=specular,
             shininess=p.shininess,
             roughness=roughness,
             f0=p.f0,
@@ -300,6 +304,18 @@ def _align_and_shade(
         return aligned, None, debug_normals
     relit = _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
     return aligned, relit, debug_normals
+
+
+def holds_light(frame: Frame, lobe: str) -> bool:
+    """Whether the frame has ``lobe`` with light in it: a value other than 0 (NaN counts) in the
+    lobe or in its light. One early-exit pass over each."""
+    for name in (lobe, f"{lobe}.light"):
+        buffer = frame.buffers.get(name)
+        if buffer is not None:
+            plane = np.ascontiguousarray(buffer, np.float32)
+            if cv2.hasNonZero(plane.reshape(plane.shape[0], -1)):
+                return True
+    return False
 
 
 def lights_power(lights: list[Light]) -> float:
