@@ -23,6 +23,8 @@ Python API::
 
 from __future__ import annotations
 
+import contextvars
+import threading
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
@@ -108,19 +110,80 @@ def enhance(
     *,
     pinned: dict[str, float] | None = None,
     files: bool = True,
+    ahead: ReadAhead | None = None,
 ) -> Enhanced:
     """Read ``in_path``, run ``steps``, write the EXR (or the PNG preview) to ``out_path``.
 
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
-    whether parameters may name image files on this machine (False for the HTTP service).
+    whether parameters may name image files on this machine (False for the HTTP service);
+    ``ahead``: the read of ``in_path`` already started (:class:`ReadAhead`, with the same
+    ``read`` and ``write``).
     """
-    from ops.jit import prepare_in_background
-
     read, write = read or ReadRequest(), write or WriteRequest()
-    prepared = prepare_in_background()  # Numba's start-up, while the frame decodes
-    frame = read_for(in_path, read, write)
-    prepared.join()
+    if ahead is None:
+        ahead = ReadAhead(in_path, read, write)
+    elif ahead.path != str(in_path):
+        raise ValueError(f"the read started ahead is of {ahead.path}, not of {in_path}")
+    frame = ahead.frame()
     return enhance_frame(frame, out_path, steps, write, pinned=pinned, files=files)
+
+
+class ReadAhead:
+    """:func:`read_for` of ``path`` on a thread of its own, started now: the OpenEXR library
+    decodes without Python's lock, so what the caller's thread does meanwhile is not waited for
+    (``depict enhance`` imports the operators and checks the pipeline). With ``prepare``, Numba's
+    start-up runs beside it from now on (:func:`ops.jit.prepare_in_background`), else from
+    :meth:`prepare`. :meth:`frame` waits for both and gives the frame, or raises what reading
+    raised."""
+
+    def __init__(
+        self, path: str | Path, read: ReadRequest, write: WriteRequest, *, prepare: bool = True
+    ) -> None:
+        self.path = str(path)
+        self._read = read
+        self._write = write
+        self._frame: Frame | None = None
+        self._error: BaseException | None = None
+        self._prepared: threading.Thread | None = None
+        if prepare:
+            self.prepare()
+        context = contextvars.copy_context()  # (the caller's, e.g. NumPy's error state)
+        self._thread = threading.Thread(
+            target=context.run, args=(self._run,), name="depict-read-ahead", daemon=True
+        )
+        self._thread.start()
+
+    def prepare(self) -> None:
+        """Start Numba's start-up beside the read (once). Only once the caller has imported
+        what it imports meanwhile: the start-up imports Numba's modules, and two threads
+        importing them at once could meet one of Numba's import cycles half done."""
+        if self._prepared is None:
+            from ops.jit import prepare_in_background
+
+            self._prepared = prepare_in_background()
+
+    def _run(self) -> None:
+        try:
+            self._frame = read_for(self.path, self._read, self._write)
+        except BaseException as exc:  # (raised again by frame(), on the caller's thread)
+            self._error = exc
+
+    def wait(self) -> None:
+        """Until the read and Numba's start-up have ended."""
+        self._thread.join()
+        if self._prepared is not None:
+            self._prepared.join()
+
+    def frame(self) -> Frame:
+        """The frame read (once: it is let go here), or the error reading raised."""
+        self.wait()
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+        frame, self._frame = self._frame, None
+        if frame is None:
+            raise RuntimeError(f"the frame read ahead from {self.path} was taken already")
+        return frame
 
 
 def read_for(in_path: str | Path, read: ReadRequest, write: WriteRequest) -> Frame:

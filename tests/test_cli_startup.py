@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -29,12 +30,23 @@ print(json.dumps({"code": code, "out": out.getvalue(), "modules": sorted(sys.mod
 """
 
 
+def probed(code: str, *args: str | Path, env: dict[str, str] | None = None) -> Any:
+    """What the Python ``code`` printed last, as JSON, run in a process of its own from the
+    repository's root with ``args`` (its stderr's end shown if it fails)."""
+    run = subprocess.run(
+        [sys.executable, "-c", code, *map(str, args)],
+        capture_output=True,
+        text=True,
+        env=env,
+        cwd=ROOT,
+    )
+    assert run.returncode == 0, run.stderr[-2000:]
+    return json.loads(run.stdout.splitlines()[-1])
+
+
 @pytest.mark.parametrize("flag", ["--version", "--help"])
 def test_version_and_help_import_nothing_heavy(flag: str) -> None:
-    run = subprocess.run(
-        [sys.executable, "-c", PROBE, flag], capture_output=True, text=True, check=True
-    )
-    answer = json.loads(run.stdout.splitlines()[-1])
+    answer = probed(PROBE, flag)
     assert answer["code"] == 0
     loaded = {m.split(".")[0] for m in answer["modules"]}
     assert not loaded & set(HEAVY), sorted(loaded & set(HEAVY))
@@ -45,10 +57,7 @@ def test_version_and_help_import_nothing_heavy(flag: str) -> None:
 
 
 def test_a_deferred_command_still_has_its_arguments() -> None:
-    run = subprocess.run(
-        [sys.executable, "-c", PROBE, "compare", "--help"], capture_output=True, text=True
-    )
-    answer = json.loads(run.stdout.splitlines()[-1])
+    answer = probed(PROBE, "compare", "--help")
     assert answer["code"] == 0 and "--albedo {white,frame}" in answer["out"]
 
 
@@ -57,9 +66,8 @@ FRAME = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
 
 def _modules_of(*argv: str) -> tuple[set[str], list[str]]:
     """The top-level packages and the modules a successful ``depict *argv`` loaded."""
-    run = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True, text=True)
-    answer = json.loads(run.stdout.splitlines()[-1])
-    assert answer["code"] == 0, run.stderr[-2000:]
+    answer = probed(PROBE, *argv)
+    assert answer["code"] == 0
     return {m.split(".")[0] for m in answer["modules"]}, answer["modules"]
 
 
@@ -104,15 +112,7 @@ def test_the_install_compiled_the_bytecode_of_the_enhance_path() -> None:
     the container's user, ``PYTHONDONTWRITEBYTECODE``) would otherwise compile the 800 modules
     of ``depict enhance`` from source again, about a second each time."""
     env = {"PYTHONDONTWRITEBYTECODE": "1", "PYOPENGL_PLATFORM": "osmesa"}
-    run = subprocess.run(
-        [sys.executable, "-c", COMPILED_PROBE],
-        capture_output=True,
-        text=True,
-        check=True,
-        env=env,
-        cwd=ROOT,
-    )
-    missing = json.loads(run.stdout.splitlines()[-1])
+    missing = probed(COMPILED_PROBE, env=env)
     assert not missing, f"{len(missing)} modules without bytecode, e.g. {missing[:5]}"
 
 
@@ -156,13 +156,38 @@ def test_enhance_readies_numbas_compiler_while_the_frame_decodes(tmp_path: Path)
     among them); ``enhance`` has a thread of its own load them (``ops.jit.prepare``) while the
     frame decodes."""
     out = tmp_path / "out.exr"
-    run = subprocess.run(
-        [sys.executable, "-c", PREPARE_PROBE, str(FRAME), str(out)],
-        capture_output=True,
-        text=True,
-        check=True,
-        cwd=ROOT,
-    )
-    answer = json.loads(run.stdout.splitlines()[-1])
+    answer = probed(PREPARE_PROBE, FRAME, out)
     assert not answer["before"] and answer["after"] and out.is_file()
     assert "depict-jit-prepare" in answer["names"]
+
+
+READ_AHEAD_PROBE = """
+import json, sys, threading
+import service.cli.frames as frames
+import service.enhance as enhance
+from service.cli import main
+events = []
+def note(what):
+    events.append([what, threading.current_thread().name])
+read_for, steps = enhance.read_for, frames.steps
+def reading(*args, **kwargs):
+    note("read")
+    return read_for(*args, **kwargs)
+def checking(args):
+    note("pipeline checked")
+    return steps(args)
+enhance.read_for, frames.steps = reading, checking
+code = main(["enhance", sys.argv[1], "-o", sys.argv[2]])
+print(json.dumps({"code": code, "events": events, "prepared": "numba.np.arraymath" in sys.modules}))
+"""
+
+
+def test_enhance_decodes_the_first_input_while_it_loads_the_operators(tmp_path: Path) -> None:
+    """``depict enhance`` starts reading its first input on a thread of its own before it imports
+    the operators (and Numba) and checks the pipeline, which take about half a second: the
+    OpenEXR library decodes meanwhile, without Python's lock. Numba's start-up follows beside the
+    rest of the read, and the frame is enhanced as before."""
+    out = tmp_path / "out.exr"
+    answer = probed(READ_AHEAD_PROBE, FRAME, out)
+    assert answer["code"] == 0 and out.is_file() and answer["prepared"]
+    assert answer["events"] == [["read", "depict-read-ahead"], ["pipeline checked", "MainThread"]]

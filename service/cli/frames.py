@@ -11,7 +11,7 @@ from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
 from service.cli.common import each_file, enhance_targets, exr_name, read_request, steps, warn
-from service.enhance import WriteRequest, enhance
+from service.enhance import ReadAhead, WriteRequest, enhance
 from service.masks import matte
 
 # The operators (and Numba) are imported by the commands that run or list them, not by
@@ -19,17 +19,28 @@ from service.masks import matte
 
 
 def cmd_enhance(args: argparse.Namespace) -> int:
-    from service import pipeline
-
     pairs = enhance_targets(args)
-    compiled = steps(args) or pipeline.DEFAULT
     read = read_request(args)
     write = WriteRequest(
         debug_layers=args.debug_layers, output_layer=args.output_layer, layout=args.layout
     )
+    # the first input decodes while the operators (and Numba) are imported and the pipeline is
+    # checked, then beside Numba's start-up; a pipeline refused is said once the decode has
+    # given the terminal back (the reader captures what the OpenEXR library prints)
+    ahead = ReadAhead(pairs[0][0], read, write, prepare=False)
+    try:
+        from service import pipeline
+
+        compiled = steps(args) or pipeline.DEFAULT
+    except Exception:
+        ahead.wait()
+        raise
+    ahead.prepare()
+    first = [ahead]
 
     def one(src: str, out: str) -> None:
-        result = enhance(src, out, compiled, read, write)
+        started = first.pop() if first else None
+        result = enhance(src, out, compiled, read, write, ahead=started)
         warn(result["read_warnings"] + result["warnings"] + exr_name(out))
         print(f"wrote {out}")
 
