@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextvars
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, TypedDict
@@ -111,13 +112,14 @@ def enhance(
     pinned: dict[str, float] | None = None,
     files: bool = True,
     ahead: ReadAhead | None = None,
+    before_write: Callable[[], None] | None = None,
 ) -> Enhanced:
     """Read ``in_path``, run ``steps``, write the EXR (or the PNG preview) to ``out_path``.
 
     ``pinned``: statistics pinned for a sequence (:class:`service.registry.Context`); ``files``:
     whether parameters may name image files on this machine (False for the HTTP service);
     ``ahead``: the read of ``in_path`` already started (:class:`ReadAhead`, with the same
-    ``read`` and ``write``).
+    ``read`` and ``write``); ``before_write``: see :func:`enhance_frame`.
     """
     read, write = read or ReadRequest(), write or WriteRequest()
     if ahead is None:
@@ -125,7 +127,9 @@ def enhance(
     elif ahead.path != str(in_path):
         raise ValueError(f"the read started ahead is of {ahead.path}, not of {in_path}")
     frame = ahead.frame()
-    return enhance_frame(frame, out_path, steps, write, pinned=pinned, files=files)
+    return enhance_frame(
+        frame, out_path, steps, write, pinned=pinned, files=files, before_write=before_write
+    )
 
 
 class ReadAhead:
@@ -205,11 +209,13 @@ def enhance_frame(
     *,
     pinned: dict[str, float] | None = None,
     files: bool = True,
+    before_write: Callable[[], None] | None = None,
 ) -> Enhanced:
     """The second half of :func:`enhance`: run ``steps`` on a frame :func:`read_for` read, write
     the result to ``out_path``. Where the input's parts are copied and only the new layers
     encoded (a frame read from a file, ``part`` or ``sidecar``), the frame's buffers are let go
-    before it is written (it is used up)."""
+    before it is written (it is used up), and ``before_write`` is called then (``depict enhance``
+    starts reading its next input there: the memory the frame held is free)."""
     from service import pipeline
     from service.registry import Context
 
@@ -225,6 +231,8 @@ def enhance_frame(
         if write.layout != "same" and frame.passthrough.parts:  # the input's parts are copied
             for each in (frame, ran, out):  # and only the new layers encoded: the buffers go
                 each.buffers.clear()
+            if before_write is not None:
+                before_write()
         warnings = write_exr(out, out_path, write.layout)
     return {
         "op_s": op_s,

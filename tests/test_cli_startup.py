@@ -191,3 +191,45 @@ def test_enhance_decodes_the_first_input_while_it_loads_the_operators(tmp_path: 
     answer = probed(READ_AHEAD_PROBE, FRAME, out)
     assert answer["code"] == 0 and out.is_file() and answer["prepared"]
     assert answer["events"] == [["read", "depict-read-ahead"], ["pipeline checked", "MainThread"]]
+
+
+SEQUENCE_PROBE = """
+import json, sys, threading
+from pathlib import Path
+import service.enhance as enhance
+from service.cli import main
+events = []
+read_for, write_exr = enhance.read_for, enhance.write_exr
+def reading(path, *args, **kwargs):
+    events.append(["read", Path(path).name, threading.current_thread().name])
+    return read_for(path, *args, **kwargs)
+def writing(frame, path, *args, **kwargs):
+    done = write_exr(frame, path, *args, **kwargs)
+    events.append(["written", Path(path).name, threading.current_thread().name])
+    return done
+enhance.read_for, enhance.write_exr = reading, writing
+code = main(["enhance", *sys.argv[1:-1], "-o", sys.argv[-1]])
+print(json.dumps({"code": code, "events": events}))
+"""
+
+
+def test_enhance_of_several_files_reads_the_next_while_it_writes_one(tmp_path: Path) -> None:
+    """``depict enhance`` of several files starts reading the next input once the operators
+    have run on one and its buffers are let go, while that one's result is written (the memory
+    the frame held is free then). Each output is the one a single file gives."""
+    inputs = []
+    for name in ("a.exr", "b.exr"):
+        inputs.append(tmp_path / name)
+        inputs[-1].write_bytes(FRAME.read_bytes())
+    outs = tmp_path / "out"
+    outs.mkdir()
+    answer = probed(SEQUENCE_PROBE, *inputs, outs)
+    assert answer["code"] == 0
+    events = answer["events"]
+    assert events[0] == ["read", "a.exr", "depict-read-ahead"]
+    assert events.index(["read", "b.exr", "depict-read-ahead"]) < events.index(
+        ["written", "a.exr", "MainThread"]
+    ), events
+    single = tmp_path / "single.exr"
+    assert probed(SEQUENCE_PROBE, inputs[1], single)["code"] == 0
+    assert (outs / "b.exr").read_bytes() == single.read_bytes()

@@ -36,11 +36,28 @@ def cmd_enhance(args: argparse.Namespace) -> int:
         ahead.wait()
         raise
     ahead.prepare()
-    first = [ahead]
+    reads: list[ReadAhead | None] = [ahead] + [None] * (len(pairs) - 1)  # each input's, started
+    position = iter(range(len(pairs)))
 
     def one(src: str, out: str) -> None:
-        started = first.pop() if first else None
-        result = enhance(src, out, compiled, read, write, ahead=started)
+        i = next(position)
+
+        def read_next() -> None:  # the next input decodes while this one's result is written
+            if i + 1 < len(pairs):
+                reads[i + 1] = ReadAhead(pairs[i + 1][0], read, write, prepare=False)
+
+        def next_read_done() -> None:  # (its decode has the terminal: nothing said before)
+            following = reads[i + 1] if i + 1 < len(pairs) else None
+            if following is not None:
+                following.wait()
+
+        started, reads[i] = reads[i], None
+        try:
+            result = enhance(src, out, compiled, read, write, ahead=started, before_write=read_next)
+        except Exception:
+            next_read_done()
+            raise
+        next_read_done()
         warn(result["read_warnings"] + result["warnings"] + exr_name(out))
         print(f"wrote {out}")
 
