@@ -6,6 +6,13 @@ directly (``std::cout``, ``std::cerr``, below Python's ``sys.stdout``) and throu
 temporary file, and both Python streams at a buffer, around a call and gives back the lines
 written, so the caller can put them in its one-line error (or its warnings) instead of the
 terminal.
+
+The descriptors and streams are the process's, so one capture runs at a time: a second one (a
+program reading frames on several threads) waits for the first to end. Two at once would each
+restore what the other had put in place, and the one ending last would leave the process's
+output in the other's temporary file. For the same reason nothing the process says while a
+capture runs reaches the terminal: ``depict enhance`` holds its lines back while a read it
+started ahead decodes.
 """
 
 from __future__ import annotations
@@ -16,10 +23,13 @@ import io
 import os
 import sys
 import tempfile
+import threading
 from collections.abc import Iterator
 
 #: Most bytes of captured output kept.
 MAX_CAPTURED = 64 << 10
+
+_ONE_AT_A_TIME = threading.Lock()  # (see the module docstring)
 
 try:
     _LIBC: ctypes.CDLL | None = ctypes.CDLL(None)
@@ -39,7 +49,16 @@ def _flush() -> None:
 def captured_output() -> Iterator[list[str]]:
     """Run the block with descriptors 1 and 2 sent to a temporary file; the non-empty lines
     written there are in the yielded list once the block ends (at most :data:`MAX_CAPTURED`
-    bytes). Where the descriptors cannot be duplicated the block runs uncaptured."""
+    bytes). Where the descriptors cannot be duplicated the block runs uncaptured. One capture
+    at a time in the process: another thread's waits for this one to end."""
+    with _ONE_AT_A_TIME:
+        with _captured() as lines:
+            yield lines
+
+
+@contextlib.contextmanager
+def _captured() -> Iterator[list[str]]:
+    """:func:`captured_output`, without its lock."""
     lines: list[str] = []
     _flush()
     try:
