@@ -27,6 +27,9 @@ __all__ = ["STRIP_PIXELS", "run_strips", "strip_rows", "workers"]
 #: Pixels per strip that keep a few float32 planes of it in the caches (:func:`strip_rows`).
 STRIP_PIXELS = 1 << 17
 
+#: The machine's cores, read once (``os.cpu_count()`` reads sysfs: ~8 µs, and :func:`workers` is
+#: asked at every strip run).
+_CORES = os.cpu_count() or 1
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 _IN_STRIP = threading.local()
@@ -43,7 +46,7 @@ if hasattr(os, "register_at_fork"):
 
 def workers() -> int:
     """How many strips may run at once."""
-    return max(1, min(cv2.getNumThreads(), os.cpu_count() or 1))
+    return max(1, min(cv2.getNumThreads(), _CORES))
 
 
 def strip_rows(width: int, pixels: int = STRIP_PIXELS) -> int:
@@ -67,7 +70,7 @@ def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
         return
     with _POOL_LOCK:
         if _POOL is None:
-            _POOL = ThreadPoolExecutor(max(2, os.cpu_count() or 1), "depict-strips")
+            _POOL = ThreadPoolExecutor(max(2, _CORES), "depict-strips")
         pool = _POOL
     todo = iter(starts)
     lock = threading.Lock()

@@ -4,6 +4,7 @@ the light carried to finer levels by the pyramid's edge-aware upsampling)."""
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -70,7 +71,7 @@ class _Work:
 
     def arr(self, name: str, shape: tuple[int, ...]) -> F32:
         """A contiguous scratch array of any shape."""
-        n = int(np.prod(shape))
+        n = math.prod(shape)  # (np.prod of a tuple: ~5 µs, called per strip and source)
         flat = self._flat.get("@" + name)
         if flat is None or flat.size < n:
             flat = self._flat["@" + name] = np.empty(max(n, 1), np.float32)
