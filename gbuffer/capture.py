@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import fcntl
 import io
 import os
 import sys
@@ -49,11 +50,30 @@ def _flush() -> None:
 def captured_output() -> Iterator[list[str]]:
     """Run the block with descriptors 1 and 2 sent to a temporary file; the non-empty lines
     written there are in the yielded list once the block ends (at most :data:`MAX_CAPTURED`
-    bytes). Where the descriptors cannot be duplicated the block runs uncaptured. One capture
-    at a time in the process: another thread's waits for this one to end."""
+    bytes). Where the descriptors are closed or cannot be duplicated the block runs
+    uncaptured. One capture at a time in the process: another thread's waits for this one to
+    end."""
     with _ONE_AT_A_TIME:
         with _captured() as lines:
             yield lines
+
+
+def _saved_descriptors() -> tuple[int, int] | None:
+    """Copies of descriptors 1 and 2 numbered 3 or above, or None where either is closed (or
+    cannot be copied). A closed one is never captured: the number is free for any file the
+    process opens meanwhile (the output another thread is writing), which pointing it at the
+    temporary file and back would take over."""
+    try:
+        for fd in (1, 2):
+            os.fstat(fd)
+        first = fcntl.fcntl(1, fcntl.F_DUPFD_CLOEXEC, 3)
+    except OSError:
+        return None
+    try:
+        return first, fcntl.fcntl(2, fcntl.F_DUPFD_CLOEXEC, 3)
+    except OSError:
+        os.close(first)
+        return None
 
 
 @contextlib.contextmanager
@@ -61,9 +81,8 @@ def _captured() -> Iterator[list[str]]:
     """:func:`captured_output`, without its lock."""
     lines: list[str] = []
     _flush()
-    try:
-        saved = (os.dup(1), os.dup(2))
-    except OSError:
+    saved = _saved_descriptors()
+    if saved is None:
         yield lines
         return
     python = io.StringIO()

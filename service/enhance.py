@@ -151,6 +151,7 @@ class ReadAhead:
         self._prepared: threading.Thread | None = None
         if prepare:
             self.prepare()
+        self._ended = threading.Event()  # (see wait)
         context = contextvars.copy_context()  # (the caller's, e.g. NumPy's error state)
         self._thread = threading.Thread(
             target=context.run, args=(self._run,), name="depict-read-ahead", daemon=True
@@ -171,9 +172,15 @@ class ReadAhead:
             self._frame = read_for(self.path, self._read, self._write)
         except BaseException as exc:  # (raised again by frame(), on the caller's thread)
             self._error = exc
+        finally:
+            self._ended.set()
 
     def wait(self) -> None:
-        """Until the read and Numba's start-up have ended."""
+        """Until the read and Numba's start-up have ended. Interrupted (Ctrl-C), it may be
+        called again: it waits on an event, as a thread's ``join`` cut short by a signal in
+        Python 3.11 later returns at once while the thread still runs (and the read still
+        points the terminal elsewhere: :mod:`gbuffer.capture`)."""
+        self._ended.wait()
         self._thread.join()
         if self._prepared is not None:
             self._prepared.join()

@@ -7,6 +7,7 @@ found by the ``request_id`` a client got back in its problem answer.
 
 from __future__ import annotations
 
+import contextlib
 import contextvars
 import json
 import logging
@@ -80,6 +81,8 @@ def end_process(code: int) -> NoReturn:
     mp_util = sys.modules.get("multiprocessing.util")
     if mp_util is not None:
         mp_util._exit_function()  # (what multiprocessing registers with atexit)
-    sys.stdout.flush()
-    sys.stderr.flush()
+    for stream in (sys.stdout, sys.stderr):  # (None where Python started without one)
+        if stream is not None:
+            with contextlib.suppress(OSError):  # a closed pipe, a full disk: nothing to add
+                stream.flush()
     os._exit(code)

@@ -4,7 +4,10 @@ descriptors and real threads."""
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
+from pathlib import Path
 
 from gbuffer.capture import captured_output
 
@@ -59,3 +62,36 @@ def test_captures_on_two_threads_take_turns_and_give_the_terminal_back() -> None
         os.close(saved[1])
     assert got == {"first": ["first"], "second": ["second"]}
     assert after == before
+
+
+CLOSED_STDERR = """
+import os, threading
+from gbuffer.capture import captured_output
+os.close(2)
+stdout = os.fstat(1)
+opened = []
+def open_meanwhile():  # (a file another thread opens while the capture runs: an output)
+    opened.append(os.open(os.devnull, os.O_WRONLY))
+with captured_output() as lines:
+    thread = threading.Thread(target=open_meanwhile)
+    thread.start()
+    thread.join()
+    os.write(1, b"said meanwhile\\n")
+after = os.fstat(1)
+same = (after.st_dev, after.st_ino) == (stdout.st_dev, stdout.st_ino)
+kept = os.fstat(opened[0]).st_ino == os.stat(os.devnull).st_ino
+print("stdout kept" if same else "stdout moved", "file kept" if kept else "file moved")
+"""
+
+
+def test_a_closed_descriptor_is_not_captured(tmp_path: Path) -> None:
+    """With descriptor 2 closed (``depict ... 2>&-``), a capture left the process's stdout in its
+    temporary file (its saved copy of descriptor 1 took number 2, which it then pointed at that
+    file), and a file another thread opened meanwhile could be given that number and be taken
+    over. Now a closed descriptor leaves the capture off: stdout is the process's throughout
+    (the line said during it reaches it) and the other file is untouched."""
+    run = subprocess.run(
+        [sys.executable, "-c", CLOSED_STDERR], capture_output=True, text=True, cwd=tmp_path
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.splitlines() == ["said meanwhile", "stdout kept file kept"]

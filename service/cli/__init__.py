@@ -25,7 +25,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from service import allocator
-from service.cli.args import error_line, fail
+from service.cli.args import drop_stdout, error_line, fail
 from service.cli.parser import build_parser
 from service.logs import end_process
 from service.signals import sigint_held
@@ -76,15 +76,26 @@ def _catch_stops(args: argparse.Namespace, replaced: dict[int, Any]) -> None:
             signal.signal(each, _stop)
 
 
-def _drop_stdout() -> None:
-    """Point standard output at /dev/null: what is still buffered for a closed pipe is let go
-    instead of failing again as the process ends."""
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    os.dup2(devnull, sys.stdout.fileno())
-    os.close(devnull)
+def _standard_streams() -> None:
+    """Open /dev/null on descriptors 0, 1 and 2 where they are closed (``depict ... >&-``), and
+    give Python the streams it then lacks: otherwise the first files the command opens get those
+    numbers, and what is printed (or what the reader points at a temporary file while the
+    OpenEXR library decodes: :mod:`gbuffer.capture`) would land in an output being written."""
+    for fd in (0, 1, 2):
+        try:
+            os.fstat(fd)
+        except OSError:
+            opened = os.open(os.devnull, os.O_RDWR)  # (the lowest free number: this one)
+            if opened != fd:
+                os.dup2(opened, fd)
+                os.close(opened)
+    for name, fd in (("stdout", 1), ("stderr", 2)):
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, "w", closefd=False))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    _standard_streams()
     allocator.tune()
     args = build_parser().parse_args(argv)
     replaced: dict[int, Any] = {}
@@ -96,7 +107,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except _Stopped as stop:
         return 128 + stop.signum
     except BrokenPipeError:  # (``depict ops | head``: the reader has all it wanted)
-        _drop_stdout()
+        drop_stdout()
         return 128 + signal.SIGPIPE
     except Exception as exc:  # bad input, a server that refused or is down: one line
         line = error_line(exc)

@@ -4,6 +4,7 @@ standard library only, so that building the parser (``depict --help``) imports n
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -27,6 +28,33 @@ def fail(message: str) -> int:
     """One line on stderr, control characters escaped; the exit code of bad input."""
     print(f"depict: error: {printable(message)}", file=sys.stderr)
     return EXIT_USAGE
+
+
+def say(line: str) -> None:
+    """``line`` on standard output, flushed. Where that output is gone (a reader that closed its
+    pipe: ``depict enhance *.exr -o out | head -1``; a full disk) its lines stop and the command
+    goes on: that is no file's failure. A reason other than a closed pipe is said once on
+    stderr."""
+    try:
+        print(line, flush=True)
+    except OSError as exc:
+        drop_stdout()
+        if not isinstance(exc, BrokenPipeError):
+            note(f"depict: warning: standard output: {exc.strerror or exc}; its lines are dropped")
+
+
+def note(line: str) -> None:
+    """``line`` on stderr, if it can still be written."""
+    with contextlib.suppress(OSError):
+        print(line, file=sys.stderr, flush=True)
+
+
+def drop_stdout() -> None:
+    """Point standard output at /dev/null: what is still buffered for a closed pipe (or a full
+    disk) is let go instead of failing again as the process ends."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
 
 
 def error_line(exc: BaseException) -> str | None:

@@ -12,8 +12,17 @@ from typing import TYPE_CHECKING
 
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
-from gbuffer.presets import ReadOptions
-from service.cli.args import EXIT_USAGE, UsageError, error_line, fail, mapping, printable
+from gbuffer.presets import ReadOptions, find_preset
+from service.cli.args import (
+    EXIT_USAGE,
+    UsageError,
+    error_line,
+    fail,
+    mapping,
+    note,
+    printable,
+    say,
+)
 from service.enhance import ReadRequest
 
 if TYPE_CHECKING:  # the operators (and Numba) load when a pipeline is compiled
@@ -37,7 +46,9 @@ def steps(args: argparse.Namespace) -> pipeline.Pipeline | None:
 
 def read_request(args: argparse.Namespace) -> ReadRequest:
     """How ``--preset``, ``--map``, ``--normal-space``, ``--colorspace`` and ``--camera`` say
-    to read a frame."""
+    to read a frame (an unknown preset is refused here, before any file is read)."""
+    if args.preset != "auto":
+        find_preset(args.preset)
     options = ReadOptions(
         mapping=dict(mapping(args)),
         normal_space=args.normal_space,
@@ -82,11 +93,12 @@ def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
 def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> int:
     """``one(input, output)`` for every pair, in this process. A single file's failure is the
     command's (one line, exit 2); with several, a file that fails says so on one line and the
-    others go on; the exit code is 2 if any failed."""
+    others go on; the exit code is 2 if any failed. Stopped (Ctrl-C, SIGTERM) among several,
+    it says how many were enhanced before it ends."""
     if len(pairs) == 1:
         one(*pairs[0])
         return 0
-    failed = 0
+    failed = enhanced = 0
     for src, out in pairs:
         try:
             one(src, out)
@@ -96,6 +108,15 @@ def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> 
                 raise
             fail(line if src in line else f"{src}: {line}")
             failed += 1
+            continue
+        except BaseException:
+            note(f"depict: stopped: {_tally(enhanced, failed, len(pairs))}")
+            raise
+        enhanced += 1
     if failed:
-        print(f"{len(pairs) - failed} of {len(pairs)} files enhanced, {failed} failed")
+        say(_tally(enhanced, failed, len(pairs)))
     return EXIT_USAGE if failed else 0
+
+
+def _tally(enhanced: int, failed: int, count: int) -> str:
+    return f"{enhanced} of {count} files enhanced" + (f", {failed} failed" if failed else "")

@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+from collections.abc import Callable
 
 import numpy as np
 
 from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
+from service.cli.args import say
 from service.cli.common import each_file, enhance_targets, exr_name, read_request, steps, warn
-from service.enhance import ReadAhead, WriteRequest, enhance
+from service.enhance import Enhanced, ReadAhead, WriteRequest, enhance
 from service.masks import matte
 
 # The operators (and Numba) are imported by the commands that run or list them, not by
@@ -38,8 +42,11 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     ahead.prepare()
     reads: list[ReadAhead | None] = [ahead] + [None] * (len(pairs) - 1)  # each input's, started
     position = iter(range(len(pairs)))
+    held: list[BaseException] = []  # a stop that came once a file was in place (see below)
 
     def one(src: str, out: str) -> None:
+        if held:
+            raise held.pop()
         i = next(position)
 
         def read_next() -> None:  # the next input decodes while this one's result is written
@@ -52,16 +59,63 @@ def cmd_enhance(args: argparse.Namespace) -> int:
                 following.wait()
 
         started, reads[i] = reads[i], None
+
+        def reads_done() -> None:  # this input's too (stopped while it decodes)
+            if started is not None:
+                started.wait()
+            next_read_done()
+
+        before = _file_id(out)
         try:
             result = enhance(src, out, compiled, read, write, ahead=started, before_write=read_next)
         except Exception:
-            next_read_done()
+            late = _wait_through_stops(reads_done)
+            if late is not None:
+                raise late from None
             raise
-        next_read_done()
-        warn(result["read_warnings"] + result["warnings"] + exr_name(out))
-        print(f"wrote {out}")
+        except BaseException as stopped:  # Ctrl-C, SIGTERM
+            _wait_through_stops(reads_done)
+            if _file_id(out) in (before, None):
+                raise
+            held.append(stopped)  # (it came once the output was in place: that file is said)
+            say(f"wrote {out}")
+            return
+        stop = _wait_through_stops(next_read_done)
+        if stop is not None:  # this file is in place: it is said (and counted) before the stop
+            held.append(stop)
+        report(out, result)
 
     return each_file(pairs, one)
+
+
+def _file_id(path: str) -> tuple[int, int] | None:
+    """The (device, inode) of the file at ``path``, None where there is none: an output written
+    is a new file (renamed into place: :func:`gbuffer.atomic.atomic_path`)."""
+    try:
+        st = os.stat(path)
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def _wait_through_stops(wait: Callable[[], None]) -> BaseException | None:
+    """``wait()`` to the end, and the stop (Ctrl-C, SIGTERM) that came meanwhile, if any: what is
+    said after it must not go into the temporary file a decode points the terminal at
+    (:mod:`gbuffer.capture`), and the decode ends within about a second. A second stop gives up
+    waiting."""
+    try:
+        wait()
+    except BaseException as stop:
+        with contextlib.suppress(BaseException):
+            wait()
+        return stop
+    return None
+
+
+def report(out: str, result: Enhanced) -> None:
+    """What ``depict enhance`` says of a file it wrote: its warnings, then ``wrote OUT``."""
+    warn(result["read_warnings"] + result["warnings"] + exr_name(out))
+    say(f"wrote {out}")
 
 
 def cmd_preview(args: argparse.Namespace) -> int:

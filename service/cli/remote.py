@@ -15,7 +15,7 @@ from service.cli.analysis import (
     print_score,
     score_options,
 )
-from service.cli.args import UsageError, mapping
+from service.cli.args import UsageError, mapping, say
 from service.cli.common import each_file, enhance_targets, exr_name, steps, warn
 from service.client import Client
 
@@ -66,7 +66,7 @@ def enhance(args: argparse.Namespace) -> int:
                 layout=args.layout,
             )
             warn(client.warnings + exr_name(out))
-            print(f"wrote {out}")
+            say(f"wrote {out}")
 
         return each_file(pairs, one)
 

@@ -1,0 +1,178 @@
+"""What ``depict enhance`` of several files says, and where, when its standard streams are closed,
+gone or full, or when it is stopped while it reads the next input ahead (whose decode points the
+process's descriptors 1 and 2 elsewhere: :mod:`gbuffer.capture`). Real ``depict`` processes,
+real descriptors, real signals."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from gbuffer.atomic import partial_files
+
+ROOT = Path(__file__).resolve().parents[1]
+FRAME = ROOT / "tests" / "fixtures" / "blender" / "cycles_multilayer.exr"
+ENV = dict(os.environ, PYOPENGL_PLATFORM="osmesa")
+#: ``depict`` whose reads of every input but the first hold the terminal for 3 s first, as the
+#: decode of a large frame does (the capture around a call, then the read).
+SLOW_NEXT_READ = """
+import time
+import service.enhance as enhance
+from gbuffer.capture import captured_output
+read_for, seen = enhance.read_for, []
+def reading(path, *args, **kwargs):
+    if seen:
+        with captured_output():
+            time.sleep(3)
+    seen.append(path)
+    return read_for(path, *args, **kwargs)
+enhance.read_for = reading
+from service.cli import run; run()
+"""
+
+
+def _inputs(folder: Path, count: int = 3) -> list[Path]:
+    names = [folder / f"{chr(ord('a') + i)}.exr" for i in range(count)]
+    for name in names:
+        name.write_bytes(FRAME.read_bytes())
+    return names
+
+
+def _depict(*args: str | Path) -> list[str]:
+    return [sys.executable, "-m", "service.cli", *map(str, args)]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+def test_a_stop_while_the_next_input_decodes_says_the_file_written(
+    tmp_path: Path, signum: int
+) -> None:
+    """Ctrl-C (or SIGTERM) once the first output is in place, while the second input decodes:
+    the first file's ``wrote`` line was never said (it waited for that decode, which the stop
+    cut short). Now it is said once the decode gives the terminal back, with how many files
+    were enhanced."""
+    inputs, out = _inputs(tmp_path), tmp_path / "out"
+    out.mkdir()
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SLOW_NEXT_READ, "enhance", *map(str, inputs), "-o", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    deadline = time.monotonic() + 120
+    while not (out / "a.exr").exists() and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 128 + signum, stderr
+    assert stdout.splitlines() == [f"wrote {out / 'a.exr'}"]
+    assert stderr.splitlines() == ["depict: stopped: 1 of 3 files enhanced"]
+    assert sorted(p.name for p in out.iterdir()) == ["a.exr"]
+    assert not partial_files(out)
+
+
+def _alone(tmp_path: Path, src: Path) -> bytes:
+    """The output of ``depict enhance`` of ``src`` alone (it records the input's name)."""
+    folder = tmp_path / "alone"
+    folder.mkdir(exist_ok=True)
+    subprocess.run(_depict("enhance", src, "-o", folder), check=True, env=ENV, cwd=ROOT)
+    return (folder / src.name).read_bytes()
+
+
+def test_closed_standard_descriptors_take_nothing_over(tmp_path: Path) -> None:
+    """``depict enhance a b c -o out 2>&-``: the read's capture left the process's stdout in a
+    temporary file (every ``wrote`` line lost), and an output opened on a free descriptor 2
+    could be taken over by the next read's capture (the Depict renders of 1080p came out
+    truncated). Now the closed descriptors are /dev/null from the start: the lines are said and
+    the outputs are whole. With stdout closed (``>&-``), the end of the process raised a
+    traceback (Python has no ``sys.stdout`` then)."""
+    inputs, out = _inputs(tmp_path), tmp_path / "out"
+    out.mkdir()
+    run = subprocess.run(
+        _depict("enhance", *inputs, "-o", out),
+        stdout=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+        preexec_fn=lambda: os.close(2),
+    )
+    assert run.returncode == 0
+    assert run.stdout.splitlines() == [f"wrote {out / p.name}" for p in inputs]
+    want = {p.name: _alone(tmp_path, p) for p in inputs}
+    assert all((out / name).read_bytes() == data for name, data in want.items())
+    closed_out = tmp_path / "closed_out"
+    closed_out.mkdir()
+    run = subprocess.run(
+        _depict("enhance", *inputs[:2], "-o", closed_out),
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+        preexec_fn=lambda: os.close(1),
+    )
+    assert (run.returncode, run.stderr) == (0, "")
+    assert all((closed_out / p.name).read_bytes() == want[p.name] for p in inputs[:2])
+
+
+def test_a_reader_gone_or_a_full_stdout_is_no_files_failure(tmp_path: Path) -> None:
+    """``depict enhance *.exr -o out | head -1`` and ``> /dev/full``: the failed ``wrote`` line
+    was taken for the file's failure (``depict: error: a.exr: Broken pipe`` for every file,
+    exit 2 or 141, though every output was written). Now the lines stop and the files go on:
+    exit 0, every output written; a full disk is said once."""
+    inputs = _inputs(tmp_path)
+    gone, full = tmp_path / "gone", tmp_path / "full"
+    gone.mkdir()
+    full.mkdir()
+    proc = subprocess.Popen(
+        _depict("enhance", *inputs, "-o", gone),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()  # the reader is gone before the first line
+    _, stderr = proc.communicate(timeout=120)
+    assert (proc.returncode, stderr) == (0, "")
+    assert sorted(p.name for p in gone.iterdir()) == [p.name for p in inputs]
+    with open("/dev/full", "w") as dev_full:
+        run = subprocess.run(
+            _depict("enhance", *inputs, "-o", full),
+            stdout=dev_full,
+            stderr=subprocess.PIPE,
+            text=True,
+            env=ENV,
+            cwd=ROOT,
+        )
+    assert run.returncode == 0
+    assert run.stderr.splitlines() == [
+        "depict: warning: standard output: No space left on device; its lines are dropped"
+    ]
+    assert sorted(p.name for p in full.iterdir()) == [p.name for p in inputs]
+
+
+def test_an_unknown_preset_is_refused_before_any_file_is_read(tmp_path: Path) -> None:
+    """It was refused by each file's read: one line per file, then a tally."""
+    inputs, out = _inputs(tmp_path, 2), tmp_path / "out"
+    out.mkdir()
+    run = subprocess.run(
+        _depict("enhance", *inputs, "--preset", "nope", "-o", out),
+        capture_output=True,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+    )
+    assert run.returncode == 2
+    assert run.stdout == ""
+    assert len(run.stderr.splitlines()) == 1
+    assert run.stderr.startswith("depict: error: preset='nope' is not known; valid: auto, ")
+    assert not list(out.iterdir())
