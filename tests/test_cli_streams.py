@@ -176,3 +176,37 @@ def test_an_unknown_preset_is_refused_before_any_file_is_read(tmp_path: Path) ->
     assert len(run.stderr.splitlines()) == 1
     assert run.stderr.startswith("depict: error: preset='nope' is not known; valid: auto, ")
     assert not list(out.iterdir())
+
+
+#: ``depict`` that gets Ctrl-C just as its first output is renamed into place.
+STOP_AT_RENAME = """
+import os, signal
+rename, done = os.replace, []
+def replacing(a, b):
+    rename(a, b)
+    if not done:
+        done.append(b)
+        os.kill(os.getpid(), signal.SIGINT)
+os.replace = replacing
+from service.cli import run; run()
+"""
+
+
+@pytest.mark.parametrize("count", [1, 2])
+def test_a_stop_just_as_an_output_is_put_in_place_says_it(tmp_path: Path, count: int) -> None:
+    """The output is there: it is said, and the command still ends as stopped (130)."""
+    inputs, out = _inputs(tmp_path, count), tmp_path / "out"
+    out.mkdir()
+    run = subprocess.run(
+        [sys.executable, "-c", STOP_AT_RENAME, "enhance", *map(str, inputs), "-o", str(out)],
+        capture_output=True,
+        text=True,
+        env=ENV,
+        cwd=ROOT,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    assert run.returncode == 130, run.stderr
+    assert run.stdout.splitlines() == [f"wrote {out / 'a.exr'}"]
+    stopped = [f"depict: stopped: 1 of {count} files enhanced"] if count > 1 else []
+    assert run.stderr.splitlines() == stopped
+    assert sorted(p.name for p in out.iterdir()) == ["a.exr"]

@@ -85,7 +85,10 @@ def cmd_enhance(args: argparse.Namespace) -> int:
             held.append(stop)
         report(out, result)
 
-    return each_file(pairs, one)
+    code = each_file(pairs, one)
+    if held:  # (the stop came as the last file was put in place)
+        raise held.pop()
+    return code
 
 
 def _file_id(path: str) -> tuple[int, int] | None:
