@@ -48,18 +48,23 @@ def _depict(*args: str | Path) -> list[str]:
     return [sys.executable, "-m", "service.cli", *map(str, args)]
 
 
-@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize(
+    ("signum", "layout"),
+    [(signal.SIGINT, "part"), (signal.SIGTERM, "part"), (signal.SIGINT, "same")],
+)
 def test_a_stop_while_the_next_input_decodes_says_the_file_written(
-    tmp_path: Path, signum: int
+    tmp_path: Path, signum: int, layout: str
 ) -> None:
     """Ctrl-C (or SIGTERM) once the first output is in place, while the second input decodes:
     the first file's ``wrote`` line was never said (it waited for that decode, which the stop
     cut short). Now it is said once the decode gives the terminal back, with how many files
-    were enhanced."""
+    were enhanced. ``--layout same`` reads no input ahead (the second is read once the first is
+    written), and its stop line went into that read's capture."""
     inputs, out = _inputs(tmp_path), tmp_path / "out"
     out.mkdir()
+    argv = ["enhance", *map(str, inputs), "-o", str(out), "--layout", layout]
     proc = subprocess.Popen(
-        [sys.executable, "-c", SLOW_NEXT_READ, "enhance", *map(str, inputs), "-o", str(out)],
+        [sys.executable, "-c", SLOW_NEXT_READ, *argv],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
@@ -160,6 +165,25 @@ def test_a_reader_gone_or_a_full_stdout_is_no_files_failure(tmp_path: Path) -> N
     assert sorted(p.name for p in full.iterdir()) == [p.name for p in inputs]
 
 
+def test_a_reader_gone_from_both_streams_stops_no_file(tmp_path: Path) -> None:
+    """``depict enhance a b c -o out 2>&1 | head -1`` with b damaged: b's error line met the
+    closed pipe and stopped the run (exit 141, c never enhanced). Now b fails alone."""
+    inputs, out = _inputs(tmp_path), tmp_path / "out"
+    out.mkdir()
+    inputs[1].write_bytes(b"not an EXR" * 100)
+    proc = subprocess.Popen(
+        _depict("enhance", *inputs, "-o", out),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        env=ENV,
+        cwd=ROOT,
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()
+    assert proc.wait(timeout=120) == 2
+    assert sorted(p.name for p in out.iterdir()) == ["a.exr", "c.exr"]
+
+
 def test_an_unknown_preset_is_refused_before_any_file_is_read(tmp_path: Path) -> None:
     """It was refused by each file's read: one line per file, then a tally."""
     inputs, out = _inputs(tmp_path, 2), tmp_path / "out"
@@ -194,7 +218,8 @@ from service.cli import run; run()
 
 @pytest.mark.parametrize("count", [1, 2])
 def test_a_stop_just_as_an_output_is_put_in_place_says_it(tmp_path: Path, count: int) -> None:
-    """The output is there: it is said, and the command still ends as stopped (130)."""
+    """The output is there: it is said (and counted), and the command still ends as stopped
+    (130); with one file it went on to exit 0."""
     inputs, out = _inputs(tmp_path, count), tmp_path / "out"
     out.mkdir()
     run = subprocess.run(

@@ -26,7 +26,7 @@ EXIT_USAGE = 2
 
 def fail(message: str) -> int:
     """One line on stderr, control characters escaped; the exit code of bad input."""
-    print(f"depict: error: {printable(message)}", file=sys.stderr)
+    note(f"depict: error: {printable(message)}")
     return EXIT_USAGE
 
 
@@ -44,7 +44,8 @@ def say(line: str) -> None:
 
 
 def note(line: str) -> None:
-    """``line`` on stderr, if it can still be written."""
+    """``line`` on stderr, if it can still be written (a reader gone from ``2>&1 | head -1`` is
+    no reason to stop enhancing the other files)."""
     with contextlib.suppress(OSError):
         print(line, file=sys.stderr, flush=True)
 

@@ -5,7 +5,6 @@ this module: see :mod:`service.cli.args`.)"""
 from __future__ import annotations
 
 import argparse
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -47,8 +46,7 @@ def steps(args: argparse.Namespace) -> pipeline.Pipeline | None:
 def read_request(args: argparse.Namespace) -> ReadRequest:
     """How ``--preset``, ``--map``, ``--normal-space``, ``--colorspace`` and ``--camera`` say
     to read a frame (an unknown preset is refused here, before any file is read)."""
-    if args.preset != "auto":
-        find_preset(args.preset)
+    check_preset(args)
     options = ReadOptions(
         mapping=dict(mapping(args)),
         normal_space=args.normal_space,
@@ -58,10 +56,16 @@ def read_request(args: argparse.Namespace) -> ReadRequest:
     return ReadRequest(args.preset, camera, options)
 
 
+def check_preset(args: argparse.Namespace) -> None:
+    """A FrameError naming the valid presets where ``--preset`` is none of them."""
+    if args.preset != "auto":
+        find_preset(args.preset)
+
+
 def warn(messages: list[str]) -> None:
     """Notes for the user (e.g. NaN/Inf pixels read as holes), one line each on stderr."""
     for message in messages:
-        print(f"depict: warning: {printable(message)}", file=sys.stderr)
+        note(f"depict: warning: {printable(message)}")
 
 
 def exr_name(out: str) -> list[str]:
@@ -90,32 +94,47 @@ def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
     return pairs
 
 
+class StoppedAfter(BaseException):
+    """A stop (Ctrl-C, SIGTERM: :attr:`stop`) that came once a file was in place and said:
+    :func:`each_file` counts the file, then stops."""
+
+    def __init__(self, stop: BaseException) -> None:
+        super().__init__(stop)
+        self.stop = stop
+
+
 def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> int:
     """``one(input, output)`` for every pair, in this process. A single file's failure is the
     command's (one line, exit 2); with several, a file that fails says so on one line and the
     others go on; the exit code is 2 if any failed. Stopped (Ctrl-C, SIGTERM) among several,
     it says how many were enhanced before it ends."""
-    if len(pairs) == 1:
-        one(*pairs[0])
-        return 0
     failed = enhanced = 0
     for src, out in pairs:
         try:
             one(src, out)
         except Exception as exc:
             line = error_line(exc)
-            if line is None:
+            if line is None or len(pairs) == 1:
                 raise
             fail(line if src in line else f"{src}: {line}")
             failed += 1
             continue
+        except StoppedAfter as after:
+            enhanced += 1
+            _stopped(enhanced, failed, len(pairs))
+            raise after.stop from None
         except BaseException:
-            note(f"depict: stopped: {_tally(enhanced, failed, len(pairs))}")
+            _stopped(enhanced, failed, len(pairs))
             raise
         enhanced += 1
     if failed:
         say(_tally(enhanced, failed, len(pairs)))
     return EXIT_USAGE if failed else 0
+
+
+def _stopped(enhanced: int, failed: int, count: int) -> None:
+    if count > 1:
+        note(f"depict: stopped: {_tally(enhanced, failed, count)}")
 
 
 def _tally(enhanced: int, failed: int, count: int) -> str:

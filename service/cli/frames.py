@@ -14,7 +14,15 @@ from gbuffer.atomic import check_outputs
 from gbuffer.colorspace import View
 from gbuffer.preview import picture, write_png
 from service.cli.args import say
-from service.cli.common import each_file, enhance_targets, exr_name, read_request, steps, warn
+from service.cli.common import (
+    StoppedAfter,
+    each_file,
+    enhance_targets,
+    exr_name,
+    read_request,
+    steps,
+    warn,
+)
 from service.enhance import Enhanced, ReadAhead, WriteRequest, enhance
 from service.masks import matte
 
@@ -42,11 +50,8 @@ def cmd_enhance(args: argparse.Namespace) -> int:
     ahead.prepare()
     reads: list[ReadAhead | None] = [ahead] + [None] * (len(pairs) - 1)  # each input's, started
     position = iter(range(len(pairs)))
-    held: list[BaseException] = []  # a stop that came once a file was in place (see below)
 
     def one(src: str, out: str) -> None:
-        if held:
-            raise held.pop()
         i = next(position)
 
         def read_next() -> None:  # the next input decodes while this one's result is written
@@ -58,16 +63,19 @@ def cmd_enhance(args: argparse.Namespace) -> int:
             if following is not None:
                 following.wait()
 
-        started, reads[i] = reads[i], None
+        # this input's read: started ahead, or now (``--layout same`` reads none ahead)
+        started = reads[i] or ReadAhead(src, read, write, prepare=False)
+        reads[i] = None
 
         def reads_done() -> None:  # this input's too (stopped while it decodes)
-            if started is not None:
-                started.wait()
+            started.wait()
             next_read_done()
 
         before = _file_id(out)
+        result: Enhanced | None = None
         try:
             result = enhance(src, out, compiled, read, write, ahead=started, before_write=read_next)
+            stop = _wait_through_stops(next_read_done)
         except Exception:
             late = _wait_through_stops(reads_done)
             if late is not None:
@@ -77,18 +85,24 @@ def cmd_enhance(args: argparse.Namespace) -> int:
             _wait_through_stops(reads_done)
             if _file_id(out) in (before, None):
                 raise
-            held.append(stopped)  # (it came once the output was in place: that file is said)
-            say(f"wrote {out}")
-            return
-        stop = _wait_through_stops(next_read_done)
-        if stop is not None:  # this file is in place: it is said (and counted) before the stop
-            held.append(stop)
-        report(out, result)
+            stop = stopped  # it came once the output was in place: said, then raised
+        _said(out, result, stop)
 
-    code = each_file(pairs, one)
-    if held:  # (the stop came as the last file was put in place)
-        raise held.pop()
-    return code
+    return each_file(pairs, one)
+
+
+def _said(out: str, result: Enhanced | None, stop: BaseException | None) -> None:
+    """:func:`report` of a file in place, then the stop that came meanwhile, if any, as
+    :class:`StoppedAfter` (the file counts as enhanced)."""
+    try:
+        if result is None:
+            say(f"wrote {out}")
+        else:
+            report(out, result)
+    except BaseException as late:  # (stopped as it is said)
+        raise StoppedAfter(stop or late) from None
+    if stop is not None:
+        raise StoppedAfter(stop) from None
 
 
 def _file_id(path: str) -> tuple[int, int] | None:

@@ -16,7 +16,7 @@ from service.cli.analysis import (
     score_options,
 )
 from service.cli.args import UsageError, mapping, say
-from service.cli.common import each_file, enhance_targets, exr_name, steps, warn
+from service.cli.common import check_preset, each_file, enhance_targets, exr_name, steps, warn
 from service.client import Client
 
 
@@ -48,6 +48,7 @@ def render(args: argparse.Namespace) -> int:
 
 def enhance(args: argparse.Namespace) -> int:
     pairs = enhance_targets(args)
+    check_preset(args)
     buffers, spec = mapping(args), _spec(args)
     with Client.from_env(args.server) as client:
 
