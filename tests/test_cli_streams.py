@@ -127,6 +127,18 @@ def test_closed_standard_descriptors_take_nothing_over(tmp_path: Path) -> None:
     assert all((closed_out / p.name).read_bytes() == want[p.name] for p in inputs[:2])
 
 
+def _reader_gone(argv: list[str], stderr: int) -> tuple[int, str]:
+    """Run ``argv`` with its stdout (and, with ``stderr`` STDOUT, its stderr) to a pipe whose
+    reader is gone before the first line; the exit code and stderr (with ``stderr`` PIPE)."""
+    proc = subprocess.Popen(
+        argv, stdout=subprocess.PIPE, stderr=stderr, text=True, env=ENV, cwd=ROOT
+    )
+    assert proc.stdout is not None
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=120)
+    return proc.returncode, err or ""
+
+
 def test_a_reader_gone_or_a_full_stdout_is_no_files_failure(tmp_path: Path) -> None:
     """``depict enhance *.exr -o out | head -1`` and ``> /dev/full``: the failed ``wrote`` line
     was taken for the file's failure (``depict: error: a.exr: Broken pipe`` for every file,
@@ -136,18 +148,7 @@ def test_a_reader_gone_or_a_full_stdout_is_no_files_failure(tmp_path: Path) -> N
     gone, full = tmp_path / "gone", tmp_path / "full"
     gone.mkdir()
     full.mkdir()
-    proc = subprocess.Popen(
-        _depict("enhance", *inputs, "-o", gone),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        env=ENV,
-        cwd=ROOT,
-    )
-    assert proc.stdout is not None
-    proc.stdout.close()  # the reader is gone before the first line
-    _, stderr = proc.communicate(timeout=120)
-    assert (proc.returncode, stderr) == (0, "")
+    assert _reader_gone(_depict("enhance", *inputs, "-o", gone), subprocess.PIPE) == (0, "")
     assert sorted(p.name for p in gone.iterdir()) == [p.name for p in inputs]
     with open("/dev/full", "w") as dev_full:
         run = subprocess.run(
@@ -171,16 +172,7 @@ def test_a_reader_gone_from_both_streams_stops_no_file(tmp_path: Path) -> None:
     inputs, out = _inputs(tmp_path), tmp_path / "out"
     out.mkdir()
     inputs[1].write_bytes(b"not an EXR" * 100)
-    proc = subprocess.Popen(
-        _depict("enhance", *inputs, "-o", out),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        env=ENV,
-        cwd=ROOT,
-    )
-    assert proc.stdout is not None
-    proc.stdout.close()
-    assert proc.wait(timeout=120) == 2
+    assert _reader_gone(_depict("enhance", *inputs, "-o", out), subprocess.STDOUT)[0] == 2
     assert sorted(p.name for p in out.iterdir()) == ["a.exr", "c.exr"]
 
 
