@@ -63,9 +63,7 @@ def _saved_descriptors() -> tuple[int, int] | None:
     cannot be copied). A closed one is never captured: the number is free for any file the
     process opens meanwhile (the output another thread is writing), which pointing it at the
     temporary file and back would take over."""
-    try:
-        for fd in (1, 2):
-            os.fstat(fd)
+    try:  # (a closed descriptor cannot be copied: EBADF)
         first = fcntl.fcntl(1, fcntl.F_DUPFD_CLOEXEC, 3)
     except OSError:
         return None

@@ -99,6 +99,8 @@ def _said(out: str, result: Enhanced | None, stop: BaseException | None) -> None
             say(f"wrote {out}")
         else:
             report(out, result)
+    except Exception:
+        raise
     except BaseException as late:  # (stopped as it is said)
         raise StoppedAfter(stop or late) from None
     if stop is not None:
