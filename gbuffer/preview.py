@@ -38,10 +38,14 @@ RADIANCE = {
 
 def srgb_encode(linear: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     """Linear radiance -> sRGB-encoded float in [0, 1] (IEC 61966-2-1), after ``2**exposure``."""
-    x = np.clip(linear * np.float32(2.0**exposure), 0.0, 1.0).astype(np.float32)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055).astype(
-        np.float32
-    )
+    x = np.asarray(np.clip(linear * np.float32(2.0**exposure), 0.0, 1.0), np.float32)
+    # (the same float32 operations as np.where(x <= 0.0031308, 12.92 x, 1.055 x^(1/2.4) − 0.055),
+    # in place: half the time of a preview's picture)
+    out = np.power(x, 1 / 2.4, out=np.empty(x.shape, np.float32))
+    out *= np.float32(1.055)
+    out -= np.float32(0.055)
+    np.multiply(x, np.float32(12.92), out=out, where=x <= 0.0031308)
+    return out
 
 
 #: Depict's own exposure and clip (:func:`srgb_encode`), the default of :func:`picture`.
@@ -129,8 +133,9 @@ def picture(
     return _grey_or_signed(channels[names[0]])
 
 
-def write_png(rgb: np.ndarray, path: str | Path) -> None:
-    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG (OpenImageIO), atomically."""
+def write_png(rgb: np.ndarray, path: str | Path, level: int | None = None) -> None:
+    """Write an (H, W, 3) float picture in [0, 1] as an 8-bit PNG (OpenImageIO), atomically;
+    ``level``: zlib's compression level, 1 (fastest) … 9 (None: OpenImageIO's default, 6)."""
     import OpenImageIO as oiio  # (its 17 MiB and 30 ms only where a PNG is written)
 
     img = np.ascontiguousarray((np.clip(rgb, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8))
@@ -141,6 +146,8 @@ def write_png(rgb: np.ndarray, path: str | Path) -> None:
     with atomic_path(path) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         spec = oiio.ImageSpec(img.shape[1], img.shape[0], img.shape[2], oiio.UINT8)
+        if level is not None:
+            spec.attribute("png:compressionLevel", int(level))
         if out is None or not out.open(str(tmp), spec):
             raise FrameError(f"cannot write PNG {path}: {oiio.geterror()}")
         ok = out.write_image(img)

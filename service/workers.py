@@ -8,6 +8,10 @@ killed at any instant cannot leave another one stuck). Its life:
    (:func:`service.http.worker.warm_worker`), then says ``ready``. Only then is it handed a job,
    so a time limit never interrupts an import or an initialisation half-way.
 2. **jobs**: it receives ``(function, args, request id)``, runs it and sends the result back.
+   Once no job has come for :data:`IDLE_S` seconds it runs the pool's ``on_idle`` function (the HTTP
+   workers give their freed memory back to the system then, not after every job: jobs that come
+   one after the other, such as the viewer's previews while a slider moves, reuse it without
+   faulting it in again).
 3. **end**: at the job's deadline the server kills it (``SIGKILL``) rather than interrupting the
    job inside the process; when it dies on its own (a signal, the out-of-memory killer) the job
    on it is answered with what happened; after an unexpected error it is retired, in case it was
@@ -48,6 +52,8 @@ UNHEALTHY_AFTER = 3
 BACKOFF_S = (0.0, 0.5, 1.0, 2.0, 5.0, 10.0)
 #: How often idle workers are checked for a death that no job noticed.
 WATCH_S = 0.5
+#: Seconds without a job after which a worker runs the pool's ``on_idle`` function.
+IDLE_S = 1.0
 
 
 def describe_exit(code: int | None) -> str:
@@ -67,12 +73,17 @@ def describe_exit(code: int | None) -> str:
 # -- inside a worker ---------------------------------------------------------------------------
 
 
-def worker_process(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
+def worker_process(
+    conn: Connection,
+    log_level: str,
+    warm: Callable[[], dict[str, Any]],
+    on_idle: Callable[[], None] | None = None,
+) -> None:
     """A worker process: :func:`worker_main`, then the process ends without the interpreter's
     teardown (nothing is left to write; the teardown would print the OpenImageIO binding's
     "nanobind: leaked ..." lines, some 40 of them per worker, on every server stop)."""
     try:
-        worker_main(conn, log_level, warm)
+        worker_main(conn, log_level, warm, on_idle)
         code = 0
     except BaseException:  # a fault of the loop itself: logged; the server replaces the worker
         log.exception("worker failed", extra={"pid": os.getpid()})
@@ -80,8 +91,14 @@ def worker_process(conn: Connection, log_level: str, warm: Callable[[], dict[str
     end_process(code)
 
 
-def worker_main(conn: Connection, log_level: str, warm: Callable[[], dict[str, Any]]) -> None:
-    """The worker's loop: warm up, say ready, then run jobs until the pipe closes."""
+def worker_main(
+    conn: Connection,
+    log_level: str,
+    warm: Callable[[], dict[str, Any]],
+    on_idle: Callable[[], None] | None = None,
+) -> None:
+    """The worker's loop: warm up, say ready, then run jobs until the pipe closes; ``on_idle``
+    each time no job has come for :data:`IDLE_S` seconds (once per pause)."""
     configure_logging(log_level)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # ^C is for the server, which stops the pool
     try:
@@ -93,6 +110,8 @@ def worker_main(conn: Connection, log_level: str, warm: Callable[[], dict[str, A
     conn.send(("ready", info))
     while True:
         try:
+            if on_idle is not None and not conn.poll(IDLE_S):
+                on_idle()
             message = conn.recv()
         except (EOFError, OSError):  # the server went away
             return
@@ -169,9 +188,11 @@ class WorkerPool:
         log_level: str = "info",
         start_timeout: float = START_TIMEOUT_S,
         on_replace: Callable[[str], None] | None = None,
+        on_idle: Callable[[], None] | None = None,
     ) -> None:
         self.size = size
         self.on_replace = on_replace
+        self.on_idle = on_idle  # (run in the workers: a module-level function)
         self.warm = warm
         self.log_level = log_level
         self.start_timeout = start_timeout
@@ -229,7 +250,7 @@ class WorkerPool:
         here, there = self.context.Pipe(duplex=True)
         process = self.context.Process(
             target=worker_process,
-            args=(there, self.log_level, self.warm),
+            args=(there, self.log_level, self.warm, self.on_idle),
             name="depict-worker",
             daemon=True,
         )

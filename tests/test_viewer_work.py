@@ -3,17 +3,22 @@ look tuned on it carries to the full frame), and the colour space read from the 
 
 from __future__ import annotations
 
+import os
 import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
+from PIL import Image
 
 from gbuffer.frame import Frame
 from gbuffer.io import read
+from gbuffer.preview import write_png
 from gbuffer.render import load_mesh, render
 from service import pipeline
+from service.enhance import ReadRequest
 from service.registry import Context
+from service.viewer import work
 from service.viewer.work import colour_space, downscale, shrink_factor
 from tests import exr_factory
 from tests.live_server import ROOT
@@ -102,3 +107,49 @@ def test_colour_space_from_the_header(
 ) -> None:
     path = exr_factory.write_raw_exr(tmp_path / "c.exr", {"Y": np.ones((4, 4), np.float32)}, extra)
     assert expected in colour_space(str(path))
+
+
+def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(sphere: Path, tmp_path: Path) -> None:
+    """Every slider move previews the same frame: its shrunk copy is read from the frame's
+    folder once per worker, read-only; a preview leaves it as it was, a file written again is
+    read again, and only the last files read are kept."""
+    folder = tmp_path / "frame"
+    folder.mkdir()
+    (folder / "in.exr").write_bytes(sphere.read_bytes())
+    steps = pipeline.compile([{"op": "radiance_scaling", "params": {"gamma": 3.0}}])
+
+    def preview() -> dict[str, object]:
+        return work.preview_job(str(folder), 2, steps, ReadRequest(), str(tmp_path), 0.0, True)
+
+    first = preview()
+    small, _ = work._small(folder, 2, ReadRequest())
+    assert work._small(folder, 2, ReadRequest())[0] is small
+    beauty = small.buffers["beauty"].copy()
+    assert not any(a.flags.writeable for a in small.buffers.values())
+    again = preview()
+    assert again["image"] == first["image"] and again["score"] == first["score"]
+    assert np.array_equal(small.buffers["beauty"], beauty)
+    pickled = folder / "small_2.pkl"
+    pickled.write_bytes(pickled.read_bytes())  # written again: another time
+    os.utime(pickled, ns=(1, 1))
+    assert work._small(folder, 2, ReadRequest())[0] is not small
+    for i in range(work.KEEP_LOADED):  # other files read since: the frame's is let go
+        other = tmp_path / f"other{i}.pkl"
+        other.write_bytes(pickled.read_bytes())
+        work._load(other)
+    assert pickled not in work._loaded
+
+
+def test_the_viewers_pictures_are_quick_pngs_of_the_same_pixels(tmp_path: Path) -> None:
+    """Pictures for the browser are compressed at zlib's fastest level: the same pixels as
+    OpenImageIO's default level, in a larger file."""
+    ramp = np.linspace(0.0, 1.0, 320 * 240 * 3, dtype=np.float32).reshape(240, 320, 3)
+    noisy = np.clip(ramp + np.random.default_rng(0).normal(0, 0.05, ramp.shape), 0, 1)
+    quick, default = tmp_path / "quick.png", tmp_path / "default.png"
+    write_png(noisy, quick, work.PNG_LEVEL)
+    write_png(noisy, default)
+    assert np.array_equal(np.asarray(Image.open(quick)), np.asarray(Image.open(default)))
+    assert (
+        quick.read_bytes() != default.read_bytes()
+    )  # (one encoder: the same level, the same bytes)
+    assert quick.stat().st_size > default.stat().st_size

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from service.http.worker import run_job, warm_worker
+from service.http.worker import give_back_memory, run_job, warm_worker
 from service.metrics import Metrics
 from service.problems import Problem
 from service.workers import Outcome, WorkerPool
@@ -40,7 +40,9 @@ class JobPool:
         self.metrics = metrics
         self.active = 0  # admitted jobs not finished (waiting or running)
         self.recent_s = 1.0  # running mean of job times, for Retry-After
-        self.pool = WorkerPool(workers, warm_worker, log_level, on_replace=self._replaced)
+        self.pool = WorkerPool(
+            workers, warm_worker, log_level, on_replace=self._replaced, on_idle=give_back_memory
+        )
 
     def _replaced(self, cause: str) -> None:
         if self.metrics is not None:

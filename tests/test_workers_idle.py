@@ -1,0 +1,121 @@
+"""A worker process runs its pool's ``on_idle`` function in its pauses, never between jobs that
+wait for it (:func:`service.workers.worker_main`): the HTTP workers give their memory back then
+(:func:`service.http.worker.give_back_memory`), so that jobs coming one after the other, as the
+viewer's previews while a slider moves, reuse it instead of faulting it in again."""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import psutil
+import pytest
+
+from service import workers
+from service.http.worker import give_back_memory
+
+LOG = "DEPICT_TEST_IDLE_LOG"
+
+
+def warm() -> dict[str, Any]:
+    return {}
+
+
+def on_idle() -> None:
+    with open(os.environ[LOG], "a") as f:
+        f.write("idle\n")
+
+
+def hold(mib: int) -> dict[str, Any]:
+    """A job that touches ``mib`` MiB in blocks a heap keeps (below the mmap threshold) and
+    frees them."""
+    from service import allocator
+
+    allocator.tune()
+    blocks = [bytearray(8 << 20) for _ in range(mib // 8)]
+    for block in blocks:
+        block[::4096] = b"x" * len(block[::4096])
+    del blocks
+    return {"pid": os.getpid()}
+
+
+def pauses(path: Path) -> int:
+    return len(path.read_text().splitlines()) if path.exists() else 0
+
+
+def wait_for(what: str, check: Any, timeout: float = 60.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not check():
+        assert time.monotonic() < deadline, f"timed out waiting for {what}"
+        time.sleep(0.05)
+
+
+@pytest.fixture
+def worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Any, Path]]:
+    """A real worker process (spawned as the pool spawns them) and the file its pauses go to."""
+    log = tmp_path / "idle.log"
+    monkeypatch.setenv(LOG, str(log))
+    context = multiprocessing.get_context("spawn")
+    here, there = context.Pipe(duplex=True)
+    process = context.Process(
+        target=workers.worker_process, args=(there, "warning", warm, on_idle), daemon=True
+    )
+    process.start()
+    there.close()
+    try:
+        assert here.recv()[0] == "ready"
+        yield here, log
+    finally:
+        here.send(None)
+        process.join(30)
+        if process.is_alive():
+            process.kill()
+
+
+def test_on_idle_runs_once_a_pause_and_never_between_waiting_jobs(worker: tuple[Any, Path]) -> None:
+    conn, log = worker
+    wait_for("the pause after the start", lambda: pauses(log) == 1)
+    for _ in range(3):  # three jobs waiting for the worker at once: no pause between them
+        conn.send((hold, (64,), "request"))
+    results = [conn.recv() for _ in range(3)]
+    assert all(r["pid"] == results[0]["pid"] for r in results)
+    assert pauses(log) == 1
+    wait_for("the pause after the jobs", lambda: pauses(log) == 2)
+    time.sleep(3 * workers.IDLE_S)
+    assert pauses(log) == 2  # once a pause, not every IDLE_S
+
+
+def test_the_memory_of_a_job_is_given_back_in_the_next_pause(tmp_path: Path) -> None:
+    """The HTTP workers' ``on_idle``: the heap a job left (kept for the next job) goes back to
+    the system in the pause."""
+    context = multiprocessing.get_context("spawn")
+    here, there = context.Pipe(duplex=True)
+    process = context.Process(
+        target=workers.worker_process,
+        args=(there, "warning", warm, give_back_memory),
+        daemon=True,
+    )
+    process.start()
+    there.close()
+    try:
+        assert here.recv()[0] == "ready"
+        child = psutil.Process(process.pid)
+        time.sleep(2 * workers.IDLE_S)  # (its first pause: what the start left, given back)
+        before = child.memory_info().rss
+        here.send((hold, (256,), "request"))
+        here.recv()
+        peak = int(Path(f"/proc/{process.pid}/status").read_text().split("VmHWM:")[1].split()[0])
+        assert peak * 1024 > before + (200 << 20)  # the job did hold its 256 MiB
+        wait_for(
+            "the job's memory given back",
+            lambda: child.memory_info().rss < before + (32 << 20),
+        )
+    finally:
+        here.send(None)
+        process.join(30)
+        if process.is_alive():
+            process.kill()
