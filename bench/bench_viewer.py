@@ -4,8 +4,8 @@ Run: ``.venv/bin/python -m bench.bench_viewer``. A canonical 1920x1080 G-buffer 
 examples/spot.obj) is loaded into the viewer (``/ui/`` of a real ``depict serve``, one worker) in
 Debian's Chromium through Playwright, with the default pipeline (Radiance Scaling). Then, 10
 times, the γ slider moves and the time until the page shows the new preview is measured: the
-page's debounce (40 ms), the request, the job on the worker (the pipeline on the 960x540 copy,
-its PNG, the congruence score), the answer and its display. Also the preview
+request (asked at once: no preview is in flight), the job on the worker (the pipeline on the
+960x540 copy, its PNG, the congruence score), the answer and its display. Also the preview
 request alone (no browser) at several preview heights, with the worker's share; and how far
 each operator on the half-size copy is from its full-resolution result shrunk to half size.
 """

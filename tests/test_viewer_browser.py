@@ -209,3 +209,52 @@ def test_a_cryptomatte_object_as_a_steps_mask(page: Any, server: Server) -> None
     wait_preview(page, count)
     assert page.evaluate(AFTER_HASH) != whole
     assert "error" not in page.get_attribute("#status", "class")
+
+
+def test_a_dragged_slider_previews_while_it_moves_and_ends_on_its_last_value(
+    page: Any, server: Server
+) -> None:
+    """One preview in flight at a time, each answered and shown; the settings changed while it
+    ran are asked for as soon as it is back, so the last move is the last preview."""
+    page.add_init_script(f"sessionStorage.setItem('depict.key', '{KEY}')")
+    page.goto(f"{server.url}/ui/")
+    page.wait_for_selector("#add-op option[value=radiance_scaling]", state="attached")
+    page.set_input_files("#file", str(BLENDER))
+    wait_preview(page, 0)
+    asked: list[float] = []
+    answered: list[int] = []
+    in_flight = [0, 0]  # now, most
+
+    def on_request(request: Any) -> None:
+        if request.url.endswith("/preview"):
+            (step,) = json.loads(request.post_data)["pipeline"]["steps"]
+            asked.append(step.get("params", {}).get("gamma", 1.0))  # (absent: the default)
+            in_flight[0] += 1
+            in_flight[1] = max(in_flight)
+
+    def on_end(request: Any, ok: int) -> None:
+        if request.url.endswith("/preview"):
+            answered.append(ok)
+            in_flight[0] -= 1
+
+    page.on("request", on_request)
+    page.on("requestfinished", lambda r: on_end(r, 1))
+    page.on("requestfailed", lambda r: on_end(r, 0))
+    count = previews(page)
+    gamma = page.locator('li[data-op="radiance_scaling"] [data-param="gamma"]')
+    moves = [str(300 + 40 * i) for i in range(12)]  # a drag: one input event per position
+    for value in moves:
+        gamma.locator("input[type=range]").fill(value)
+    last = float(gamma.locator("input[type=number]").input_value())
+    page.wait_for_function(
+        f"Number(document.body.dataset.previews || 0) >= {count} + 2", timeout=120_000
+    )
+    deadline = time.monotonic() + 120
+    while not (asked and asked[-1] == last and len(answered) == len(asked)):
+        assert time.monotonic() < deadline, (asked, answered, last)
+        page.wait_for_timeout(100)
+    page.wait_for_timeout(1000)  # nothing more is asked for
+    assert asked[-1] == last and len(asked) >= 2, asked  # (more when previews are quicker)
+    assert answered == [1] * len(asked)  # none aborted
+    assert in_flight == [0, 1]
+    wait_preview(page, count + len(asked) - 1)  # each shown

@@ -129,15 +129,29 @@ function previewHeight() {
   return Math.min(Number($("height").value), state.frame ? state.frame.info.size[1] : 1e9);
 }
 
-// ---- previews: one in flight, the superseded one aborted ----------------------------------
+// ---- previews: one in flight; what changed meanwhile is asked for as soon as it is back ----
+// (no delay before the first: a slider shows its effect while it moves, at the worker's pace)
 
 let timer = null;
-let controller = null;
+let running = null;  // the preview in flight
+let again = false;  // something changed since it was asked for
 
-function schedulePreview(delay = 40) {
+function schedulePreview(delay = 0) {
   clearTimeout(timer);
-  timer = setTimeout(preview, delay);
+  timer = setTimeout(nextPreview, delay);
   updateCommands();
+}
+
+function nextPreview() {
+  if (running) {
+    again = true;
+    return;
+  }
+  again = false;
+  running = preview().finally(() => {
+    running = null;
+    if (again) nextPreview();
+  });
 }
 
 function b64blob(b64) {
@@ -147,9 +161,7 @@ function b64blob(b64) {
 
 async function preview() {
   if (!state.frame || !state.steps.length) return;
-  if (controller) controller.abort();
-  controller = new AbortController();
-  const mine = controller;
+  const frame = state.frame;
   const started = performance.now();
   setStatus("computing preview…", "busy");
   $("progress").hidden = false;
@@ -158,11 +170,11 @@ async function preview() {
       pipeline: pipeline(), height: previewHeight(), exposure: Number($("exposure").value) || 0,
       score_map: state.layer === "score_map",
     });
-    const response = await api(`/v1/frames/${state.frame.id}/preview`, {
-      method: "POST", body, signal: mine.signal, headers: { "Content-Type": "application/json" },
+    const response = await api(`/v1/frames/${frame.id}/preview`, {
+      method: "POST", body, headers: { "Content-Type": "application/json" },
     });
     const answer = await response.json();
-    if (mine !== controller) return;
+    if (frame !== state.frame) return;  // another frame was loaded meanwhile
     state.latest = answer;
     state.previewMs = performance.now() - started;
     showAfter();
@@ -171,15 +183,15 @@ async function preview() {
     setStatus(`preview ${answer.size[0]}×${answer.size[1]} in ${Math.round(state.previewMs)} ms`);
     document.body.dataset.previews = String(Number(document.body.dataset.previews || 0) + 1);
   } catch (error) {
-    if (error.name === "AbortError" || error.status === 409) return;
+    if (error.status === 409) return;  // (another client's newer preview of this frame)
     if (error.status === 429) {
       setStatus(`busy: retrying in ${error.retryAfter} s`, "busy");
-      if (mine === controller) schedulePreview(1000 * error.retryAfter);
+      schedulePreview(1000 * error.retryAfter);
       return;
     }
     setStatus(error.message, "error");
   } finally {
-    if (mine === controller) $("progress").hidden = true;
+    if (!again) $("progress").hidden = true;
   }
 }
 
