@@ -5,10 +5,11 @@ viewer's previews while a slider moves, reuse it instead of faulting it in again
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -54,26 +55,35 @@ def wait_for(what: str, check: Any, timeout: float = 60.0) -> None:
         time.sleep(0.05)
 
 
-@pytest.fixture
-def worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Any, Path]]:
-    """A real worker process (spawned as the pool spawns them) and the file its pauses go to."""
-    log = tmp_path / "idle.log"
-    monkeypatch.setenv(LOG, str(log))
+@contextlib.contextmanager
+def started(idle: Callable[[], None]) -> Iterator[tuple[Any, int]]:
+    """A real worker process (spawned as the pool spawns them) with ``idle`` as its pool's
+    ``on_idle``, once ready: its end of the pipe and its pid."""
     context = multiprocessing.get_context("spawn")
     here, there = context.Pipe(duplex=True)
     process = context.Process(
-        target=workers.worker_process, args=(there, "warning", warm, on_idle), daemon=True
+        target=workers.worker_process, args=(there, "warning", warm, idle), daemon=True
     )
     process.start()
     there.close()
     try:
         assert here.recv()[0] == "ready"
-        yield here, log
+        assert process.pid is not None
+        yield here, process.pid
     finally:
         here.send(None)
         process.join(30)
         if process.is_alive():
             process.kill()
+
+
+@pytest.fixture
+def worker(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Iterator[tuple[Any, Path]]:
+    """A worker whose pauses are written to a file, and that file."""
+    log = tmp_path / "idle.log"
+    monkeypatch.setenv(LOG, str(log))
+    with started(on_idle) as (conn, _):
+        yield conn, log
 
 
 def test_on_idle_runs_once_a_pause_and_never_between_waiting_jobs(worker: tuple[Any, Path]) -> None:
@@ -89,33 +99,18 @@ def test_on_idle_runs_once_a_pause_and_never_between_waiting_jobs(worker: tuple[
     assert pauses(log) == 2  # once a pause, not every IDLE_S
 
 
-def test_the_memory_of_a_job_is_given_back_in_the_next_pause(tmp_path: Path) -> None:
+def test_the_memory_of_a_job_is_given_back_in_the_next_pause() -> None:
     """The HTTP workers' ``on_idle``: the heap a job left (kept for the next job) goes back to
     the system in the pause."""
-    context = multiprocessing.get_context("spawn")
-    here, there = context.Pipe(duplex=True)
-    process = context.Process(
-        target=workers.worker_process,
-        args=(there, "warning", warm, give_back_memory),
-        daemon=True,
-    )
-    process.start()
-    there.close()
-    try:
-        assert here.recv()[0] == "ready"
-        child = psutil.Process(process.pid)
+    with started(give_back_memory) as (conn, pid):
+        child = psutil.Process(pid)
         time.sleep(2 * workers.IDLE_S)  # (its first pause: what the start left, given back)
         before = child.memory_info().rss
-        here.send((hold, (256,), "request"))
-        here.recv()
-        peak = int(Path(f"/proc/{process.pid}/status").read_text().split("VmHWM:")[1].split()[0])
+        conn.send((hold, (256,), "request"))
+        conn.recv()
+        peak = int(Path(f"/proc/{pid}/status").read_text().split("VmHWM:")[1].split()[0])
         assert peak * 1024 > before + (200 << 20)  # the job did hold its 256 MiB
         wait_for(
             "the job's memory given back",
             lambda: child.memory_info().rss < before + (32 << 20),
         )
-    finally:
-        here.send(None)
-        process.join(30)
-        if process.is_alive():
-            process.kill()
