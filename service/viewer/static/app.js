@@ -186,6 +186,7 @@ async function preview() {
     if (error.status === 409) return;  // (another client's newer preview of this frame)
     if (error.status === 429) {
       setStatus(`busy: retrying in ${error.retryAfter} s`, "busy");
+      again = false;  // (the retry asks for the latest settings, after Retry-After)
       schedulePreview(1000 * error.retryAfter);
       return;
     }
