@@ -110,10 +110,14 @@ def worker_main(
     conn.send(("ready", info))
     while True:
         try:
-            if on_idle is not None and not conn.poll(IDLE_S):
-                on_idle()
-            message = conn.recv()
+            paused = on_idle is not None and not conn.poll(IDLE_S)
         except (EOFError, OSError):  # the server went away
+            return
+        if paused and on_idle is not None:  # (its own failure is the worker's, not the pipe's)
+            on_idle()
+        try:
+            message = conn.recv()
+        except (EOFError, OSError):
             return
         if message is None:
             return

@@ -4,6 +4,7 @@ look tuned on it carries to the full frame), and the colour space read from the 
 from __future__ import annotations
 
 import os
+import shutil
 import struct
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from gbuffer.preview import write_png
 from gbuffer.render import load_mesh, render
 from service import pipeline
 from service.enhance import ReadRequest
+from service.http.worker import give_back_memory
 from service.registry import Context
 from service.viewer import work
 from service.viewer.work import colour_space, downscale, shrink_factor
@@ -109,34 +111,59 @@ def test_colour_space_from_the_header(
     assert expected in colour_space(str(path))
 
 
-def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(sphere: Path, tmp_path: Path) -> None:
-    """Every slider move previews the same frame: its shrunk copy is read from the frame's
-    folder once per worker, read-only; a preview leaves it as it was, a file written again is
-    read again, and only the last files read are kept."""
+@pytest.fixture
+def stored(sphere: Path, tmp_path: Path) -> Path:
+    """A frame's folder as the viewer keeps it (``in.exr``)."""
     folder = tmp_path / "frame"
     folder.mkdir()
     (folder / "in.exr").write_bytes(sphere.read_bytes())
+    return folder
+
+
+def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(stored: Path, tmp_path: Path) -> None:
+    """Every slider move previews the same frame: its shrunk copy is kept by the worker that
+    made or read it, read-only; a preview leaves it as it was, a file written again is read
+    again, and only the last files read are kept."""
     steps = pipeline.compile([{"op": "radiance_scaling", "params": {"gamma": 3.0}}])
 
     def preview() -> dict[str, object]:
-        return work.preview_job(str(folder), 2, steps, ReadRequest(), str(tmp_path), 0.0, True)
+        return work.preview_job(str(stored), 2, steps, ReadRequest(), str(tmp_path), 0.0, True)
 
     first = preview()
-    small, _ = work._small(folder, 2, ReadRequest())
-    assert work._small(folder, 2, ReadRequest())[0] is small
+    small, _ = work._small(stored, 2, ReadRequest())
+    assert work._small(stored, 2, ReadRequest())[0] is small
     beauty = small.buffers["beauty"].copy()
     assert not any(a.flags.writeable for a in small.buffers.values())
     again = preview()
     assert again["image"] == first["image"] and again["score"] == first["score"]
     assert np.array_equal(small.buffers["beauty"], beauty)
-    pickled = folder / "small_2.pkl"
+    pickled = stored / "small_2.pkl"
     pickled.write_bytes(pickled.read_bytes())  # written again: another time
     os.utime(pickled, ns=(1, 1))
-    assert work._small(folder, 2, ReadRequest())[0] is not small
+    assert work._small(stored, 2, ReadRequest())[0] is not small
     for i in range(work.KEEP_LOADED):  # other files read since: the frame's is let go
         other = tmp_path / f"other{i}.pkl"
         other.write_bytes(pickled.read_bytes())
         work._load(other)
+    assert pickled not in work._loaded
+
+
+def test_what_a_worker_keeps_is_bounded_and_let_go_with_its_frame(
+    stored: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A shrunk copy larger than the bytes a worker keeps is read at every preview; a frame
+    deleted (forgotten, expired) is let go in the worker's next pause."""
+    pickled = stored / "small_2.pkl"
+    monkeypatch.setattr(work, "KEEP_LOADED_BYTES", 100_000)  # (the copy: 380 kB)
+    small, _ = work._small(stored, 2, ReadRequest())
+    assert sum(np.asarray(a).nbytes for a in small.buffers.values()) > work.KEEP_LOADED_BYTES
+    assert pickled not in work._loaded
+    assert work._small(stored, 2, ReadRequest())[0] is not small  # read again
+    monkeypatch.undo()
+    kept = work._small(stored, 2, ReadRequest())[0]
+    assert work._small(stored, 2, ReadRequest())[0] is kept
+    shutil.rmtree(stored)
+    give_back_memory()  # (the HTTP workers' pause)
     assert pickled not in work._loaded
 
 

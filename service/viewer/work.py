@@ -155,13 +155,14 @@ def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[st
     frame = read.read(folder / "in.exr")
     small = downscale(frame, factor)
     score = _score(small)
-    for path, data in (
-        (cache.with_suffix(".layers.pkl"), shrink_passthrough(frame, factor)),
-        (cache, (small, score)),
-    ):
+    layers = shrink_passthrough(frame, factor)
+    del frame  # (what the copies do not hold goes before they are written)
+    made = ((cache.with_suffix(".layers.pkl"), layers), (cache, (small, score)))
+    for path, data in made:
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
             pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
-    return _load(cache)
+        _keep(path, data)
+    return small, score
 
 
 def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
@@ -171,41 +172,65 @@ def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
     return replace(small, passthrough=passthrough)
 
 
-#: How many of the files :func:`_load` reads a worker keeps in memory (the last ones read): a
-#: frame's shrunk copy and its file's channels, each about 90 MiB for a 1080p render.
+#: What a worker keeps in memory of the files :func:`_load` reads (the last ones read): at most
+#: this many files and bytes (a 1080p render's shrunk copy for a 540-row preview and its file's
+#: channels: 95 and 89 MB; at full size, 363 and 340 MB: then the copy alone is kept). A file
+#: larger than the bytes is not kept; files deleted since (a frame forgotten or expired) are let
+#: go in the worker's next pause (:func:`forget_deleted`).
 KEEP_LOADED = 2
-_loaded: dict[Path, tuple[tuple[int, int, int], Any]] = {}
+KEEP_LOADED_BYTES = 512 << 20
+_loaded: dict[Path, tuple[tuple[int, int, int], Any, int]] = {}
 
 
 def _load(path: Path) -> Any:
     """Our own pickle ``path``, kept in this worker's memory for the next preview (every slider
-    move asks for the same frame: 95 MiB of a 1080p render's shrunk copy unpickled took 12 ms
+    move asks for the same frame: 95 MB of a 1080p render's shrunk copy unpickled took 12 ms
     a preview, more in a worker whose memory had been given back), its arrays read-only (the
     operators work on copies). A file written again (another inode, time or size) is read
     again."""
-    stat = path.stat()
-    key = (stat.st_ino, stat.st_mtime_ns, stat.st_size)
-    kept = _loaded.pop(path, None)
-    if kept is None or kept[0] != key:
-        with open(path, "rb") as f:
-            kept = (key, _read_only(pickle.load(f)))  # our own file
-    _loaded[path] = kept  # (the last one read last: the first is the oldest)
-    while len(_loaded) > KEEP_LOADED:
-        _loaded.pop(next(iter(_loaded)))
-    return kept[1]
+    kept = _loaded.get(path)
+    if kept is not None and kept[0] == _stamp(path):
+        _loaded[path] = _loaded.pop(path)  # (the last one used last: the first is the oldest)
+        return kept[1]
+    with open(path, "rb") as f:
+        value = pickle.load(f)  # our own file
+    return _keep(path, value)
 
 
-def _read_only(value: Any) -> Any:
-    """``value`` (a small frame and its score, or a passthrough) with its arrays read-only."""
-    if isinstance(value, tuple):
-        frame = value[0]
-        arrays = [*frame.buffers.values()]
-    else:
-        arrays = [c for _, channels in value.parts for c in channels.values()]
+def _keep(path: Path, value: Any) -> Any:
+    """``value``, read from or written to ``path``, read-only and kept as :func:`_load`'s
+    (within :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
+    arrays = _arrays(value)
     for array in arrays:
-        if isinstance(array, np.ndarray):
-            array.flags.writeable = False
+        array.flags.writeable = False
+    _loaded.pop(path, None)
+    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in arrays))
+    while _loaded and (
+        len(_loaded) > KEEP_LOADED or sum(k[2] for k in _loaded.values()) > KEEP_LOADED_BYTES
+    ):
+        _loaded.pop(next(iter(_loaded)))
     return value
+
+
+def forget_deleted() -> None:
+    """Let go of what :func:`_load` kept of files deleted since (a frame forgotten or expired)."""
+    for path in [p for p in _loaded if not p.exists()]:
+        del _loaded[path]
+
+
+def _stamp(path: Path) -> tuple[int, int, int]:
+    stat = path.stat()
+    return stat.st_ino, stat.st_mtime_ns, stat.st_size
+
+
+def _arrays(value: Any) -> list[np.ndarray]:
+    """The arrays of ``value``: a small frame's buffers (with its score), or a passthrough's
+    channels."""
+    if isinstance(value, tuple):
+        found = list(value[0].buffers.values())
+    else:
+        found = [c for _, channels in value.parts for c in channels.values()]
+    return [a for a in found if isinstance(a, np.ndarray)]
 
 
 def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
