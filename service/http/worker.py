@@ -69,8 +69,8 @@ def warm_worker() -> dict[str, Any]:
         return {"osmesa": False, "detail": f"cannot render with OSMesa: {exc}"}
     finally:
         # What exists now (modules, compiled kernels) lives as long as the worker: kept out of
-        # the collection after each job (:func:`run_job`), which would walk it every time
-        # (about 200 ms a job, as long as a preview's operators).
+        # the full collection of each pause (:func:`give_back_memory`), which would walk it
+        # every time (about 200 ms, as long as a preview's operators).
         gc.freeze()
     return {"osmesa": True}
 
@@ -80,8 +80,11 @@ def give_back_memory() -> None:
     to the system (glibc keeps it in the heap for reuse otherwise). Not after every job: the
     next job would fault every page in again, as one preview of the viewer does while a slider
     moves (a 960x540 preview of a 1080p render took 177 ms with it after each job, 105 ms
-    without). What the viewer kept of frames deleted since goes first."""
+    without). What the viewer kept of frames deleted since goes first, then every cycle of
+    garbage (after a job only the young ones are: a full collection walks the 50 000 objects
+    the first jobs leave for good, 8-10 ms a preview)."""
     service.viewer.work.forget_deleted()
+    gc.collect()
     with contextlib.suppress(OSError, AttributeError):
         ctypes.CDLL("libc.so.6").malloc_trim(0)
 
@@ -101,6 +104,6 @@ def run_job(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
             log.error("job failed", exc_info=exc)
         out = {"ok": False, "kind": problem.kind, "detail": problem.detail}
     finally:
-        gc.collect()  # (what the job left in cycles freed now; the memory is kept for the next)
+        gc.collect(1)  # (the job's young cycles freed now; the rest in the pause)
     out["job_s"] = time.perf_counter() - t0
     return out
