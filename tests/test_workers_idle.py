@@ -114,3 +114,38 @@ def test_the_memory_of_a_job_is_given_back_in_the_next_pause() -> None:
             "the job's memory given back",
             lambda: child.memory_info().rss < before + (32 << 20),
         )
+
+
+class _Marked:
+    """Part of a cycle of garbage; says on disk when the collector frees it."""
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.me = self
+
+    def __del__(self) -> None:
+        Path(self.path).write_text("freed")
+
+
+def cyclic_garbage(path: str, seconds: float) -> dict[str, Any]:
+    """A job that leaves a cycle of garbage among the old objects (as a long job's first
+    objects become), then runs ``seconds``."""
+    import gc
+
+    marked = _Marked(path)
+    gc.collect(1)  # (it survives two generations: the oldest one now)
+    del marked
+    time.sleep(seconds)
+    return {}
+
+
+def test_a_long_job_is_followed_by_a_full_collection(tmp_path: Path) -> None:
+    """After a job of seconds, even its oldest cycles of garbage are freed before its answer:
+    a service that never pauses does not keep them."""
+    from service.http.worker import FULL_COLLECTION_AFTER_S, run_job
+
+    marker = tmp_path / "freed"
+    with started(give_back_memory) as (conn, _):
+        conn.send((run_job, (cyclic_garbage, str(marker), FULL_COLLECTION_AFTER_S + 0.1), "r"))
+        assert conn.recv()["ok"]
+        assert marker.read_text() == "freed"

@@ -75,14 +75,19 @@ def warm_worker() -> dict[str, Any]:
     return {"osmesa": True}
 
 
+#: Jobs at least this long (seconds) are followed by a full garbage collection, which takes
+#: 8-10 ms: a preview's job takes 40-100 ms, an enhance of a 1080p frame seconds.
+FULL_COLLECTION_AFTER_S = 0.5
+
+
 def give_back_memory() -> None:
     """A worker's pause (:data:`service.workers.IDLE_S` without a job): its freed memory back
     to the system (glibc keeps it in the heap for reuse otherwise). Not after every job: the
     next job would fault every page in again, as one preview of the viewer does while a slider
     moves (a 960x540 preview of a 1080p render took 177 ms with it after each job, 105 ms
     without). What the viewer kept of frames deleted since goes first, then every cycle of
-    garbage (after a job only the young ones are: a full collection walks the 50 000 objects
-    the first jobs leave for good, 8-10 ms a preview)."""
+    garbage (after a short job only the young ones are: a full collection walks the 50 000
+    objects the first jobs leave for good, 8-10 ms a preview)."""
     service.viewer.work.forget_deleted()
     gc.collect()
     with contextlib.suppress(OSError, AttributeError):
@@ -104,6 +109,8 @@ def run_job(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
             log.error("job failed", exc_info=exc)
         out = {"ok": False, "kind": problem.kind, "detail": problem.detail}
     finally:
-        gc.collect(1)  # (the job's young cycles freed now; the rest in the pause)
+        # the job's cycles of garbage freed now: every one after a long job (a service never
+        # idle still collects them), the young ones after a short one (the rest in the pause)
+        gc.collect(2 if time.perf_counter() - t0 >= FULL_COLLECTION_AFTER_S else 1)
     out["job_s"] = time.perf_counter() - t0
     return out
