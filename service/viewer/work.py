@@ -185,9 +185,11 @@ _loaded: dict[Path, tuple[tuple[int, int, int], Any, int]] = {}
 def _load(path: Path) -> Any:
     """Our own pickle ``path``, kept in this worker's memory for the next preview (every slider
     move asks for the same frame: 95 MB of a 1080p render's shrunk copy unpickled took 12 ms
-    a preview, more in a worker whose memory had been given back), its arrays read-only (the
-    operators work on copies). A file written again (another inode, time or size) is read
-    again."""
+    a preview, more in a worker whose memory had been given back). Its arrays are shared with
+    every preview: no operator writes into the frame it is given (``tests/test_viewer_work.py``
+    holds them to it); they are not made read-only, which would make Numba compile another
+    version of every kernel that reads them. A file written again (another inode, time or
+    size) is read again."""
     kept = _loaded.get(path)
     if kept is not None and kept[0] == _stamp(path):
         _loaded[path] = _loaded.pop(path)  # (the last one used last: the first is the oldest)
@@ -198,13 +200,10 @@ def _load(path: Path) -> Any:
 
 
 def _keep(path: Path, value: Any) -> Any:
-    """``value``, read from or written to ``path``, read-only and kept as :func:`_load`'s
-    (within :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
-    arrays = _arrays(value)
-    for array in arrays:
-        array.flags.writeable = False
+    """``value``, read from or written to ``path``, kept as :func:`_load`'s (within
+    :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
     _loaded.pop(path, None)
-    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in arrays))
+    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in _arrays(value)))
     while _loaded and (
         len(_loaded) > KEEP_LOADED or sum(k[2] for k in _loaded.values()) > KEEP_LOADED_BYTES
     ):
