@@ -4,8 +4,9 @@ its job overruns, replaced when it dies.
 Each worker is a spawned process with its own pipe (no lock shared between workers, so a worker
 killed at any instant cannot leave another one stuck). Its life:
 
-1. **start**: it configures its JSON logs, imports everything a job needs and renders a tiny mesh
-   (:func:`service.http.worker.warm_worker`), then says ``ready``. Only then is it handed a job,
+1. **start**: it configures its JSON logs, imports everything a job needs, renders a tiny mesh
+   and loads the operators' kernels (:func:`service.http.worker.warm_worker`), then says
+   ``ready``. Only then is it handed a job,
    so a time limit never interrupts an import or an initialisation half-way.
 2. **jobs**: it receives ``(function, args, request id)``, runs it and sends the result back.
    Once no job has come for :data:`IDLE_S` seconds it runs the pool's ``on_idle`` function (the HTTP
