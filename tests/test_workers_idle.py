@@ -56,13 +56,15 @@ def wait_for(what: str, check: Any, timeout: float = 60.0) -> None:
 
 
 @contextlib.contextmanager
-def started(idle: Callable[[], None]) -> Iterator[tuple[Any, int]]:
+def started(
+    idle: Callable[[], None], start: Callable[[], dict[str, Any]] = warm
+) -> Iterator[tuple[Any, int]]:
     """A real worker process (spawned as the pool spawns them) with ``idle`` as its pool's
-    ``on_idle``, once ready: its end of the pipe and its pid."""
+    ``on_idle`` and ``start`` as its warm-up, once ready: its end of the pipe and its pid."""
     context = multiprocessing.get_context("spawn")
     here, there = context.Pipe(duplex=True)
     process = context.Process(
-        target=workers.worker_process, args=(there, "warning", warm, idle), daemon=True
+        target=workers.worker_process, args=(there, "warning", start, idle), daemon=True
     )
     process.start()
     there.close()
@@ -149,3 +151,44 @@ def test_a_long_job_is_followed_by_a_full_collection(tmp_path: Path) -> None:
         conn.send((run_job, (cyclic_garbage, str(marker), FULL_COLLECTION_AFTER_S + 0.1), "r"))
         assert conn.recv()["ok"]
         assert marker.read_text() == "freed"
+
+
+def kernels_loaded_by(fn: Callable[..., dict[str, Any]], *args: Any) -> dict[str, Any]:
+    """A job: ``fn(*args)``, and the Numba kernels that had no compiled version before it."""
+    import sys
+
+    from numba.core.registry import CPUDispatcher
+
+    def loaded() -> set[str]:  # (the kernels are module attributes: frozen, gc does not list them)
+        return {
+            f"{d.py_func.__module__}.{d.py_func.__qualname__}"
+            for module in list(sys.modules.values())
+            for d in list(vars(module).values())
+            if isinstance(d, CPUDispatcher) and d.overloads
+        }
+
+    before = loaded()
+    out = fn(*args)
+    return {"new": sorted(loaded() - before), "out": out}
+
+
+def test_a_fresh_http_worker_loads_no_kernel_for_its_first_preview(tmp_path: Path) -> None:
+    """The HTTP workers' warm-up runs every operator once: the first preview of a frame on a
+    fresh worker (Radiance Scaling, the congruence score, a picture) loads no kernel that the
+    warm-up did not."""
+    from service import pipeline
+    from service.enhance import ReadRequest
+    from service.http.worker import warm_worker
+    from service.viewer.work import preview_job
+    from tests import exr_factory
+
+    folder = tmp_path / "frame"
+    folder.mkdir()
+    exr_factory.write_canonical(folder / "in.exr", exr_factory.make_scene(h=240, w=320))
+    steps = pipeline.compile([{"op": "radiance_scaling"}])
+    args = (str(folder), 1, steps, ReadRequest(), str(tmp_path), 0.0, True)
+    with started(give_back_memory, warm_worker) as (conn, _):
+        conn.send((kernels_loaded_by, (preview_job, *args), "request"))
+        answer = conn.recv()
+    assert answer["out"]["score"] is not None  # (the preview ran, scored)
+    assert answer["new"] == []
