@@ -75,6 +75,13 @@ def exr_name(out: str) -> list[str]:
     return [f"{out} is written as OpenEXR (its name does not end in .exr)"]
 
 
+def report_written(out: str, warnings: list[str]) -> None:
+    """What ``depict enhance`` says of a file it wrote (here or on a server): the warnings of
+    its run and of its name, then ``wrote OUT``."""
+    warn(warnings + exr_name(out))
+    say(f"wrote {out}")
+
+
 def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
     """(input, output) of each file ``depict enhance`` names: ``-o`` is the output of a single
     input, or an existing folder that receives each input's output under the input's name.

@@ -18,10 +18,9 @@ from service.cli.common import (
     StoppedAfter,
     each_file,
     enhance_targets,
-    exr_name,
     read_request,
+    report_written,
     steps,
-    warn,
 )
 from service.enhance import Enhanced, ReadAhead, WriteRequest, enhance
 from service.masks import matte
@@ -92,13 +91,13 @@ def cmd_enhance(args: argparse.Namespace) -> int:
 
 
 def _said(out: str, result: Enhanced | None, stop: BaseException | None) -> None:
-    """:func:`report` of a file in place, then the stop that came meanwhile, if any, as
+    """:func:`report_written` of a file in place, then the stop that came meanwhile, if any, as
     :class:`StoppedAfter` (the file counts as enhanced)."""
     try:
         if result is None:
             say(f"wrote {out}")
         else:
-            report(out, result)
+            report_written(out, result["read_warnings"] + result["warnings"])
     except Exception:
         raise
     except BaseException as late:  # (stopped as it is said)
@@ -129,12 +128,6 @@ def _wait_through_stops(wait: Callable[[], None]) -> BaseException | None:
             wait()
         return stop
     return None
-
-
-def report(out: str, result: Enhanced) -> None:
-    """What ``depict enhance`` says of a file it wrote: its warnings, then ``wrote OUT``."""
-    warn(result["read_warnings"] + result["warnings"] + exr_name(out))
-    say(f"wrote {out}")
 
 
 def cmd_preview(args: argparse.Namespace) -> int:

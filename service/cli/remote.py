@@ -15,8 +15,16 @@ from service.cli.analysis import (
     print_score,
     score_options,
 )
-from service.cli.args import UsageError, mapping, say
-from service.cli.common import check_preset, each_file, enhance_targets, exr_name, steps, warn
+from service.cli.args import UsageError, mapping
+from service.cli.common import (
+    check_preset,
+    each_file,
+    enhance_targets,
+    exr_name,
+    report_written,
+    steps,
+    warn,
+)
 from service.client import Client
 
 
@@ -66,8 +74,7 @@ def enhance(args: argparse.Namespace) -> int:
                 output_layer=args.output_layer,
                 layout=args.layout,
             )
-            warn(client.warnings + exr_name(out))
-            say(f"wrote {out}")
+            report_written(out, client.warnings)
 
         return each_file(pairs, one)
 
