@@ -6,13 +6,13 @@ killed at any instant cannot leave another one stuck). Its life:
 
 1. **start**: it configures its JSON logs, imports everything a job needs, renders a tiny mesh
    and loads the operators' kernels (:func:`service.http.worker.warm_worker`), then says
-   ``ready``. Only then is it handed a job,
-   so a time limit never interrupts an import or an initialisation half-way.
+   ``ready``. Only then is it handed a job, so a time limit never interrupts an import or an
+   initialisation half-way.
 2. **jobs**: it receives ``(function, args, request id)``, runs it and sends the result back.
-   Once no job has come for :data:`IDLE_S` seconds it runs the pool's ``on_idle`` function (the HTTP
-   workers give their freed memory back to the system then, not after every job: jobs that come
-   one after the other, such as the viewer's previews while a slider moves, reuse it without
-   faulting it in again).
+   Once no job has come for :data:`IDLE_S` seconds it runs the pool's ``on_idle`` function
+   (the HTTP workers give their freed memory back to the system then, not after every job:
+   jobs that come one after the other, such as the viewer's previews while a slider moves,
+   reuse it without faulting it in again).
 3. **end**: at the job's deadline the server kills it (``SIGKILL``) rather than interrupting the
    job inside the process; when it dies on its own (a signal, the out-of-memory killer) the job
    on it is answered with what happened; after an unexpected error it is retired, in case it was
