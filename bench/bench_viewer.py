@@ -21,6 +21,7 @@ from typing import Any
 import httpx
 import numpy as np
 
+from bench.bench_end_to_end import cycles_frame
 from bench.common import HD
 from bench.viewer_browser import CHROMIUM, previews, viewer, wait_preview
 from gbuffer.frame import Frame
@@ -68,6 +69,15 @@ def api_ms(url: str, frame_id: str, height: int) -> tuple[float, float]:
     return statistics.median(trips), statistics.median(jobs)
 
 
+def upload(url: str, path: Path) -> str:
+    """The viewer's id of ``path``, sent to the server at ``url``."""
+    answer = httpx.post(
+        f"{url}/v1/frames", files={"file": (path.name, path.read_bytes())}, timeout=600
+    )
+    answer.raise_for_status()
+    return str(answer.json()["id"])
+
+
 def carried(frame: Frame, op: str) -> float:
     """How far ``op`` on the half-size copy is from its full-resolution result shrunk to half
     size, as a fraction of the operator's own effect there (mean absolute differences)."""
@@ -97,13 +107,20 @@ def main() -> None:
         median, low, high = statistics.median(times), min(times), max(times)
         print(f"  median {median:.0f} ms, min {low:.0f}, max {high:.0f}")
         print(f"  the page's last status: {statuses[-1]}")
-        frame_id = httpx.post(
-            f"{url}/v1/frames", files={"file": (frame.name, frame.read_bytes())}, timeout=600
-        ).json()["id"]
         print("preview request alone (no browser), median of 10: round trip / on the worker")
+        frame_id = upload(url, frame)
         for height in (360, 540, 720, 1080):
             trip, job = api_ms(url, frame_id, height)
             print(f"  {height:5d} px: {trip:6.0f} ms / {job:6.0f} ms")
+        cycles = cycles_frame()
+        if cycles is None:
+            print("Cycles frame skipped: no blender on PATH (apt-get install blender)")
+        else:
+            print(f"the same, {cycles.name} (Cycles, path traced: noise that PNG compresses badly)")
+            cycles_id = upload(url, cycles)
+            for height in (540, 1080):
+                trip, job = api_ms(url, cycles_id, height)
+                print(f"  {height:5d} px: {trip:6.0f} ms / {job:6.0f} ms")
     for p in work.iterdir():
         p.unlink()
     work.rmdir()

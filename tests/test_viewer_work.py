@@ -3,6 +3,7 @@ look tuned on it carries to the full frame), and the colour space read from the 
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import struct
@@ -15,7 +16,7 @@ from PIL import Image
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from gbuffer.io import read
-from gbuffer.preview import write_png
+from gbuffer.preview import quick_png, write_png
 from gbuffer.render import load_mesh, render
 from service import pipeline
 from service.enhance import ReadRequest
@@ -128,7 +129,7 @@ def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(stored: Path, tmp_
     steps = pipeline.compile([{"op": "radiance_scaling", "params": {"gamma": 3.0}}])
 
     def preview() -> dict[str, object]:
-        return work.preview_job(str(stored), 2, steps, ReadRequest(), str(tmp_path), 0.0, True)
+        return work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, True)
 
     first = preview()
     small, _ = work._small(stored, 2, ReadRequest())
@@ -168,18 +169,21 @@ def test_what_a_worker_keeps_is_bounded_and_let_go_with_its_frame(
 
 
 def test_the_viewers_pictures_are_quick_pngs_of_the_same_pixels(tmp_path: Path) -> None:
-    """Pictures for the browser are compressed at zlib's fastest level: the same pixels as
-    OpenImageIO's default level, in a larger file."""
+    """Pictures for the browser are PNGs made for speed (OpenCV, one filter, run-length
+    matching): the same pixels, in the same order of channels, as the PNG ``depict preview``
+    writes (OpenImageIO, default settings), in other bytes; written to a file, the same bytes."""
     ramp = np.linspace(0.0, 1.0, 320 * 240 * 3, dtype=np.float32).reshape(240, 320, 3)
     noisy = np.clip(ramp + np.random.default_rng(0).normal(0, 0.05, ramp.shape), 0, 1)
-    quick, default = tmp_path / "quick.png", tmp_path / "default.png"
-    write_png(noisy, quick, work.PNG_LEVEL)
+    noisy[:40, :40] = (1.0, 0.0, 0.0)  # a red corner: channels kept in order
+    default, quick = tmp_path / "default.png", tmp_path / "quick.png"
     write_png(noisy, default)
-    assert np.array_equal(np.asarray(Image.open(quick)), np.asarray(Image.open(default)))
-    assert (
-        quick.read_bytes() != default.read_bytes()
-    )  # (one encoder: the same level, the same bytes)
-    assert quick.stat().st_size > default.stat().st_size
+    encoded = quick_png(noisy)
+    assert encoded != default.read_bytes()  # (one encoder: the same bytes)
+    pixels = np.asarray(Image.open(io.BytesIO(encoded)))
+    assert pixels.shape == (240, 320, 3) and tuple(pixels[0, 0]) == (255, 0, 0)
+    assert np.array_equal(pixels, np.asarray(Image.open(default)))
+    write_png(noisy, quick, quick=True)
+    assert quick.read_bytes() == encoded
 
 
 def test_no_operator_writes_into_the_frame_it_is_given(sphere: Path) -> None:

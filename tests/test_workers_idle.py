@@ -186,7 +186,7 @@ def test_a_fresh_http_worker_loads_no_kernel_for_its_first_preview(tmp_path: Pat
     folder.mkdir()
     exr_factory.write_canonical(folder / "in.exr", exr_factory.make_scene(h=240, w=320))
     steps = pipeline.compile([{"op": "radiance_scaling"}])
-    args = (str(folder), 1, steps, ReadRequest(), str(tmp_path), 0.0, True)
+    args = (str(folder), 1, steps, ReadRequest(), 0.0, True)
     with started(give_back_memory, warm_worker) as (conn, _):
         conn.send((kernels_loaded_by, (preview_job, *args), "request"))
         answer = conn.recv()

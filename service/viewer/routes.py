@@ -251,15 +251,14 @@ async def _latest(request: Request, frame: StoredFrame) -> asyncio.Lock:
     responses=openapi_responses(400, 401, 404, 409, 422, 429, 503, 504),
 )
 async def preview(
-    frame_id: FrameId, body: PreviewRequest, request: Request, server: Server, work: Work
+    frame_id: FrameId, body: PreviewRequest, request: Request, server: Server
 ) -> dict[str, Any]:
     frame = store(server).get(frame_id)
     steps = await anyio.to_thread.run_sync(pipelines.compile, body.pipeline)
     factor = jobs.shrink_factor(frame.info["size"], body.height)
     lock = await _latest(request, frame)
     try:
-        folder, work_dir = str(frame.folder), str(work.path)
-        args = (folder, factor, steps, frame.read, work_dir, body.exposure, body.score_map)
+        args = (str(frame.folder), factor, steps, frame.read, body.exposure, body.score_map)
         with _naming(frame):
             return await server.run("preview", jobs.preview_job, *args)
     finally:

@@ -30,7 +30,7 @@ from gbuffer.errors import FrameError
 from gbuffer.exr import read_layout
 from gbuffer.frame import Frame, Passthrough
 from gbuffer.io import inspect
-from gbuffer.preview import picture, write_png
+from gbuffer.preview import picture, quick_png, write_png
 from service import pipeline
 from service.enhance import ReadRequest
 from service.registry import Context, runnable
@@ -42,11 +42,6 @@ SCORE_MAP = "score_map"
 #: would invent surfaces between the object and what lies behind it, and averaged normals are
 #: not what the operators' surface filters expect); the radiance buffers are block averages.
 _GEOMETRY = ("depth", "position", "normal", "coverage")
-
-
-#: zlib's level for the viewer's pictures: at 960x540, 12 ms and 55 kB a preview of a render of
-#: spot where OpenImageIO's default (6) took 20 ms for 40 kB; they go to a browser nearby.
-PNG_LEVEL = 1
 
 #: Parameters that may name a layer of the file (a mask, a gain map, an ARM, ...): a preview
 #: whose steps set one also loads the file's channels.
@@ -258,10 +253,9 @@ def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | 
         return None
 
 
-def _png(rgb: np.ndarray, path: Path) -> str:
-    """The picture as a base64 PNG (written to ``path`` on the way)."""
-    write_png(rgb, path, PNG_LEVEL)
-    return base64.b64encode(path.read_bytes()).decode("ascii")
+def _png(rgb: np.ndarray) -> str:
+    """The picture as a base64 PNG (:func:`gbuffer.preview.quick_png`: for the browser)."""
+    return base64.b64encode(quick_png(rgb)).decode("ascii")
 
 
 def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
@@ -277,9 +271,9 @@ def layer_job(folder: str, factor: int, layer: str, read: ReadRequest, out: str)
         score = _score(small, maps=True)
         if score is None:
             raise FrameError("the frame has no depth: no score map")
-        write_png(_score_picture(small, score), out, PNG_LEVEL)
+        write_png(_score_picture(small, score), out, quick=True)
     else:
-        write_png(picture(small, layer), out, PNG_LEVEL)
+        write_png(picture(small, layer), out, quick=True)
     return {"size": list(small.shape[::-1])}
 
 
@@ -288,7 +282,6 @@ def preview_job(
     factor: int,
     steps: pipeline.Pipeline,
     read: ReadRequest,
-    work: str,
     exposure: float,
     score_map: bool,
 ) -> dict[str, Any]:
@@ -300,7 +293,7 @@ def preview_job(
         small = _file_layers(Path(folder), factor, small)
     out, op_s = pipeline.run_timed(small, steps, Context(files=False))
     answer: dict[str, Any] = {
-        "image": _png(picture(out, "beauty", exposure), Path(work) / "after.png"),
+        "image": _png(picture(out, "beauty", exposure)),
         "size": list(out.shape[::-1]),
         "op_s": op_s,
         "score": None,
@@ -312,5 +305,5 @@ def preview_job(
         after = score_frame(out, maps=score_map, shading_norm=norm)
         answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
         if score_map:
-            answer["score_map"] = _png(_score_picture(out, after), Path(work) / "score.png")
+            answer["score_map"] = _png(_score_picture(out, after))
     return answer
