@@ -30,7 +30,7 @@ KEY = "viewer-key"
 AUTH = {"Authorization": f"Bearer {KEY}"}
 RS = {"steps": [{"op": "radiance_scaling", "params": {"gamma": 4.0}}]}
 #: A pipeline that keeps a worker busy for seconds on the example frame.
-HEAVY = {"steps": [{"op": "light_alignment"}] * 12}
+HEAVY = {"steps": [{"op": "light_alignment"}] * 48}
 
 
 @pytest.fixture(scope="module")

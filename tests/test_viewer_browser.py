@@ -24,7 +24,7 @@ CHROMIUM = Path("/usr/bin/chromium")
 BLENDER = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
 KEY = "browser-key"
 #: A preview that keeps the only worker busy for seconds.
-HEAVY = {"steps": [{"op": "light_alignment"}] * 12}
+HEAVY = {"steps": [{"op": "light_alignment"}] * 48}
 
 playwright = pytest.importorskip("playwright.sync_api", reason="the playwright package is absent")
 if not CHROMIUM.is_file():

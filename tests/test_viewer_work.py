@@ -15,7 +15,7 @@ from PIL import Image
 
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
-from gbuffer.io import read
+from gbuffer.io import inspect, read
 from gbuffer.preview import quick_png, write_png
 from gbuffer.render import load_mesh, render
 from service import pipeline
@@ -26,6 +26,9 @@ from service.viewer import work
 from service.viewer.work import colour_space, downscale, shrink_factor
 from tests import exr_factory
 from tests.live_server import ROOT
+
+#: What the viewer adds to what ``depict inspect --json`` says of a frame.
+VIEWER_KEYS = ("operators", "colour_space", "layers")
 
 
 @pytest.fixture(scope="module")
@@ -120,6 +123,38 @@ def stored(sphere: Path, tmp_path: Path) -> Path:
     folder.mkdir()
     (folder / "in.exr").write_bytes(sphere.read_bytes())
     return folder
+
+
+def test_an_uploads_inspection_makes_the_first_previews_copy(
+    stored: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The upload's inspection decodes the file once: it says what ``depict inspect`` says, and
+    the copy at the page's preview height is made from that decode, so the first picture and
+    preview read no EXR; a file that does not read as previews read it is only described."""
+    info = work.inspect_job(str(stored / "in.exr"), ReadRequest(), 48)["info"]
+    assert {k: v for k, v in info.items() if k not in VIEWER_KEYS} == inspect(stored / "in.exr")
+    assert info["layers"][-1] == work.SCORE_MAP
+    assert sorted(p.name for p in stored.glob("small_*")) == ["small_2.layers.pkl", "small_2.pkl"]
+
+    def no_read(*args: object, **kwargs: object) -> None:
+        raise AssertionError("the EXR was decoded again")
+
+    monkeypatch.setattr(ReadRequest, "read", no_read)
+    small, score = work._small(stored, 2, ReadRequest())
+    assert small.shape == (48, 64) and score is not None
+    work.layer_job(str(stored), 2, "beauty", ReadRequest(), str(stored / "beauty.png"))
+    monkeypatch.undo()
+
+    broken = exr_factory.make_scene(h=96, w=128)
+    broken.normal[...] = np.nan
+    exr_factory.write_canonical(stored / "in.exr", broken)
+    for cache in stored.glob("small_*"):
+        cache.unlink()
+    info = work.inspect_job(str(stored / "in.exr"), ReadRequest(), 48)["info"]
+    assert {k: v for k, v in info.items() if k not in VIEWER_KEYS} == inspect(stored / "in.exr")
+    assert not list(stored.glob("small_*"))
+    with pytest.raises(FrameError, match=r"N\.X"):
+        work._small(stored, 2, ReadRequest())
 
 
 def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(stored: Path, tmp_path: Path) -> None:

@@ -54,6 +54,11 @@ EXAMPLE_SIZE = (960, 720)
 
 FrameId = Annotated[str, PathParam(pattern=ID_PATTERN.strip("^$"), description="frame id")]
 Height = Annotated[int, Query(ge=16, le=4320, description="picture height, pixels")]
+#: The height of the previews the page will ask for first: their copy of the frame is made as
+#: it is inspected, from the same decode.
+PreviewHeight = Annotated[
+    int, Query(ge=16, le=4320, description="height of the first previews, pixels")
+]
 
 
 class FrameInfo(BaseModel):
@@ -113,10 +118,11 @@ def _answer(frame: StoredFrame, server: Server) -> dict[str, Any]:
     }
 
 
-async def _keep(server: Server, frame: StoredFrame) -> dict[str, Any]:
-    """Inspect the received frame on a worker, then keep it."""
+async def _keep(server: Server, frame: StoredFrame, height: int) -> dict[str, Any]:
+    """Inspect the received frame on a worker (and make its copy at the preview ``height``),
+    then keep it."""
     with _naming(frame):
-        out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read)
+        out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read, height)
     frame.info = out["info"]
     frame.info["file"] = frame.name
     frame.size_bytes = frame.source.stat().st_size
@@ -146,6 +152,7 @@ async def upload(
     camera: CameraField = None,
     map: MapField = None,
     normal_space: NormalSpace = None,
+    height: PreviewHeight = 540,
 ) -> dict[str, Any]:
     fields = await forms.read_fields(preset, camera, map, normal_space)
     limits = server.settings.limits
@@ -154,7 +161,7 @@ async def upload(
         frame = StoredFrame(frame_id, folder, name, fields.request(limits), 0)
         with _naming(frame):
             await receive_exr(file, frame.source, limits)
-        return await _keep(server, frame)
+        return await _keep(server, frame, height)
 
 
 @router.post(
@@ -163,7 +170,7 @@ async def upload(
     response_model=FrameInfo,
     responses=openapi_responses(401, 404, 413, 429, 503, 504),
 )
-async def example(server: Server) -> dict[str, Any]:
+async def example(server: Server, height: PreviewHeight = 540) -> dict[str, Any]:
     if not EXAMPLE_MESH.is_file():
         raise Problem("not-found", "this installation has no example mesh (examples/spot.obj)")
     width, height = EXAMPLE_SIZE
@@ -178,7 +185,7 @@ async def example(server: Server) -> dict[str, Any]:
     with store(server).new_folder() as (frame_id, folder):
         frame = StoredFrame(frame_id, folder, "spot.exr", read, 0)
         await server.run("render", worker.render_job, str(EXAMPLE_MESH), str(frame.source), scene)
-        return await _keep(server, frame)
+        return await _keep(server, frame, height)
 
 
 @router.get(

@@ -4,7 +4,8 @@ so within its queue and time limits): what a frame holds, pictures of its layers
 Previews run on a copy of the frame shrunk by a whole number near the ratio of its height to the
 preview height (:func:`shrink_factor`, :func:`downscale`), made once per frame and factor and
 kept in the frame's folder (``small_<factor>.pkl``, with the score of the input at that size),
-and in the memory of the worker that last read it (:func:`_load`).
+and in the memory of the worker that last read it (:func:`_load`). The copy at the page's
+preview height is made as the upload is inspected, from the same decode (:func:`inspect_job`).
 Every size of the operators is relative to the image height, so a look tuned on the preview
 carries to the full-resolution frame, which
 ``GET /v1/frames/{id}/enhanced.exr`` enhances exactly as ``depict enhance`` does
@@ -29,7 +30,7 @@ from gbuffer.atomic import atomic_path
 from gbuffer.errors import FrameError
 from gbuffer.exr import read_layout
 from gbuffer.frame import Frame, Passthrough
-from gbuffer.io import inspect
+from gbuffer.io import describe, inspect
 from gbuffer.preview import picture, quick_png, write_png
 from service import pipeline
 from service.enhance import ReadRequest
@@ -128,10 +129,20 @@ def colour_space(source: str) -> str:
     return "chromaticities " + ", ".join(f"{v:.4g}" for v in values)
 
 
-def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
+def inspect_job(source: str, read: ReadRequest, height: int) -> dict[str, Any]:
     """What ``depict inspect --json`` says of the uploaded frame, with the layers the viewer
-    can show (its buffers and the score map)."""
-    info = inspect(source, read.preset, read.camera, read.options)
+    can show (its buffers and the score map). The file is decoded once: where it reads as the
+    previews read it, its copy at the preview ``height`` is made from the same decode
+    (:func:`_small`), so that the first picture and preview do not decode it again; where it
+    does not, it is described as ``depict inspect`` describes it, with what is wrong, and its
+    previews say what that is."""
+    try:
+        frame = read.read(source)
+    except FrameError:
+        info = inspect(source, read.preset, read.camera, read.options)
+    else:
+        info = {**describe(frame), "problems": []}
+        _shrink(Path(source).parent, shrink_factor(info["size"], height), frame)
     info["operators"] = runnable(info)
     info["colour_space"] = colour_space(source)
     scored = "depth" in info["buffers"]
@@ -141,17 +152,21 @@ def inspect_job(source: str, read: ReadRequest) -> dict[str, Any]:
 
 def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[str, Any] | None]:
     """The frame shrunk by ``factor`` and the score of its beauty (None without depth), made on
-    first use and kept in the frame's folder, with the file's channels shrunk beside them
-    (:func:`_file_layers`)."""
+    first use (:func:`_shrink`) and kept in the frame's folder, with the file's channels shrunk
+    beside them (:func:`_file_layers`)."""
     cache = folder / f"small_{factor}.pkl"
     if cache.is_file():
         loaded: tuple[Frame, dict[str, Any] | None] = _load(cache)
         return loaded
-    frame = read.read(folder / "in.exr")
+    return _shrink(folder, factor, read.read(folder / "in.exr"))
+
+
+def _shrink(folder: Path, factor: int, frame: Frame) -> tuple[Frame, dict[str, Any] | None]:
+    """:func:`_small` of the frame read from the folder's file: made, written and kept."""
     small = downscale(frame, factor)
     score = _score(small)
     layers = shrink_passthrough(frame, factor)
-    del frame  # (what the copies do not hold goes before they are written)
+    cache = folder / f"small_{factor}.pkl"
     made = ((cache.with_suffix(".layers.pkl"), layers), (cache, (small, score)))
     for path, data in made:
         with atomic_path(path) as tmp, open(tmp, "wb") as f:

@@ -70,7 +70,8 @@ function upload(file) {
   const form = new FormData();
   form.append("file", file, file.name);
   form.append("preset", $("read-preset").value);
-  loadFrame({ path: "/v1/frames", options: { method: "POST", body: form } }, file.name);
+  // (the height of the first previews: their copy is made from the upload's inspection)
+  loadFrame({ path: "/v1/frames?height=" + $("height").value, options: { method: "POST", body: form } }, file.name);
 }
 
 function cameraText(info) {
@@ -294,7 +295,7 @@ function wire() {
   $("key").value = sessionStorage.getItem("depict.key") || "";
   $("key").addEventListener("change", () => { sessionStorage.setItem("depict.key", $("key").value.trim()); init(); });
   $("file").addEventListener("change", () => $("file").files[0] && upload($("file").files[0]));
-  $("example").addEventListener("click", () => loadFrame({ path: "/v1/frames/example", options: { method: "POST" } }, "the example"));
+  $("example").addEventListener("click", () => loadFrame({ path: "/v1/frames/example?height=" + $("height").value, options: { method: "POST" } }, "the example"));
   const drop = $("drop");
   drop.addEventListener("dragover", (e) => { e.preventDefault(); drop.classList.add("over"); });
   drop.addEventListener("dragleave", () => drop.classList.remove("over"));
