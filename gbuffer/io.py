@@ -27,7 +27,7 @@ frame grid) and attributes of its header:
   but the new layers (when an output replaces a channel of the primary part, e.g. a second
   enhance of a ``part`` output, that part is re-encoded with every new layer, as ``"same"``);
 * ``"sidecar"``: a file with only the outputs and the header attributes (one part, ZIP, the
-  frame's windows); the input stays where it is and holds the G-buffer.
+  input's windows and pixel aspect ratio); the input stays where it is and holds the G-buffer.
 
 A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
 canonical channel names (DESIGN.md): radiance (beauty, alpha, albedo, lobes) as HALF unless it
@@ -249,7 +249,7 @@ def _added_part(
         "lineOrder": OpenEXR.INCREASING_Y,
         "type": OpenEXR.scanlineimage,
     }
-    for key in ("dataWindow", "displayWindow", "pixelAspectRatio"):
+    for key in _WINDOWS:
         if key in primary:
             header[key] = primary[key]
     if data_window is not None and "displayWindow" not in header:
@@ -320,6 +320,10 @@ def _radiance_keys() -> set[str]:
     return keys
 
 
+#: The header attributes that place a part's pixels: a sidecar or an added part takes the input's.
+_WINDOWS = ("dataWindow", "displayWindow", "pixelAspectRatio")
+
+
 def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[str]:
     """One part, ZIP: the frame's buffers under canonical names (``buffers``) and its outputs."""
     warnings: list[str] = []
@@ -351,6 +355,10 @@ def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[s
         "lineOrder": OpenEXR.INCREASING_Y,
         "type": OpenEXR.scanlineimage,
     }
+    if frame.passthrough.parts:  # a sidecar: the input's windows as they are (the frame's own
+        # are relative to the display window's corner, which a file may put anywhere)
+        primary = frame.passthrough.parts[frame.passthrough.primary][0]
+        header.update({k: primary[k] for k in _WINDOWS if k in primary})
     cam = frame.camera
     if cam is not None:
         if cam.fov_y_deg is not None or cam.ortho_height is not None:

@@ -26,6 +26,7 @@ from service.cli import main
 from service.cli.args import DEFAULT_LAYOUT as CLI_DEFAULT
 from service.cli.args import LAYOUTS as CLI_LAYOUTS
 from service.enhance import WriteRequest, enhance_frame
+from tests import exr_factory
 from tests.test_output_layout import blender_passes, write_compressed
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -194,6 +195,28 @@ def test_sidecar_holds_only_the_new_layers(outputs: dict[str, Path]) -> None:
     for name in RESULT:
         np.testing.assert_array_equal(channels[name], same[name])
     assert outputs["sidecar"].stat().st_size < outputs["same"].stat().st_size / 2
+
+
+@pytest.mark.parametrize("layout", LAYOUTS)
+def test_every_layout_keeps_the_inputs_windows_where_the_file_put_them(
+    layout: str, tmp_path: Path
+) -> None:
+    """A display window away from (0, 0), a data window inside it and a pixel aspect ratio: the
+    result sits where the input's pixels do in every layout (a sidecar was written at the frame's
+    own origin, the display window's corner, and lay 90 × 40 pixels off in a compositor)."""
+    scene = exr_factory.make_scene(h=48, w=64)
+    windows = {
+        "displayWindow": exr.box2i(90, 40, 179, 119),
+        "dataWindow": exr.box2i(100, 50, 163, 97),
+        "pixelAspectRatio": 1.25,
+    }
+    src = exr_factory.write_canonical(tmp_path / "offset.exr", scene, windows)
+    out = tmp_path / f"{layout}.exr"
+    assert depict("enhance", src, "-o", out, "--layout", layout) == 0
+    [(source_header, _)] = parts(src)
+    for header, _ in parts(out):  # (the result's part, and the input's copied beside it)
+        for key in windows:
+            assert np.array_equal(np.asarray(header[key]), np.asarray(source_header[key])), key
 
 
 def test_a_part_output_reads_back_and_enhances_again(
