@@ -140,7 +140,8 @@ def _output_array(name: str, arr: Any, shape: tuple[int, int]) -> np.ndarray:
         )
     if a.dtype.kind not in "fiub":
         raise FrameError(f"output '{name}' has dtype {a.dtype}; outputs are float32 arrays")
-    return np.ascontiguousarray(a, dtype=np.float32)
+    # (HALF stays HALF: the input's own R, G, B, A kept beside a result, bit for bit)
+    return np.ascontiguousarray(a, dtype=np.float16 if a.dtype == np.float16 else np.float32)
 
 
 def _check_attributes(attributes: dict[str, Any]) -> None:

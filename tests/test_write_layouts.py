@@ -219,6 +219,21 @@ def test_every_layout_keeps_the_inputs_windows_where_the_file_put_them(
             assert np.array_equal(np.asarray(header[key]), np.asarray(source_header[key])), key
 
 
+def test_the_same_layout_keeps_a_half_beauty_beside_the_result_as_half(tmp_path: Path) -> None:
+    """``--layout same`` moves the input's own R, G, B, A aside for the result: HALF stays HALF,
+    bit for bit (they were written as FLOAT, twice the bytes, and a different channel type)."""
+    src = exr_factory.write_canonical(tmp_path / "half.exr", exr_factory.make_scene(h=48, w=64))
+    [(_, given)] = parts(src)
+    assert all(given[c].dtype == np.float16 for c in "RGBA")
+    out = tmp_path / "same.exr"
+    assert depict("enhance", src, "-o", out, "--layout", "same") == 0
+    [(header, written)] = parts(out)
+    kept = header["depict/original"]
+    for c in "RGBA":
+        assert written[f"{kept}.{c}"].dtype == np.float16
+        assert written[f"{kept}.{c}"].tobytes() == given[c].tobytes()
+
+
 def test_a_part_output_reads_back_and_enhances_again(
     outputs: dict[str, Path], tmp_path: Path
 ) -> None:
