@@ -52,7 +52,7 @@ from numpy.typing import NDArray
 
 from analysis.methods import METHODS, resolve_params, shade
 from analysis.result import ComparisonResult
-from analysis.score import score_image
+from analysis.score import score_image, shape_of
 from gbuffer.frame import Frame
 from ops.congruence import CongruenceResult
 from ops.directions import N_DIRECTIONS, comparison_directions
@@ -112,8 +112,11 @@ def compare(
         img = np.where(mask, np.clip(img, 0.0, 1.0), np.float32(0.0)).astype(np.float32)
         return img if albedo_rgb is None else np.asarray(albedo_rgb * img[..., None], np.float32)
 
+    # the shape's side of the score, once for every rendering (they differ by shading_norm)
+    flow = shape_of(depth, mask, normal, height, **dict(resolved["congruence"]))
+
     def score(img: F32, cong: Mapping[str, Any]) -> CongruenceResult:
-        return score_image(img, depth, mask, normal, height, weights=weights, **dict(cong))
+        return score_image(img, depth, mask, normal, height, flow, weights=weights, **dict(cong))
 
     sweep = comparison_directions(N_DIRECTIONS)
     cong, norm = _normalisation(shading_norm, resolved["congruence"], render, score, sweep[0])

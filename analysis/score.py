@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from gbuffer.frame import Frame
-from ops.congruence import CongruenceResult, congruence
+from ops.congruence import CongruenceResult, ShapeFlow, congruence, shape_flow
 
 F32 = NDArray[np.float32]
 
@@ -36,22 +36,51 @@ def score_image(
     mask: NDArray[np.generic],
     normal: F32 | None,
     image_height: int,
+    flow: ShapeFlow | None = None,
     **cong: Any,
 ) -> CongruenceResult:
     """:func:`ops.congruence.congruence` of ``image`` with the congruence parameters ``cong``,
     whose ``shape`` ("normals", the default, or "depth") picks the shape signal; without
-    normals the shape is the depth. A parameter it does not take is a ValueError."""
-    shape = cong.pop("shape", "normals")
-    if shape not in SHAPES:
-        raise ValueError(f"params['congruence']: shape must be one of {SHAPES}, got {shape!r}")
-    use = normal if shape == "normals" else None
+    normals the shape is the depth. ``flow``: :func:`shape_of` the same frame and parameters
+    (computed once for several images). A parameter it does not take is a ValueError."""
+    use = _shape_signal(normal, cong)
     try:
-        return congruence(image, depth, mask, image_height=image_height, normal=use, **cong)
+        return congruence(
+            image, depth, mask, image_height=image_height, normal=use, flow=flow, **cong
+        )
     except TypeError as exc:  # an unknown keyword
         raise ValueError(f"params['congruence']: {exc}") from None
 
 
-def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str, Any]:
+def shape_of(
+    depth: F32,
+    mask: NDArray[np.generic],
+    normal: F32 | None,
+    image_height: int,
+    **cong: Any,
+) -> ShapeFlow:
+    """The shape's side of :func:`score_image` with the same arguments (``shading_norm`` and
+    ``weights`` among ``cong`` concern the image: left out), to score several images of the
+    frame: :func:`ops.congruence.shape_flow`."""
+    use = _shape_signal(normal, cong)
+    params = {k: v for k, v in cong.items() if k not in ("shading_norm", "weights")}
+    try:
+        return shape_flow(depth, mask, image_height=image_height, normal=use, **params)
+    except TypeError as exc:  # an unknown keyword
+        raise ValueError(f"params['congruence']: {exc}") from None
+
+
+def _shape_signal(normal: F32 | None, cong: dict[str, Any]) -> F32 | None:
+    """The normals when ``cong``'s ``shape`` (taken out of it) is "normals", else None."""
+    shape = cong.pop("shape", "normals")
+    if shape not in SHAPES:
+        raise ValueError(f"params['congruence']: shape must be one of {SHAPES}, got {shape!r}")
+    return normal if shape == "normals" else None
+
+
+def score_frame(
+    frame: Frame, *, maps: bool = False, flow: ShapeFlow | None = None, **params: Any
+) -> dict[str, Any]:
     """The congruence score (LLA Eq. 2) of ``frame``'s beauty against its depth (``depict score``).
 
     Parameters
@@ -60,6 +89,8 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     maps : also return the per-pixel layers under ``"layers"``: ``congruence.X`` (score map),
         ``congruence.shading.X/Y`` and ``congruence.shape.X/Y`` (the two flows, camera x right /
         y up), ``congruence.weight.X`` — ready for ``frame.outputs``.
+    flow : :func:`frame_shape` of a frame with the same depth, mask and normals, and the same
+        ``params`` (a rendering or enhancement of it): its shape's side, not computed again.
     **params : keywords of :func:`ops.congruence.congruence` (``gradient_scale``,
         ``integration_scale``, ``percentile``, ``depth_jump``).
 
@@ -70,18 +101,15 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     ``analysis_shape``, ``image_shape``, ``params`` (the congruence parameters used) and, with
     ``maps``, ``layers``.
     """
-    cong = {**CONGRUENCE, **params}
     beauty = np.asarray(frame.need("beauty", "the image to score"), np.float32)
-    depth = np.asarray(frame.need("depth", "for the shape flow of the score"), np.float32)
-    normal = frame.buffers.get("normal")
-    if normal is None:
-        cong["shape"] = "depth"
+    cong, depth, normal = _frame_shape_args(frame, params)
     res = score_image(
         beauty,
         depth,
         frame.mask,
         normal,
         int(frame.image_height),
+        flow,
         weights=frame.colorspace.weights,  # the shading: luminance in the frame's space
         **dict(cong),
     )
@@ -95,6 +123,26 @@ def score_frame(frame: Frame, *, maps: bool = False, **params: Any) -> dict[str,
     if maps:
         out["layers"] = congruence_layers(res)
     return out
+
+
+def frame_shape(frame: Frame, **params: Any) -> ShapeFlow:
+    """The shape's side of :func:`score_frame` with these ``params``, for every image of the
+    frame (``flow``)."""
+    cong, depth, normal = _frame_shape_args(frame, params)
+    return shape_of(depth, frame.mask, normal, int(frame.image_height), **cong)
+
+
+def _frame_shape_args(
+    frame: Frame, params: dict[str, Any]
+) -> tuple[dict[str, Any], F32, F32 | None]:
+    """The congruence parameters of a frame's score (the depth's shape without normals), its
+    depth and its normals."""
+    cong = {**CONGRUENCE, **params}
+    depth = np.asarray(frame.need("depth", "for the shape flow of the score"), np.float32)
+    normal = frame.buffers.get("normal")
+    if normal is None:
+        cong["shape"] = "depth"
+    return cong, depth, normal
 
 
 def congruence_layers(res: CongruenceResult) -> dict[str, F32]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ops.congruence import CongruenceResult, congruence
+from ops.congruence import CongruenceResult, congruence, shape_flow
 from ops.directions import comparison_directions
 from tests import analytic
 
@@ -289,6 +289,49 @@ def test_bad_inputs_raise() -> None:
         congruence(bad, depth)
     with pytest.raises(ValueError, match="depth contains NaN"):
         congruence(depth, bad)
+
+
+def _results_equal(a: CongruenceResult, b: CongruenceResult) -> bool:
+    maps = ("score_map", "shading_flow", "shape_flow", "shading_strength", "shape_strength")
+    return (a.score, a.shading_norm, a.analysis_shape) == (
+        b.score,
+        b.shading_norm,
+        b.analysis_shape,
+    ) and all(np.array_equal(getattr(a, m), getattr(b, m)) for m in (*maps, "weight"))
+
+
+@pytest.mark.parametrize("size", [128, 513])  # (513: levels that do not divide the image)
+@pytest.mark.parametrize("with_normals", [True, False])
+def test_a_shape_flow_made_once_scores_every_image_as_congruence_alone(
+    size: int, with_normals: bool
+) -> None:
+    """The shape's side of Eq. 2 made once (:func:`shape_flow`, the viewer's previews and
+    ``depict compare``) scores each image of the frame bit for bit as :func:`congruence` does
+    without it, and scoring leaves it as it was."""
+    normal, depth = sphere(size)
+    mask = np.isfinite(depth).astype(np.float32)
+    kw = {"normal": normal if with_normals else None, "gradient_scale": 0.005}
+    flow = shape_flow(depth, mask, **kw)
+    images = [lambert(normal, light) for light in ((0, 0, 1), (1, 1, 0.3), (-1, 0.2, 0.5))]
+    images.append(np.dstack([images[1], images[2], images[0]]))  # RGB
+    for image in images * 2:  # (twice: the flow read, not changed)
+        for norm in (None, 0.01):
+            alone = congruence(image, depth, mask, shading_norm=norm, **kw)
+            shared = congruence(image, depth, mask, shading_norm=norm, flow=flow, **kw)
+            assert _results_equal(shared, alone)
+
+
+def test_a_shape_flow_of_another_frame_or_other_parameters_is_refused() -> None:
+    normal, depth = sphere(96)
+    flow = shape_flow(depth, normal=normal)
+    image = lambert(normal, (0, 0, 1))
+    with pytest.raises(ValueError, match="another frame or other parameters"):
+        congruence(image, depth, normal=normal, flow=flow, percentile=90.0)
+    with pytest.raises(ValueError, match="another frame or other parameters"):
+        congruence(image, depth, flow=flow)  # (no normals: the depth's shape)
+    small_normal, small_depth = sphere(64)
+    with pytest.raises(ValueError, match="another frame or other parameters"):
+        congruence(lambert(small_normal, (0, 0, 1)), small_depth, flow=flow)
 
 
 def test_empty_coverage_scores_zero() -> None:

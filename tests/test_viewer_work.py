@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from analysis.score import score_frame
 from gbuffer.errors import FrameError
 from gbuffer.frame import Frame
 from gbuffer.io import inspect, read
@@ -155,6 +156,19 @@ def test_an_uploads_inspection_makes_the_first_previews_copy(
     assert not list(stored.glob("small_*"))
     with pytest.raises(FrameError, match=r"N\.X"):
         work._small(stored, 2, ReadRequest())
+
+
+def test_a_previews_score_is_the_scores_own(stored: Path) -> None:
+    """A preview scores its result on the shape's side the copy was scored with (made once per
+    copy): the same numbers as scoring the result from scratch."""
+    for params in ({"gamma": 3.0}, {"gamma": 0.5, "alpha": 0.8}):
+        steps = pipeline.compile([{"op": "radiance_scaling", "params": params}])
+        answer = work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+        small, before = work._small(stored, 2, ReadRequest())
+        assert before is not None
+        out, _ = pipeline.run_timed(small, steps, Context(files=False))
+        fresh = score_frame(out, shading_norm=before["shading_norm"] or None)
+        assert answer["score"] == {"before": before["score"], "after": fresh["score"]}
 
 
 def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(stored: Path, tmp_path: Path) -> None:

@@ -62,14 +62,17 @@ first pass only the bounding box of the covered pixels, grown by more than the f
 is processed, since everything is exactly 0 further away; OpenCV works on one channel at a time
 (its area resize and blur are several times faster on single channels).
 
-Modules: :mod:`.score` (:func:`congruence`), :mod:`.result` (:class:`CongruenceResult`); the flows
-are private (:mod:`._flow`).
+Modules: :mod:`.score` (:func:`congruence`; :func:`shape_flow`, the shape's side of Eq. 2,
+computed once to score several images of one frame), :mod:`.result` (:class:`CongruenceResult`);
+the flows are private (:mod:`._flow`).
 """
 
 from ops.congruence.result import CongruenceResult
-from ops.congruence.score import congruence
+from ops.congruence.score import ShapeFlow, congruence, shape_flow
 
 __all__ = [
     "CongruenceResult",
+    "ShapeFlow",
     "congruence",
+    "shape_flow",
 ]

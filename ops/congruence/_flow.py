@@ -3,6 +3,8 @@ on strips of rows, and each flow's strength and doubled-angle direction."""
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import cv2
 import numpy as np
 from numpy.typing import NDArray
@@ -35,16 +37,18 @@ _ONES3 = np.ones((3, 3), np.uint8)
 
 
 def _covered_level(
-    img: F32,
+    img: F32 | None,
     dep: F32,
     mask: NDArray[np.generic] | None,
     f: int,
     size: tuple[int, int],
     normal: F32 | None = None,
     weights: F32 = _LUMA,
+    geometry: bool = True,
 ) -> list[F32]:
-    """Covered luminance, covered depth and coverage (then, with ``normal``, the covered n_x,
-    n_y, n_z), area-downsampled by ``f`` to ``size``.
+    """Covered luminance (when ``img`` is given), then with ``geometry`` the covered depth and
+    coverage (then, with ``normal``, the covered n_x, n_y, n_z), area-downsampled by ``f`` to
+    ``size``.
 
     Coverage is finite positive depth (and mask > 0.5); the other planes are 0 where it is 0
     (a NaN depth stays NaN). When ``f`` divides the image this runs on strips of rows (an
@@ -53,7 +57,9 @@ def _covered_level(
     h, w = dep.shape
     ws, hs = size
     strips = f == 1 or (w == ws * f and h == hs * f)
-    n_out = 3 if normal is None else 6
+    with_lum = img is not None
+    n_geo = 0 if not geometry else 2 if normal is None else 5
+    n_out = int(with_lum) + n_geo
     out = [np.empty((hs, ws), np.float32) for _ in range(n_out)]
     msk = None if mask is None else np.asarray(mask)
 
@@ -63,19 +69,24 @@ def _covered_level(
             planes = [o[a:b] for o in out]
         else:
             planes = [np.empty((r1 - r0, w), np.float32) for _ in range(n_out)]
-        lum, depc, covf = planes[:3]
+        own = planes[int(with_lum) :] if geometry else []
+        depc = own[0] if geometry else np.empty((r1 - r0, w), np.float32)
+        covf = own[1] if geometry else np.empty((r1 - r0, w), np.float32)
         cv2.threshold(dep[r0:r1], 1e30, 0, cv2.THRESH_TOZERO_INV, dst=depc)  # +inf -> 0
         cv2.threshold(depc, 0, 1, cv2.THRESH_BINARY, dst=covf)  # > 0 -> 1
         if msk is not None:
             cv2.multiply(covf, (msk[r0:r1] > 0.5).astype(np.float32), dst=covf)
-        cv2.multiply(depc, covf, dst=depc)
-        if img.ndim == 3:
-            cv2.transform(img[r0:r1], weights, dst=lum)
-            cv2.multiply(lum, covf, dst=lum)
-        else:
-            cv2.multiply(img[r0:r1], covf, dst=lum)
-        if normal is not None:
-            for c, dst in enumerate(planes[3:]):
+        if geometry:
+            cv2.multiply(depc, covf, dst=depc)
+        if img is not None:
+            lum = planes[0]
+            if img.ndim == 3:
+                cv2.transform(img[r0:r1], weights, dst=lum)
+                cv2.multiply(lum, covf, dst=lum)
+            else:
+                cv2.multiply(img[r0:r1], covf, dst=lum)
+        if geometry and normal is not None:
+            for c, dst in enumerate(own[2:]):
                 cv2.multiply(np.ascontiguousarray(normal[r0:r1, :, c]), covf, dst=dst)
                 cv2.patchNaNs(dst, 0.0)  # uncovered normals may be NaN (NaN * 0 = NaN)
         if f > 1:
@@ -87,72 +98,133 @@ def _covered_level(
     return out
 
 
-def _tensor_products(
-    planes: list[F32], sigma: float, jump: float, f: int, size: tuple[int, int]
-) -> list[F32]:
-    """Gradient-level pass over the planes of :func:`_covered_level` (luminance, depth,
-    coverage and, when given, n_x, n_y, n_z): blur them by ``sigma``, normalise by the
-    coverage, take Sobel gradients of the luminance and of the shape signal (the log depth, or
-    each normal component) where the whole stencil is covered and the log depth steps by at most
-    ``jump``, and return the structure-tensor products [lxx, lxy, lyy, sxx, sxy, syy, valid]
-    area-downsampled by ``f`` to ``size`` (the shape products summed over the normal's
-    components).
+def _sobel(x: F32, rows: slice) -> tuple[F32, F32]:
+    """Sobel derivatives per level pixel (x right, rows down) of ``x``, on ``rows``."""
+    return (
+        _f32(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[rows]),
+        _f32(cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[rows]),
+    )
 
-    Runs on strips of rows with a halo covering the blur and the 3×3 stencils when ``f``
-    divides the level, which gives the same result as one pass over the whole level.
+
+def _whole_strips(level: tuple[int, int], f: int, size: tuple[int, int]) -> bool:
+    """Whether a level of (h, w) pixels reduces to ``size`` by whole blocks of ``f``: its
+    passes then run on strips of rows (else on the whole level at once)."""
+    (h, w), (ws, hs) = level, size
+    return f == 1 or (w == ws * f and h == hs * f)
+
+
+def _grad_strips(
+    level: tuple[int, int],
+    sigma: float,
+    f: int,
+    size: tuple[int, int],
+    strip: Callable[[int, int, int, int], None],
+) -> None:
+    """``strip(a, b, lo, hi)`` over strips [a, b) of the gradient level's rows (``level``: its
+    (h, w)), with a halo [lo, hi) covering the blur of ``sigma`` and the 3×3 stencils when
+    the level reduces by whole blocks (each kept row is then the same as in one pass over the
+    whole level)."""
+    h = level[0]
+    halo = int(4.0 * sigma) + 4  # > Gaussian radius (≈ 4σ) + the Sobel / erosion row
+
+    def run(a: int, b: int) -> None:
+        strip(a, b, max(0, a - halo), min(h, b + halo))
+
+    run_strips(h, run, max(1, _ROWS_GRAD // f) * f if _whole_strips(level, f, size) else h)
+
+
+def _reduced(
+    prods: Sequence[np.ndarray], out: list[F32], f: int, rows: tuple[int, int] | None
+) -> None:
+    """Rows [a, b) = ``rows`` of the gradient level's ``prods`` (None: all of them)
+    area-downsampled by ``f`` into ``out``."""
+    hs, ws = out[0].shape
+    orows = slice(0, hs) if rows is None else slice(rows[0] // f, rows[1] // f)
+    for p, o in zip(prods, out, strict=True):
+        if f > 1:
+            cv2.resize(p, (ws, o[orows].shape[0]), dst=o[orows], interpolation=cv2.INTER_AREA)
+        else:
+            o[orows] = p
+
+
+def _shape_products(
+    planes: list[F32], sigma: float, jump: float, f: int, size: tuple[int, int]
+) -> tuple[list[F32], F32, F32]:
+    """Gradient-level pass over the geometry planes of :func:`_covered_level` (depth, coverage
+    and, when given, n_x, n_y, n_z): blur them by ``sigma``, normalise by the coverage, take
+    Sobel gradients of the shape signal (the log depth, or each normal component) where the
+    whole stencil is covered and the log depth steps by at most ``jump``, and return the shape's
+    structure-tensor products [sxx, sxy, syy, valid] area-downsampled by ``f`` to ``size`` (summed
+    over the normal's components); and, at the gradient level, 1 / the blurred coverage and the
+    valid gradients (:func:`_shading_products` takes them).
+
+    Runs on strips of rows with a halo (:func:`_grad_strips`), which gives the same result as
+    one pass over the whole level.
     """
-    cov = planes[2]
+    cov = planes[1]
     h, w = cov.shape
     ws, hs = size
-    strips = f == 1 or (w == ws * f and h == hs * f)
-    halo = int(4.0 * sigma) + 4  # > Gaussian radius (≈ 4σ) + the Sobel / erosion row
-    out = [np.empty((hs, ws), np.float32) for _ in range(7)]
+    out = [np.empty((hs, ws), np.float32) for _ in range(4)]
+    inv_all = np.empty((h, w), np.float32)
+    valid = np.empty((h, w), np.float32)
 
-    def sobel(x: F32, rows: slice) -> tuple[F32, F32]:
-        return (
-            _f32(cv2.Sobel(x, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)[rows]),
-            _f32(cv2.Sobel(x, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)[rows]),
-        )
-
-    def strip(a: int, b: int) -> None:
-        lo, hi = max(0, a - halo), min(h, b + halo)
+    def strip(a: int, b: int, lo: int, hi: int) -> None:
         chans = [x[lo:hi] for x in planes]
         if sigma >= 0.3:
             chans = [_f32(cv2.GaussianBlur(x, (0, 0), sigma)) for x in chans]
-        lum1, dep1, c1 = chans[:3]
+        dep1, c1 = chans[:2]
         # 1 / coverage; where the coverage is <= 1e-6 this is 1e6 instead of 0, which only
         # changes values no kept gradient reads (those need coverage > 0.999) and keeps them
         # finite
         inv = cv2.divide(1.0, np.maximum(c1, np.float32(1e-6)))
         logd1 = _f32(cv2.log(np.maximum(cv2.multiply(dep1, inv), np.float32(1e-30))))
-        # Sobel derivatives per level pixel (x right, rows down), kept where the whole stencil
-        # is covered and the log depth does not jump; computed on the strip, used on [a, b)
+        # kept where the whole stencil is covered and the log depth does not jump; computed on
+        # the strip, used on [a, b)
         rows = slice(a - lo, b - lo)
-        lx, ly = sobel(_f32(cv2.multiply(lum1, inv)), rows)
-        dx, dy = sobel(logd1, rows)
+        dx, dy = _sobel(logd1, rows)
         full = cv2.erode(cv2.threshold(c1, 0.999, 1, cv2.THRESH_BINARY)[1], _ONES3)[rows]
         steep = cv2.max(np.abs(dx), np.abs(dy))
         vf = cv2.multiply(cv2.threshold(steep, jump, 1, cv2.THRESH_BINARY_INV)[1], full)
         shape = [(dx, dy)]
-        if len(chans) > 3:  # the normal's components
-            shape = [sobel(_f32(cv2.multiply(n, inv)), rows) for n in chans[3:]]
-        lx, ly = _f32(cv2.multiply(lx, vf)), _f32(cv2.multiply(ly, vf))
+        if len(chans) > 2:  # the normal's components
+            shape = [_sobel(_f32(cv2.multiply(n, inv)), rows) for n in chans[2:]]
         sxx, sxy, syy = (np.zeros_like(vf) for _ in range(3))
         for sx, sy in shape:
             gx, gy = cv2.multiply(sx, vf), cv2.multiply(sy, vf)
             cv2.accumulateSquare(gx, sxx)
             cv2.accumulateProduct(gx, gy, sxy)
             cv2.accumulateSquare(gy, syy)
+        inv_all[a:b] = inv[rows]
+        valid[a:b] = vf
         # xy products in image (row-down) convention; the sign is flipped to y-up later
-        prods = (lx * lx, lx * ly, ly * ly, sxx, sxy, syy, vf)
-        orows = slice(a // f, b // f) if strips else slice(0, hs)
-        for p, o in zip(prods, out, strict=True):
-            if f > 1:
-                cv2.resize(p, (ws, o[orows].shape[0]), dst=o[orows], interpolation=cv2.INTER_AREA)
-            else:
-                o[orows] = p
+        _reduced((sxx, sxy, syy, vf), out, f, (a, b) if by_strips else None)
 
-    run_strips(h, strip, max(1, _ROWS_GRAD // f) * f if strips else h)
+    by_strips = _whole_strips((h, w), f, size)
+    _grad_strips((h, w), sigma, f, size, strip)
+    return out, inv_all, valid
+
+
+def _shading_products(
+    lum: F32, inv: F32, valid: F32, sigma: float, f: int, size: tuple[int, int]
+) -> list[F32]:
+    """The shading's structure-tensor products [lxx, lxy, lyy] of the covered luminance ``lum``
+    at the gradient level, as :func:`_shape_products` takes the shape's: blurred by ``sigma``,
+    normalised by the coverage (``inv``), its Sobel gradients kept where ``valid``,
+    area-downsampled by ``f`` to ``size``. The same strips and halo, the same result as one
+    pass."""
+    ws, hs = size
+    out = [np.empty((hs, ws), np.float32) for _ in range(3)]
+
+    def strip(a: int, b: int, lo: int, hi: int) -> None:
+        lum1 = _f32(cv2.GaussianBlur(lum[lo:hi], (0, 0), sigma)) if sigma >= 0.3 else lum[lo:hi]
+        lx, ly = _sobel(_f32(cv2.multiply(lum1, inv[lo:hi])), slice(a - lo, b - lo))
+        vf = valid[a:b]
+        lx, ly = _f32(cv2.multiply(lx, vf)), _f32(cv2.multiply(ly, vf))
+        _reduced((lx * lx, lx * ly, ly * ly), out, f, (a, b) if by_strips else None)
+
+    level = (lum.shape[0], lum.shape[1])
+    by_strips = _whole_strips(level, f, size)
+    _grad_strips(level, sigma, f, size, strip)
     return out
 
 

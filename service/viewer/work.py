@@ -25,7 +25,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from analysis.score import score_frame
+from analysis.score import frame_shape, score_frame
 from gbuffer.atomic import atomic_path
 from gbuffer.errors import FrameError
 from gbuffer.exr import read_layout
@@ -257,15 +257,28 @@ def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
     return Passthrough(parts, frame.passthrough.primary)
 
 
-def _score(frame: Frame, maps: bool = False, **params: Any) -> dict[str, Any] | None:
-    """:func:`analysis.score.score_frame`, or None when the frame has no depth to score against
-    or is too small to score (under 3 x 3 pixels: its layers are still shown)."""
+def _score(frame: Frame) -> dict[str, Any] | None:
+    """:func:`analysis.score.score_frame` of a copy, with its shape's side of the score under
+    ``"flow"`` (its results are scored on it: :func:`_same_shape`), or None when it has no depth
+    to score against or is too small to score (under 3 x 3 pixels: its layers are still
+    shown)."""
     if min(frame.shape) < 3:
         return None
     try:
-        return score_frame(frame, maps=maps, **params)
+        flow = frame_shape(frame)
+        return {**score_frame(frame, flow=flow), "flow": flow}
     except FrameError:
         return None
+
+
+#: The buffers the score reads besides the beauty (:attr:`gbuffer.frame.Frame.mask` included).
+_SCORED_SHAPE = ("depth", "normal", "coverage", "alpha")
+
+
+def _same_shape(result: Frame, frame: Frame) -> bool:
+    """Whether a pipeline's ``result`` holds ``frame``'s very arrays for what the score's shape
+    side reads (no operator replaces them; one that did would be scored on its own)."""
+    return all(result.buffers.get(k) is frame.buffers.get(k) for k in _SCORED_SHAPE)
 
 
 def _png(rgb: np.ndarray) -> str:
@@ -281,11 +294,11 @@ def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
 
 def layer_job(folder: str, factor: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
     """A picture of ``layer`` of the frame shrunk by ``factor``, written to ``out`` (PNG)."""
-    small, _ = _small(Path(folder), factor, read)
+    small, before = _small(Path(folder), factor, read)
     if layer == SCORE_MAP:
-        score = _score(small, maps=True)
-        if score is None:
+        if before is None:
             raise FrameError("the frame has no depth: no score map")
+        score = score_frame(small, maps=True, flow=before.get("flow"))
         write_png(_score_picture(small, score), out, quick=True)
     else:
         write_png(picture(small, layer), out, quick=True)
@@ -317,7 +330,8 @@ def preview_job(
     }
     if before is not None:
         norm = before["shading_norm"] or None  # (0: the input has no shading to measure)
-        after = score_frame(out, maps=score_map, shading_norm=norm)
+        flow = before.get("flow") if _same_shape(out, small) else None
+        after = score_frame(out, maps=score_map, shading_norm=norm, flow=flow)
         answer["score"] = {"before": float(before["score"]), "after": float(after["score"])}
         if score_map:
             answer["score_map"] = _png(_score_picture(out, after))
