@@ -162,7 +162,7 @@ def shape_flow(
     depth_jump: float = 0.05,
     normal: NDArray[np.floating] | None = None,
 ) -> ShapeFlow:
-    """The shape flow of a frame for :func:`congruence` (its ``shape``): the parameters are
+    """The shape flow of a frame for :func:`congruence` (its ``flow``): the parameters are
     those of :func:`congruence`, which computes the same thing itself when given none."""
     dep, href = _checked_depth(depth, mask, image_height)
     h, w = dep.shape
