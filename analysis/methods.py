@@ -122,9 +122,19 @@ def resolve_params(params: Mapping[str, Mapping[str, Any]] | None = None) -> dic
         if not isinstance(value, Mapping):
             raise ValueError(f"params[{key!r}] must be a mapping of parameter names to values")
         out[key].update(value)
+    others = sorted(set(out["congruence"]) - set(CONGRUENCE_PARAMETERS))
+    if others:  # (the image height, normals, weights and shading scale are the comparison's)
+        raise ValueError(
+            f"params['congruence']: unknown parameter {others[0]!r}; allowed: "
+            f"{', '.join(CONGRUENCE_PARAMETERS)}"
+        )
     for name, method in METHOD_TABLE.items():
         _check(name, method, out[name])
     return out
+
+
+#: The congruence parameters a comparison may be given (``--set congruence.KEY=VALUE``).
+CONGRUENCE_PARAMETERS = ("gradient_scale", "integration_scale", "percentile", "depth_jump", "shape")
 
 
 def _check(name: str, method: Method, params: Mapping[str, Any]) -> None:

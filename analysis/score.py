@@ -66,8 +66,9 @@ def shape_of(
     params = {k: v for k, v in cong.items() if k not in ("shading_norm", "weights")}
     try:
         return shape_flow(depth, mask, image_height=image_height, normal=use, **params)
-    except TypeError as exc:  # an unknown keyword
-        raise ValueError(f"params['congruence']: {exc}") from None
+    except TypeError as exc:  # an unknown keyword, named as the score's (the name users know)
+        detail = str(exc).replace("shape_flow()", "congruence()")
+        raise ValueError(f"params['congruence']: {detail}") from None
 
 
 def _shape_signal(normal: F32 | None, cong: dict[str, Any]) -> F32 | None:

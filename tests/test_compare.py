@@ -245,6 +245,9 @@ def test_bad_arguments_raise_value_errors(frame: Frame) -> None:
         compare(frame, directions=1, albedo="red")
     with pytest.raises(ValueError, match="unknown section 'phong'"):
         resolve_params({"phong": {}})
+    for key in ("foo", "weights", "normal"):  # ('weights' was a TypeError: given twice)
+        with pytest.raises(ValueError, match=f"congruence.*unknown parameter '{key}'"):
+            compare(frame, ["lambert"], directions=1, params={"congruence": {key: 1}})
     with pytest.raises(ValueError, match="radiance_scaling"):
         compare(frame, ["radiance_scaling"], directions=1, params={"radiance_scaling": {"x": 1}})
     with pytest.raises(ValueError, match="alpha"):

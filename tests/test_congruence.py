@@ -322,6 +322,8 @@ def test_a_shape_flow_made_once_scores_every_image_as_congruence_alone(
 
 
 def test_a_shape_flow_of_another_frame_or_other_parameters_is_refused() -> None:
+    """A flow is checked against the depth, mask and normals it is given with, and the
+    parameters: another frame of the same size would otherwise be scored on this one's shape."""
     normal, depth = sphere(96)
     flow = shape_flow(depth, normal=normal)
     image = lambert(normal, (0, 0, 1))
@@ -332,6 +334,16 @@ def test_a_shape_flow_of_another_frame_or_other_parameters_is_refused() -> None:
     small_normal, small_depth = sphere(64)
     with pytest.raises(ValueError, match="another frame or other parameters"):
         congruence(lambert(small_normal, (0, 0, 1)), small_depth, flow=flow)
+    # the same size and parameters, other arrays: another depth, mask or normals
+    tilted = depth + np.linspace(0, 1, 96, dtype=np.float32)[None, :]
+    for other in ({"depth": tilted}, {"mask": np.isfinite(depth)}, {"normal": -normal}):
+        args = {"depth": depth, "normal": normal, **other}
+        with pytest.raises(ValueError, match="another frame or other parameters"):
+            congruence(image, args.pop("depth"), args.pop("mask", None), flow=flow, **args)
+    copies = {"depth": depth.copy(), "normal": normal.copy()}  # the same values: taken
+    assert congruence(image, copies["depth"], normal=copies["normal"], flow=flow).score == (
+        congruence(image, depth, normal=normal).score
+    )
 
 
 def test_empty_coverage_scores_zero() -> None:

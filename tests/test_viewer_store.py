@@ -104,3 +104,22 @@ def test_live_server_refuses_a_frame_over_the_size_cap() -> None:
             r = httpx.post(f"{server.url}/v1/frames", files={"file": (BLENDER.name, f)}, timeout=60)
         assert r.status_code == 413, r.text
         assert "DEPICT_VIEWER_MAX_MB" in r.json()["detail"]
+
+
+@pytest.mark.parametrize(("route", "height", "factor"), [("example", 180, 4), ("upload", 60, 2)])
+def test_a_loaded_frame_comes_with_its_copy_at_the_pages_preview_height(
+    route: str, height: int, factor: int, tmp_path: Path
+) -> None:
+    """The page sends its preview height with the frame (``?height=``): the copy its first
+    previews run on is made as the frame is inspected, at that height (the example's own
+    height, 720 px, once hid the one asked for)."""
+    env = {"DEPICT_WORKERS": "1", "TMPDIR": str(tmp_path)}  # (the server keeps frames there)
+    with live_server(env) as server, httpx.Client(base_url=server.url, timeout=120) as api:
+        if route == "example":
+            r = api.post("/v1/frames/example", params={"height": height})
+        else:
+            with open(BLENDER, "rb") as f:
+                r = api.post("/v1/frames", params={"height": height}, files={"file": f})
+        assert r.status_code == 200, r.text
+        made = sorted(p.name for p in tmp_path.glob(f"depict-*/**/{r.json()['id']}/small_*"))
+        assert made == [f"small_{factor}.layers.pkl", f"small_{factor}.pkl"]

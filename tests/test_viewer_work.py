@@ -8,6 +8,7 @@ import os
 import shutil
 import struct
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -19,6 +20,7 @@ from gbuffer.frame import Frame
 from gbuffer.io import inspect, read
 from gbuffer.preview import quick_png, write_png
 from gbuffer.render import load_mesh, render
+from ops.congruence import score as congruence_score
 from service import pipeline
 from service.enhance import ReadRequest
 from service.http.worker import give_back_memory
@@ -158,12 +160,23 @@ def test_an_uploads_inspection_makes_the_first_previews_copy(
         work._small(stored, 2, ReadRequest())
 
 
-def test_a_previews_score_is_the_scores_own(stored: Path) -> None:
+def test_a_previews_score_is_the_scores_own(stored: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A preview scores its result on the shape's side the copy was scored with (made once per
-    copy): the same numbers as scoring the result from scratch."""
+    copy, not again at each preview): the same numbers as scoring the result from scratch."""
+    work._small(stored, 2, ReadRequest())  # (the copy, and its score's shape side)
+    made: list[object] = []
+    shape_flow = congruence_score.shape_flow
+
+    def counted(*args: Any, **kwargs: Any) -> congruence_score.ShapeFlow:
+        made.append(args)
+        return shape_flow(*args, **kwargs)
+
+    monkeypatch.setattr(congruence_score, "shape_flow", counted)
     for params in ({"gamma": 3.0}, {"gamma": 0.5, "alpha": 0.8}):
         steps = pipeline.compile([{"op": "radiance_scaling", "params": params}])
+        made.clear()
         answer = work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+        assert made == []  # (the copy's, not one of its own)
         small, before = work._small(stored, 2, ReadRequest())
         assert before is not None
         out, _ = pipeline.run_timed(small, steps, Context(files=False))

@@ -35,36 +35,46 @@ from ops.parallel import run_strips
 __all__ = ["ShapeFlow", "congruence", "shape_flow"]
 
 
-def _checked_depth(
+def _checked(
     depth: NDArray[np.floating],
     mask: NDArray[np.generic] | None,
     image_height: int | None,
-) -> tuple[np.ndarray, int]:
-    """The depth (H, W) checked, with the mask's shape, and the image height."""
+    image: NDArray[np.floating] | None = None,
+) -> tuple[np.ndarray, int, np.ndarray | None]:
+    """The depth (H, W) checked, then the image (H, W) or (H, W, 3) when given, the mask's
+    shape and the image height."""
     dep = np.asarray(depth)
     if dep.ndim != 2:
         raise ValueError(f"depth must be (H, W), got shape {dep.shape}")
     h, w = dep.shape
     if h < 3 or w < 3:
         raise ValueError(f"depth must be at least 3x3, got shape {dep.shape}")
+    img = None if image is None else np.asarray(image)
+    if img is not None and img.ndim == 3 and img.shape[2] == 1:
+        img = img[..., 0]
+    if img is not None and (
+        img.shape[:2] != (h, w) or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3)
+    ):
+        raise ValueError(
+            f"image must be (H, W, 3) or (H, W) matching depth {dep.shape}, got {img.shape}"
+        )
     if mask is not None and np.shape(mask) != (h, w):
         raise ValueError(f"mask must be (H, W) = {dep.shape}, got shape {np.shape(mask)}")
     href = h if image_height is None else int(image_height)
     if href <= 0:
         raise ValueError(f"image_height must be a positive number of pixels, got {image_height!r}")
-    return dep, href
+    return dep, href, img
 
 
-def _checked_image(image: NDArray[np.floating], shape: tuple[int, int]) -> np.ndarray:
-    """The image (H, W) or (H, W, 3) checked against the depth's ``shape``."""
-    img = np.asarray(image)
-    if img.ndim == 3 and img.shape[2] == 1:
-        img = img[..., 0]
-    if img.shape[:2] != shape or img.ndim not in (2, 3) or (img.ndim == 3 and img.shape[2] != 3):
-        raise ValueError(
-            f"image must be (H, W, 3) or (H, W) matching depth {shape}, got {img.shape}"
-        )
-    return img
+def _checked_params(
+    href: int, gradient_scale: float, integration_scale: float, percentile: float, jump: float
+) -> tuple[float, float]:
+    """The parameters checked; σ_g and σ_i in pixels."""
+    sg = GRADIENT_SCALE.check(gradient_scale, "gradient_scale") * href
+    si = INTEGRATION_SCALE.check(integration_scale, "integration_scale") * href
+    PERCENTILE.check(percentile, "percentile")
+    DEPTH_JUMP.check(jump, "depth_jump")
+    return sg, si
 
 
 def _eq2(
@@ -116,11 +126,13 @@ class ShapeFlow:
     """The shape's side of Eq. 2 for one frame (its depth, mask and normals) at one set of
     congruence parameters (:func:`shape_flow`): everything :func:`congruence` computes that does
     not depend on the image, to score several images of the frame (renderings, a preview's
-    results) without computing it again. Read-only: every image's score reads the same arrays."""
+    results) without computing it again. Not to be written into: every image's score reads the
+    same arrays."""
 
     key: tuple[object, ...]  # the depth's shape, the image height and the parameters
     depth: np.ndarray  # (H, W) float32, as checked
     mask: NDArray[np.generic] | None
+    normal: np.ndarray | None  # (H, W, 3) float32
     f1: int  # gradient level: factor, size (w, h) and σ_g there
     size1: tuple[int, int]
     s1: float
@@ -164,12 +176,9 @@ def shape_flow(
 ) -> ShapeFlow:
     """The shape flow of a frame for :func:`congruence` (its ``flow``): the parameters are
     those of :func:`congruence`, which computes the same thing itself when given none."""
-    dep, href = _checked_depth(depth, mask, image_height)
+    dep, href, _ = _checked(depth, mask, image_height)
     h, w = dep.shape
-    sg = GRADIENT_SCALE.check(gradient_scale, "gradient_scale") * href
-    si = INTEGRATION_SCALE.check(integration_scale, "integration_scale") * href
-    PERCENTILE.check(percentile, "percentile")
-    DEPTH_JUMP.check(depth_jump, "depth_jump")
+    sg, si = _checked_params(href, gradient_scale, integration_scale, percentile, depth_jump)
     dep = dep.astype(np.float32, copy=False)
     params = (gradient_scale, integration_scale, percentile, depth_jump)
     key = _shape_key(dep.shape, href, params, normal is not None)
@@ -197,7 +206,7 @@ def shape_flow(
     f2 = max(1, min(int(si1 / 2.0), h1 // 8 or 1, w1 // 8 or 1))
     size2 = (max(w1 // f2, 3), max(h1 // f2, 3)) if f2 > 1 else (w1, h1)
     s2 = si1 / f2
-    flow = ShapeFlow(key, dep, mask, f1, size1, s1, f2, size2, s2, cov0)
+    flow = ShapeFlow(key, dep, mask, nrm, f1, size1, s1, f2, size2, s2, cov0)
     # Everything below is 0 away from the covered pixels: work on their bounding box, grown by
     # more than the blurs' and stencils' reach (the result is the same as on the whole level)
     win = _window(cov0, f2, size2, max(_reach(s1) + 2, (_reach(s2) + 2) * f2))
@@ -304,10 +313,14 @@ def congruence(
     CongruenceResult
         The score and its per-pixel maps.
     """
-    params = (gradient_scale, integration_scale, percentile, depth_jump)
+    dep, href, img = _checked(depth, mask, image_height, image)
+    assert img is not None
+    _checked_params(href, gradient_scale, integration_scale, percentile, depth_jump)
+    if shading_norm is not None:
+        SHADING_NORM.check(shading_norm, "shading_norm")
     if flow is None:
         flow = shape_flow(
-            depth,
+            dep,
             mask,
             gradient_scale=gradient_scale,
             integration_scale=integration_scale,
@@ -317,10 +330,9 @@ def congruence(
             normal=normal,
         )
     else:
-        _check_shape(flow, depth, image_height, normal is not None, params)
-    if shading_norm is not None:
-        SHADING_NORM.check(shading_norm, "shading_norm")
-    img = _checked_image(image, flow.depth.shape).astype(np.float32, copy=False)
+        params = (gradient_scale, integration_scale, percentile, depth_jump)
+        _check_flow(flow, dep, mask, normal, href, params)
+    img = img.astype(np.float32, copy=False)
     h, w = flow.depth.shape
     lw = np.asarray(weights, np.float32).reshape(1, 3)
     (lum0,) = _covered_level(img, flow.depth, flow.mask, flow.f1, flow.size1, None, lw, False)
@@ -358,18 +370,36 @@ def congruence(
     )
 
 
-def _check_shape(
+def _check_flow(
     flow: ShapeFlow,
-    depth: NDArray[np.floating],
-    image_height: int | None,
-    normals: bool,
+    depth: np.ndarray,
+    mask: NDArray[np.generic] | None,
+    normal: NDArray[np.floating] | None,
+    href: int,
     params: tuple[float, float, float, float],
 ) -> None:
-    """A :class:`ShapeFlow` given to :func:`congruence` is that of its depth and parameters."""
-    shape = np.shape(depth)
-    href = shape[0] if image_height is None else int(image_height)
-    if flow.key != _shape_key(shape, href, params, normals):
+    """A :class:`ShapeFlow` given to :func:`congruence` is that of its depth, mask and normals
+    (the same arrays, else the same values) and parameters."""
+    key = _shape_key(depth.shape, href, params, normal is not None)
+    same = (
+        flow.key == key
+        and _same_values(depth, flow.depth)
+        and _same_values(mask, flow.mask)
+        and _same_values(normal, flow.normal)
+    )
+    if not same:
         raise ValueError(
             "flow: a shape flow made for another frame or other parameters; make it with "
             "shape_flow() of the same depth, mask, normal and congruence parameters"
         )
+
+
+def _same_values(given: NDArray[np.generic] | None, kept: NDArray[np.generic] | None) -> bool:
+    """``given`` is ``kept``, or holds the same values (NaN as NaN), or both are None."""
+    if given is None or kept is None:
+        return given is kept
+    if given is kept:
+        return True
+    a, b = np.asarray(given), np.asarray(kept)
+    floats = a.dtype.kind == "f" and b.dtype.kind == "f"
+    return a.shape == b.shape and bool(np.array_equal(a, b, equal_nan=floats))

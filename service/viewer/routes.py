@@ -168,19 +168,19 @@ async def upload(
     "/v1/frames/example",
     summary="Keep the bundled example frame (a render of a cow) for the viewer",
     response_model=FrameInfo,
-    responses=openapi_responses(401, 404, 413, 429, 503, 504),
+    responses=openapi_responses(401, 404, 413, 422, 429, 503, 504),
 )
 async def example(server: Server, height: PreviewHeight = 540) -> dict[str, Any]:
     if not EXAMPLE_MESH.is_file():
         raise Problem("not-found", "this installation has no example mesh (examples/spot.obj)")
-    width, height = EXAMPLE_SIZE
-    if width * height > server.settings.max_pixels:
+    width, rows = EXAMPLE_SIZE
+    if width * rows > server.settings.max_pixels:
         raise Problem(
             "limit",
-            f"the example is {width}x{height} pixels, over "
+            f"the example is {width}x{rows} pixels, over "
             f"DEPICT_MAX_PIXELS={server.settings.max_pixels}",
         )
-    scene = RenderRequest(width=width, height=height, camera=None, azimuth=30.0, elevation=20.0)
+    scene = RenderRequest(width=width, height=rows, camera=None, azimuth=30.0, elevation=20.0)
     read = ReadRequest(limits=server.settings.limits)
     with store(server).new_folder() as (frame_id, folder):
         frame = StoredFrame(frame_id, folder, "spot.exr", read, 0)

@@ -233,13 +233,16 @@ def _stamp(path: Path) -> tuple[int, int, int]:
 
 
 def _arrays(value: Any) -> list[np.ndarray]:
-    """The arrays of ``value``: a small frame's buffers (with its score), or a passthrough's
-    channels."""
+    """The arrays of ``value``, each once: a small frame's buffers and its score's shape side
+    (which shares the frame's depth), or a passthrough's channels."""
     if isinstance(value, tuple):
-        found = list(value[0].buffers.values())
+        small, score = value
+        flow = [] if score is None or score.get("flow") is None else vars(score["flow"]).values()
+        fields = [x for v in flow for x in (v if isinstance(v, tuple) else (v,))]
+        found = [*small.buffers.values(), *fields]
     else:
         found = [c for _, channels in value.parts for c in channels.values()]
-    return [a for a in found if isinstance(a, np.ndarray)]
+    return list({id(a): a for a in found if isinstance(a, np.ndarray)}.values())
 
 
 def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
