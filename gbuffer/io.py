@@ -27,7 +27,8 @@ frame grid) and attributes of its header:
   but the new layers (when an output replaces a channel of the primary part, e.g. a second
   enhance of a ``part`` output, that part is re-encoded with every new layer, as ``"same"``);
 * ``"sidecar"``: a file with only the outputs and the header attributes (one part, ZIP, the
-  input's windows and pixel aspect ratio); the input stays where it is and holds the G-buffer.
+  input's windows and the attributes OpenEXR has every part share: pixel aspect ratio, time
+  code, chromaticities); the input stays where it is and holds the G-buffer.
 
 A frame built in memory (no passthrough, e.g. a render) is written as one part with Depict's
 canonical channel names (DESIGN.md): radiance (beauty, alpha, albedo, lobes) as HALF unless it
@@ -207,7 +208,8 @@ def write(frame: Frame, path: str | Path, layout: str = DEFAULT_LAYOUT) -> list[
     if not added and frame.outputs and compression is not None:
         if int(compression) in exr.LOSSY_COMPRESSIONS:
             new = [name for name in frame.outputs if name not in pt.parts[pt.primary][1]]
-            warnings += _lossy_notes(pt.primary, exr.compression_name(header), new)
+            floats = [name for name in new if channels[name].pixels.dtype == np.float32]
+            warnings += _lossy_notes(pt.primary, exr.compression_name(header), new, floats)
     if added:  # the header attributes go with the added layers
         header = _added_part(parts, header, frame.attributes)
         parts.append((header, added))
@@ -288,8 +290,10 @@ def _share_attributes(
 DWA_LOSSY_SUFFIXES = frozenset({"R", "G", "B", "Y", "BY", "RY"})
 
 
-def _lossy_notes(part: int, codec: str, new: list[str]) -> list[str]:
-    """What re-encoding a changed part with its own lossy ``codec`` costs (one line, or none).
+def _lossy_notes(part: int, codec: str, new: list[str], floats: list[str]) -> list[str]:
+    """What re-encoding a changed part with its own lossy ``codec`` costs (one line, or none);
+    ``new``: the layers added to it, of which ``floats`` are FLOAT (the others HALF, e.g. the
+    input's own R, G, B, A moved aside).
 
     Measured with OpenEXR 3.4: B44/B44A and PXR24 give back exactly what they decode
     (idempotent) and B44 leaves FLOAT channels exact, so new 32-bit layers are exact; PXR24
@@ -305,11 +309,11 @@ def _lossy_notes(part: int, codec: str, new: list[str]) -> list[str]:
             "input with ZIP or PIZ to avoid it, e.g. oiiotool IN.exr --compression zip -o "
             f"IN_zip.exr){also}"
         ]
-    if codec == "PXR24" and new:  # new outputs are FLOAT channels
-        more = ", ..." if len(new) > 6 else ""
+    if codec == "PXR24" and floats:
+        more = ", ..." if len(floats) > 6 else ""
         return [
             f"part {part} is written with PXR24 as it was read: its new 32-bit layers "
-            f"({', '.join(new[:6])}{more}) are rounded to 24 bits"
+            f"({', '.join(floats[:6])}{more}) are rounded to 24 bits"
         ]
     return []
 
@@ -321,7 +325,7 @@ def _radiance_keys() -> set[str]:
     return keys
 
 
-#: The header attributes that place a part's pixels: a sidecar or an added part takes the input's.
+#: The header attributes that place a part's pixels (the part `layout="part"` adds: the input's).
 _WINDOWS = ("dataWindow", "displayWindow", "pixelAspectRatio")
 
 
@@ -357,9 +361,10 @@ def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[s
         "type": OpenEXR.scanlineimage,
     }
     if frame.passthrough.parts:  # a sidecar: the input's windows as they are (the frame's own
-        # are relative to the display window's corner, which a file may put anywhere)
+        # are relative to the display window's corner, which a file may put anywhere), and what
+        # OpenEXR has every part of a file share (the chromaticities its colours are in, ...)
         primary = frame.passthrough.parts[frame.passthrough.primary][0]
-        header.update({k: primary[k] for k in _WINDOWS if k in primary})
+        header.update({k: primary[k] for k in ("dataWindow", *SHARED_ATTRIBUTES) if k in primary})
     cam = frame.camera
     if cam is not None:
         if cam.fov_y_deg is not None or cam.ortho_height is not None:

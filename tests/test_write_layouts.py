@@ -201,14 +201,19 @@ def test_sidecar_holds_only_the_new_layers(outputs: dict[str, Path]) -> None:
 def test_every_layout_keeps_the_inputs_windows_where_the_file_put_them(
     layout: str, tmp_path: Path
 ) -> None:
-    """A display window away from (0, 0), a data window inside it and a pixel aspect ratio: the
+    """A display window away from (0, 0), a data window inside it, a pixel aspect ratio: the
     result sits where the input's pixels do in every layout (a sidecar was written at the frame's
-    own origin, the display window's corner, and lay 90 × 40 pixels off in a compositor)."""
+    own origin, the display window's corner, and lay 90 × 40 pixels off in a compositor); and it
+    says the input's chromaticities (ACES AP1 here) and time code (a sidecar had neither)."""
     scene = exr_factory.make_scene(h=48, w=64)
+    tc = OpenEXR.TimeCode()
+    tc.hours, tc.minutes, tc.seconds, tc.frame = 1, 2, 3, 4
     windows = {
         "displayWindow": exr.box2i(90, 40, 179, 119),
         "dataWindow": exr.box2i(100, 50, 163, 97),
         "pixelAspectRatio": 1.25,
+        "chromaticities": (0.713, 0.293, 0.165, 0.830, 0.128, 0.044, 0.32168, 0.33767),
+        "timeCode": tc,
     }
     src = exr_factory.write_canonical(tmp_path / "offset.exr", scene, windows)
     out = tmp_path / f"{layout}.exr"
@@ -216,7 +221,7 @@ def test_every_layout_keeps_the_inputs_windows_where_the_file_put_them(
     [(source_header, _)] = parts(src)
     for header, _ in parts(out):  # (the result's part, and the input's copied beside it)
         for key in windows:
-            assert np.array_equal(np.asarray(header[key]), np.asarray(source_header[key])), key
+            assert str(header[key]) == str(source_header[key]), key
 
 
 def test_the_same_layout_keeps_a_half_beauty_beside_the_result_as_half(tmp_path: Path) -> None:
@@ -232,6 +237,25 @@ def test_the_same_layout_keeps_a_half_beauty_beside_the_result_as_half(tmp_path:
     for c in "RGBA":
         assert written[f"{kept}.{c}"].dtype == np.float16
         assert written[f"{kept}.{c}"].tobytes() == given[c].tobytes()
+
+
+def test_a_pxr24_warning_names_only_the_float_layers_it_rounds(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """PXR24 keeps HALF exact and rounds FLOAT to 24 bits: re-encoding a part names the new
+    FLOAT layers only (it named the input's own R, G, B, A moved aside, HALF)."""
+    scene = exr_factory.make_scene(h=48, w=64)
+    src = exr_factory.write_canonical(
+        tmp_path / "pxr24.exr", scene, {"compression": OpenEXR.PXR24_COMPRESSION}
+    )
+    out = tmp_path / "same.exr"
+    capsys.readouterr()
+    assert depict("enhance", src, "-o", out, "--layout", "same", "--op", "curvature") == 0
+    [warning] = capsys.readouterr().err.splitlines()
+    assert "rounded to 24 bits" in warning and "curvature.H" in warning
+    [(header, written)] = parts(out)
+    kept = header["depict/original"]
+    assert f"{kept}.R" in written and f"{kept}." not in warning
 
 
 def test_a_part_output_reads_back_and_enhances_again(
