@@ -20,10 +20,12 @@ from gbuffer.frame import Frame
 from gbuffer.io import inspect, read
 from gbuffer.preview import quick_png, write_png
 from gbuffer.render import load_mesh, render
+from ops import curvature as curv_ops
 from ops.congruence import score as congruence_score
 from service import pipeline
 from service.enhance import ReadRequest
 from service.http.worker import give_back_memory
+from service.memo import Memo
 from service.registry import Context, operators
 from service.viewer import work
 from service.viewer.work import colour_space, downscale, shrink_factor
@@ -182,6 +184,39 @@ def test_a_previews_score_is_the_scores_own(stored: Path, monkeypatch: pytest.Mo
         out, _ = pipeline.run_timed(small, steps, Context(files=False))
         fresh = score_frame(out, shading_norm=before["shading_norm"] or None)
         assert answer["score"] == {"before": before["score"], "after": fresh["score"]}
+
+
+def test_previews_keep_what_their_sliders_did_not_change(
+    stored: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Radiance Scaling's curvature and smoothed lights are kept between previews of a copy
+    while the parameters they depend on stay (γ or α moves): computed again only for a scale
+    not kept; every result the same, bit for bit, as a run that keeps nothing."""
+    small, _ = work._small(stored, 2, ReadRequest())
+    computed: list[float] = []
+    principal = curv_ops.principal_curvatures
+
+    def counted(*args: Any, **kwargs: Any) -> curv_ops.Curvature:
+        computed.append(kwargs["scale"])
+        return principal(*args, **kwargs)
+
+    monkeypatch.setattr(curv_ops, "principal_curvatures", counted)
+    memo = Memo()
+    sequence = [{"gamma": 3.0}, {"gamma": 0.5}, {"scale": 0.05}, {"alpha": 0.8}, {"gamma": 2.0}]
+    for params in sequence:
+        steps = pipeline.compile([{"op": "radiance_scaling", "params": params}])
+        kept, _ = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
+        fresh, _ = pipeline.run_timed(small, steps, Context(files=False))
+        assert kept.buffers.keys() == fresh.buffers.keys()
+        for name, array in fresh.buffers.items():
+            assert kept.buffers[name].tobytes() == array.tobytes(), name
+    assert len(computed) == 2 * len(sequence) - 3  # (the kept runs: the two scales, once each)
+    steps = pipeline.compile([{"op": "radiance_scaling", "params": {"gamma": 1.5}}])
+    work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+    assert work._memo(stored / "small_2.pkl") is work._memo(stored / "small_2.pkl")
+    computed.clear()
+    work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+    assert computed == []  # (the copy's memo: its curvature from the preview before)
 
 
 def test_a_worker_keeps_the_shrunk_frame_for_the_next_preview(stored: Path, tmp_path: Path) -> None:

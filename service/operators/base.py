@@ -7,9 +7,9 @@ reads (it imports the built-in operators first).
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -19,6 +19,7 @@ from ops.numerics import clip_new_negatives
 from service.errors import PipelineError
 from service.masks import MASK_SYNTAX, blend_layers, matte
 from service.masks import parse as parse_mask
+from service.memo import Memo
 from service.numbers import NumbersModel
 
 
@@ -74,6 +75,9 @@ class Params(NumbersModel):
         return data
 
 
+T = TypeVar("T")
+
+
 @dataclass
 class Context:
     """What a pipeline run passes to every operator besides its parameters.
@@ -85,6 +89,8 @@ class Context:
     ``files``: whether parameters may name image files on this machine (matcaps, environment
     maps, gain maps, ARMs); the HTTP service runs with ``files=False``.
     ``region``: where a step with ``mask_stats`` measures its statistics (:mod:`service.masks`).
+    ``memo``: results computed from the frame's arrays, kept for the next run on the same
+    arrays (:mod:`service.memo`: the viewer's previews); None: everything computed.
     """
 
     debug_layers: bool = False
@@ -92,6 +98,17 @@ class Context:
     pinned: dict[str, float] = field(default_factory=dict)
     measured: dict[str, float] = field(default_factory=dict)
     region: np.ndarray | None = None
+    memo: Memo | None = None
+
+    def kept(
+        self,
+        name: str,
+        arrays: Sequence[np.ndarray | None],
+        params: tuple[Hashable, ...],
+        compute: Callable[[], T],
+    ) -> T:
+        """``compute()``, or its result kept by :attr:`memo` for these arrays and parameters."""
+        return compute() if self.memo is None else self.memo.get(name, arrays, params, compute)
 
     def counted(self, covered: np.ndarray) -> np.ndarray:
         """``covered`` (H, W) bool, within the step's mask when it restricts statistics."""

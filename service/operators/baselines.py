@@ -122,7 +122,7 @@ def apply_light_warping(frame: Frame, p: WarpingParams, ctx: Context) -> None:
         frame.mask,
         p.direction(),
         strength=p.strength,
-        curvature=isotropic(frame_curvature(frame, p), p.gain),
+        curvature=isotropic(frame_curvature(frame, p, ctx), p.gain),
         view=frame.view_vectors(),
         image_height=frame.image_height,
     )

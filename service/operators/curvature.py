@@ -3,6 +3,7 @@ curvature-driven operator shares."""
 
 from __future__ import annotations
 
+import numpy as np
 from pydantic import Field
 
 from gbuffer.frame import Frame
@@ -45,17 +46,33 @@ def scale_px(frame: Frame, scale: float) -> float:
     return max(scale * frame.image_height, MIN_SCALE_PX)
 
 
-def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
-    """The view-centred curvature of a frame at the parameters' scale (at least a pixel)."""
-    return curv_ops.principal_curvatures(
-        frame.need("normal", "for curvature"),
-        frame.need("depth", "for curvature"),
-        frame.mask,
-        scale=min(scale_px(frame, p.scale) / frame.image_height, 0.1),
-        foreshortening=p.foreshortening,
-        image_height=frame.image_height,
-        depth_jump=p.depth_jump,
+def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.Curvature:
+    """The view-centred curvature of a frame at the parameters' scale (at least a pixel); the
+    run's memo keeps it for the next run on the same normals, depth and mask
+    (:meth:`Context.kept`)."""
+    normal = frame.need("normal", "for curvature")
+    depth = frame.need("depth", "for curvature")
+    scale = min(scale_px(frame, p.scale) / frame.image_height, 0.1)
+    params = (scale, p.foreshortening, frame.image_height, p.depth_jump)
+    return ctx.kept(
+        "curvature",
+        (normal, depth, *mask_sources(frame)),
+        params,
+        lambda: curv_ops.principal_curvatures(
+            normal,
+            depth,
+            frame.mask,
+            scale=scale,
+            foreshortening=p.foreshortening,
+            image_height=frame.image_height,
+            depth_jump=p.depth_jump,
+        ),
     )
+
+
+def mask_sources(frame: Frame) -> tuple[np.ndarray | None, ...]:
+    """The buffers :attr:`gbuffer.frame.Frame.mask` is made of (for :meth:`Context.kept`)."""
+    return tuple(frame.buffers.get(name) for name in ("coverage", "depth", "alpha"))
 
 
 @register(
@@ -67,4 +84,5 @@ def frame_curvature(frame: Frame, p: CurvatureParams) -> curv_ops.Curvature:
     writes=("curvature.H", "curvature.k1", "curvature.k2", "curvature.dir.X", "curvature.dir.Y"),
 )
 def apply_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> None:
-    frame.set_layer("curvature", curv_ops.mean_curvature_layers(frame_curvature(frame, p), p.gain))
+    curvature = frame_curvature(frame, p, ctx)
+    frame.set_layer("curvature", curv_ops.mean_curvature_layers(curvature, p.gain))

@@ -28,7 +28,7 @@ from service.operators.common import (
     statistic,
     user_image,
 )
-from service.operators.curvature import CurvatureParams, frame_curvature, scale_px
+from service.operators.curvature import CurvatureParams, frame_curvature, mask_sources, scale_px
 
 #: Albedo (luminance) below which a pixel's light is not beauty / albedo (scenario 'beauty').
 MIN_ALBEDO = np.float32(0.02)
@@ -163,13 +163,26 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
     return "lobes" if any(lobe in frame.buffers for lobe in LOBES) else "beauty"
 
 
-def _lights(frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray]) -> list[np.ndarray]:
+def _smoothed_lights(
+    frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray]
+) -> list[np.ndarray]:
     """The lights δ̄ is mapped from, as luminances (all δ̄ reads of them): averaged at
     ``light_scale`` (default: the curvature's) over the covered pixels (one coverage average
     for them all)."""
     scale = p.scale if p.light_scale is None else p.light_scale
     ys = [x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in lights]
     return masked_gaussians(ys, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
+
+
+def _lights(
+    frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray], ctx: Context
+) -> list[np.ndarray]:
+    """:func:`_smoothed_lights` of the frame's own arrays, which the run's memo keeps for the
+    next run on the same lights and mask (:meth:`Context.kept`)."""
+    scale = p.scale if p.light_scale is None else p.light_scale
+    params = (scale_px(frame, scale) if scale > 0 else 0.0, frame.colorspace.weights)
+    arrays = (*lights, *mask_sources(frame))
+    return ctx.kept("lights", arrays, params, lambda: _smoothed_lights(frame, p, lights))
 
 
 def _lighting_gain(
@@ -191,7 +204,7 @@ def _scale_renderer_lobes(
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
     given = [frame.buffers.get(f"{n}.light", lobes[n]) for n in names]
-    lights = dict(zip(names, _lights(frame, p, given), strict=True))
+    lights = dict(zip(names, _lights(frame, p, given, ctx), strict=True))
     mask = frame.mask > 0
     weights = frame.colorspace.weights
     white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
@@ -250,7 +263,7 @@ def _scale_beauty(
         has_albedo = y_albedo > MIN_ALBEDO
         np.divide(light, y_albedo, out=light, where=has_albedo)
         counted &= has_albedo
-    (light,) = _lights(frame, p, [light])
+    (light,) = _smoothed_lights(frame, p, [light])
     white = _white(ctx, p, "beauty", light, counted, weights)
     scaled, sigmas = scale_lobes(
         {"beauty": beauty},
@@ -362,7 +375,7 @@ def _deferred(
     writes=("beauty", "curvature.H (debug)", "rs_sigma.<lobe>.X (debug)"),
 )
 def apply_radiance_scaling(frame: Frame, p: RadianceScalingParams, ctx: Context) -> None:
-    curv = frame_curvature(frame, p)
+    curv = frame_curvature(frame, p, ctx)
     scenario = _scenario(frame, p)
     kappa = None
     if scenario in ("lobes", "beauty"):

@@ -247,7 +247,7 @@ def apply_apparent_relief(frame: Frame, p: ReliefParams, ctx: Context) -> None:
     """Apparent Relief (§2, Figs. 1-2): S and r = ARM(S) fused on the curvature's working grid
     (:func:`ops.relief.relief`; S also interpolated to full resolution for the ``relief.S``
     layers), then the style over the covered pixels."""
-    curv = frame_curvature(frame, p)
+    curv = frame_curvature(frame, p, ctx)
     key = "apparent_relief.curvedness_norm"
     norm = _curvedness_norm(p, ctx, key)
     arm = load_arm(frame, p.arm, ctx)

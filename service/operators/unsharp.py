@@ -143,14 +143,14 @@ def _pixel_sizes(frame: Frame, p: UnsharpParams) -> np.ndarray:
 
 
 def _relief(
-    frame: Frame, p: UnsharpParams, sigma: float, pixel_size: np.ndarray
+    frame: Frame, p: UnsharpParams, sigma: float, pixel_size: np.ndarray, ctx: Context
 ) -> np.ndarray | None:
     """tanh(s·(|κ1| + |κ2|)) · weight of the normals' curvature at the default scale (RS §4,
     the default gain s), smoothed along the surfaces over σ / 2 (scene units): it reaches as far
     as the contrast it lets in, without crossing onto another surface; None without normals."""
     if not p.relief_only or "normal" not in frame.buffers:
         return None
-    curv = frame_curvature(frame, CurvatureParams())
+    curv = frame_curvature(frame, CurvatureParams(), ctx)
     trace = np.abs(curv.k1) + np.abs(curv.k2)
     relief = (np.tanh(np.float32(curv_ops.DEFAULT_GAIN) * trace) * curv.weight).astype(np.float32)
     normal = frame.buffers["normal"]
@@ -210,7 +210,7 @@ def apply_unsharp_masking(frame: Frame, p: UnsharpParams, ctx: Context) -> None:
             lambda: color.auto_white(signal, ctx.counted(covered), weights=space.weights),
         )
     gain = _gain_map(frame, p, ctx)
-    relief = _relief(frame, p, sigma, pixel_size)
+    relief = _relief(frame, p, sigma, pixel_size, ctx)
     if relief is not None:
         gain = relief if gain is None else gain * relief
     out = unsharp_masking(

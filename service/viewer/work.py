@@ -34,6 +34,7 @@ from gbuffer.io import describe, inspect
 from gbuffer.preview import picture, quick_png, write_png
 from service import pipeline
 from service.enhance import ReadRequest
+from service.memo import Memo
 from service.registry import Context, runnable
 
 #: The layer name of the per-pixel congruence score (LLA Eq. 2) in pictures.
@@ -189,7 +190,7 @@ def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
 #: go in the worker's next pause (:func:`forget_deleted`).
 KEEP_LOADED = 2
 KEEP_LOADED_BYTES = 512 << 20
-_loaded: dict[Path, tuple[tuple[int, int, int], Any, int]] = {}
+_loaded: dict[Path, tuple[tuple[int, int, int], Any, int, Memo]] = {}
 
 
 def _load(path: Path) -> Any:
@@ -213,12 +214,20 @@ def _keep(path: Path, value: Any) -> Any:
     """``value``, read from or written to ``path``, kept as :func:`_load`'s (within
     :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
     _loaded.pop(path, None)
-    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in _arrays(value)))
+    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in _arrays(value)), Memo())
     while _loaded and (
         len(_loaded) > KEEP_LOADED or sum(k[2] for k in _loaded.values()) > KEEP_LOADED_BYTES
     ):
         _loaded.pop(next(iter(_loaded)))
     return value
+
+
+def _memo(path: Path) -> Memo:
+    """What the previews of the copy in ``path`` computed of its arrays with parameters a
+    slider may not have changed since (the curvature, the lights' smoothing: :mod:`service.memo`),
+    kept with the copy and let go with it; a copy not kept starts afresh."""
+    kept = _loaded.get(path)
+    return Memo() if kept is None else kept[3]
 
 
 def forget_deleted() -> None:
@@ -322,7 +331,8 @@ def preview_job(
     small, before = _small(Path(folder), factor, read)
     if reads_file_layers(steps):
         small = _file_layers(Path(folder), factor, small)
-    out, op_s = pipeline.run_timed(small, steps, Context(files=False))
+    memo = _memo(Path(folder) / f"small_{factor}.pkl")
+    out, op_s = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure)),
         "size": list(out.shape[::-1]),
