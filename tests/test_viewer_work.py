@@ -186,6 +186,19 @@ def test_a_previews_score_is_the_scores_own(stored: Path, monkeypatch: pytest.Mo
         assert answer["score"] == {"before": before["score"], "after": fresh["score"]}
 
 
+def _assert_kept_as_fresh(
+    frame: Frame, spec: list[dict[str, Any]], memo: Memo, debug: bool = False
+) -> None:
+    """The pipeline ``spec`` on ``frame`` with ``memo`` gives the same bits as without one."""
+    steps = pipeline.compile(spec)
+    kept, _ = pipeline.run_timed(frame, steps, Context(files=False, memo=memo, debug_layers=debug))
+    fresh, _ = pipeline.run_timed(frame, steps, Context(files=False, debug_layers=debug))
+    for got, want in ((kept.buffers, fresh.buffers), (kept.outputs, fresh.outputs)):
+        assert got.keys() == want.keys()
+        for name, array in want.items():
+            assert np.asarray(got[name]).tobytes() == np.asarray(array).tobytes(), (spec, name)
+
+
 def test_previews_keep_what_their_sliders_did_not_change(
     stored: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -204,13 +217,21 @@ def test_previews_keep_what_their_sliders_did_not_change(
     memo = Memo()
     sequence = [{"gamma": 3.0}, {"gamma": 0.5}, {"scale": 0.05}, {"alpha": 0.8}, {"gamma": 2.0}]
     for params in sequence:
-        steps = pipeline.compile([{"op": "radiance_scaling", "params": params}])
-        kept, _ = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
-        fresh, _ = pipeline.run_timed(small, steps, Context(files=False))
-        assert kept.buffers.keys() == fresh.buffers.keys()
-        for name, array in fresh.buffers.items():
-            assert kept.buffers[name].tobytes() == array.tobytes(), name
+        _assert_kept_as_fresh(small, [{"op": "radiance_scaling", "params": params}], memo)
     assert len(computed) == 2 * len(sequence) - 3  # (the kept runs: the two scales, once each)
+    # steps that read the kept curvature's full-resolution fields before others read it (which
+    # then took another path, rounding otherwise), with and without debug layers
+    mixed: list[list[dict[str, Any]]] = [
+        [{"op": "unsharp_masking", "params": {"relief_only": True}}, {"op": "radiance_scaling"}],
+        [{"op": "curvature"}],
+        [{"op": "curvature"}],
+        [{"op": "radiance_scaling", "params": {"scenario": "phong", "anisotropy": 0.5}}],
+        [{"op": "radiance_scaling"}],
+    ]
+    for debug in (False, True):
+        memo = Memo()
+        for spec in mixed:
+            _assert_kept_as_fresh(small, spec, memo, debug)
     steps = pipeline.compile([{"op": "radiance_scaling", "params": {"gamma": 1.5}}])
     work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
     assert work._memo(stored / "small_2.pkl") is work._memo(stored / "small_2.pkl")

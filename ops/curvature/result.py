@@ -78,6 +78,15 @@ class Curvature:
         value: np.ndarray = self.__dict__[name]
         return value
 
+    def view(self) -> Curvature:
+        """This curvature for another reader: the same working-grid data with nothing
+        interpolated yet. A reader that interpolates a field (and may edit it) makes the
+        readers after it take the full-resolution path, which rounds differently: a result kept
+        between runs (:mod:`service.memo`) hands each run a view, so that each reads the same
+        numbers whatever ran before. One constructed at full resolution is its own."""
+        coarse: _Coarse | None = self.__dict__.get("_coarse")
+        return self if coarse is None else Curvature._lazy(coarse)
+
     def _coarse_for(self, *names: str) -> _Coarse | None:
         """The working-grid data, if none of ``names`` was materialised (and so maybe edited)."""
         coarse: _Coarse | None = self.__dict__.get("_coarse")

@@ -49,7 +49,8 @@ def scale_px(frame: Frame, scale: float) -> float:
 def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.Curvature:
     """The view-centred curvature of a frame at the parameters' scale (at least a pixel); the
     run's memo keeps it for the next run on the same normals, depth and mask
-    (:meth:`Context.kept`)."""
+    (:meth:`Context.kept`), and each run reads a view of it of its own
+    (:meth:`ops.curvature.Curvature.view`)."""
     normal = frame.need("normal", "for curvature")
     depth = frame.need("depth", "for curvature")
     scale = min(scale_px(frame, p.scale) / frame.image_height, 0.1)
@@ -67,7 +68,7 @@ def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.
             image_height=frame.image_height,
             depth_jump=p.depth_jump,
         ),
-    )
+    ).view()
 
 
 def mask_sources(frame: Frame) -> tuple[np.ndarray | None, ...]:
