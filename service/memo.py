@@ -3,8 +3,8 @@
 The web viewer runs the pipeline again on one kept copy of a frame at every slider move; what
 only depends on that copy's arrays and on parameters the slider did not change (the curvature,
 the lights' smoothing) need not be computed again. A :class:`Memo` given to a run
-(:attr:`service.operators.base.Context.memo`) keeps those results between runs; without one
-(the default: ``depict enhance``, the HTTP service, ``batch``) everything is computed.
+(:attr:`service.operators.base.Context.memo`) keeps those results between runs; the default,
+``Memo(0)`` (``depict enhance``, the HTTP service, ``batch``), keeps nothing.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ T = TypeVar("T")
 
 
 class Memo:
-    """At most ``size`` results, the least recently used dropped first, each keyed by a name,
-    the identities of the arrays it was computed from and the parameters it depends on.
+    """At most ``size`` results (0: none), the least recently used dropped first, each keyed by
+    a name, the identities of the arrays it was computed from and the parameters it depends on.
 
     An entry holds its arrays, so that their identities are not reused while it lives. The
     caller vouches that nothing writes into those arrays (the viewer's copy: no operator

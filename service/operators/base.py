@@ -7,9 +7,9 @@ reads (it imports the built-in operators first).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, ClassVar, TypeVar
+from typing import Any, ClassVar
 
 import numpy as np
 from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
@@ -75,9 +75,6 @@ class Params(NumbersModel):
         return data
 
 
-T = TypeVar("T")
-
-
 @dataclass
 class Context:
     """What a pipeline run passes to every operator besides its parameters.
@@ -90,7 +87,7 @@ class Context:
     maps, gain maps, ARMs); the HTTP service runs with ``files=False``.
     ``region``: where a step with ``mask_stats`` measures its statistics (:mod:`service.masks`).
     ``memo``: results computed from the frame's arrays, kept for the next run on the same
-    arrays (:mod:`service.memo`: the viewer's previews); None: everything computed.
+    arrays (:mod:`service.memo`: the viewer's previews); by default one that keeps nothing.
     """
 
     debug_layers: bool = False
@@ -98,17 +95,7 @@ class Context:
     pinned: dict[str, float] = field(default_factory=dict)
     measured: dict[str, float] = field(default_factory=dict)
     region: np.ndarray | None = None
-    memo: Memo | None = None
-
-    def kept(
-        self,
-        name: str,
-        arrays: Sequence[np.ndarray | None],
-        params: tuple[Hashable, ...],
-        compute: Callable[[], T],
-    ) -> T:
-        """``compute()``, or its result kept by :attr:`memo` for these arrays and parameters."""
-        return compute() if self.memo is None else self.memo.get(name, arrays, params, compute)
+    memo: Memo = field(default_factory=lambda: Memo(0))
 
     def counted(self, covered: np.ndarray) -> np.ndarray:
         """``covered`` (H, W) bool, within the step's mask when it restricts statistics."""

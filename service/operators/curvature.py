@@ -49,13 +49,13 @@ def scale_px(frame: Frame, scale: float) -> float:
 def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.Curvature:
     """The view-centred curvature of a frame at the parameters' scale (at least a pixel); the
     run's memo keeps it for the next run on the same normals, depth and mask
-    (:meth:`Context.kept`), and each run reads a view of it of its own
+    (:attr:`Context.memo`), and each run reads a view of it of its own
     (:meth:`ops.curvature.Curvature.view`)."""
     normal = frame.need("normal", "for curvature")
     depth = frame.need("depth", "for curvature")
     scale = min(scale_px(frame, p.scale) / frame.image_height, 0.1)
     params = (scale, p.foreshortening, frame.image_height, p.depth_jump)
-    return ctx.kept(
+    return ctx.memo.get(
         "curvature",
         (normal, depth, *mask_sources(frame)),
         params,
@@ -72,7 +72,7 @@ def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.
 
 
 def mask_sources(frame: Frame) -> tuple[np.ndarray | None, ...]:
-    """The buffers :attr:`gbuffer.frame.Frame.mask` is made of (for :meth:`Context.kept`)."""
+    """The buffers :attr:`gbuffer.frame.Frame.mask` is made of (for :attr:`Context.memo`)."""
     return tuple(frame.buffers.get(name) for name in ("coverage", "depth", "alpha"))
 
 

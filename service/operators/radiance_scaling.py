@@ -163,26 +163,29 @@ def _scenario(frame: Frame, p: RadianceScalingParams) -> str:
     return "lobes" if any(lobe in frame.buffers for lobe in LOBES) else "beauty"
 
 
-def _smoothed_lights(
-    frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray]
-) -> list[np.ndarray]:
-    """The lights δ̄ is mapped from, as luminances (all δ̄ reads of them): averaged at
-    ``light_scale`` (default: the curvature's) over the covered pixels (one coverage average
-    for them all)."""
+def _light_sigma(frame: Frame, p: RadianceScalingParams) -> float:
+    """σ in pixels of the lights' smoothing: ``light_scale`` (default: the curvature's), 0 for
+    none."""
     scale = p.scale if p.light_scale is None else p.light_scale
+    return scale_px(frame, scale) if scale > 0 else 0.0
+
+
+def _smoothed_lights(frame: Frame, lights: list[np.ndarray], sigma: float) -> list[np.ndarray]:
+    """The lights δ̄ is mapped from, as luminances (all δ̄ reads of them): averaged over the
+    covered pixels at ``sigma`` (:func:`_light_sigma`; one coverage average for them all)."""
     ys = [x if x.ndim == 2 else luminance(x, frame.colorspace.weights) for x in lights]
-    return masked_gaussians(ys, frame.mask, scale_px(frame, scale) if scale > 0 else 0.0)
+    return masked_gaussians(ys, frame.mask, sigma)
 
 
 def _lights(
     frame: Frame, p: RadianceScalingParams, lights: list[np.ndarray], ctx: Context
 ) -> list[np.ndarray]:
     """:func:`_smoothed_lights` of the frame's own arrays, which the run's memo keeps for the
-    next run on the same lights and mask (:meth:`Context.kept`)."""
-    scale = p.scale if p.light_scale is None else p.light_scale
-    params = (scale_px(frame, scale) if scale > 0 else 0.0, frame.colorspace.weights)
+    next run on the same lights and mask (:attr:`Context.memo`)."""
+    sigma = _light_sigma(frame, p)
+    params = (sigma, frame.colorspace.weights)
     arrays = (*lights, *mask_sources(frame))
-    return ctx.kept("lights", arrays, params, lambda: _smoothed_lights(frame, p, lights))
+    return ctx.memo.get("lights", arrays, params, lambda: _smoothed_lights(frame, lights, sigma))
 
 
 def _lighting_gain(
@@ -263,7 +266,7 @@ def _scale_beauty(
         has_albedo = y_albedo > MIN_ALBEDO
         np.divide(light, y_albedo, out=light, where=has_albedo)
         counted &= has_albedo
-    (light,) = _smoothed_lights(frame, p, [light])
+    (light,) = _smoothed_lights(frame, [light], _light_sigma(frame, p))
     white = _white(ctx, p, "beauty", light, counted, weights)
     scaled, sigmas = scale_lobes(
         {"beauty": beauty},
