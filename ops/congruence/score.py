@@ -184,7 +184,7 @@ def shape_flow(
     key = _shape_key(dep.shape, href, params, normal is not None)
 
     # --- gradient level: area-downsample by f1 so that sigma_g is 1-2 px there; area-average
-    # the covered depth, luminance and coverage, blur them, and normalise by the coverage.
+    # the covered depth, coverage and normals (the image's luminance: in congruence()).
     f1 = max(1, min(int(sg), h // 8 or 1, w // 8 or 1))
     size1 = (max(w // f1, 3), max(h // f1, 3)) if f1 > 1 else (w, h)
     nrm = None if normal is None else np.asarray(normal, np.float32)

@@ -155,7 +155,7 @@ def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[st
     """The frame shrunk by ``factor`` and the score of its beauty (None without depth), made on
     first use (:func:`_shrink`) and kept in the frame's folder, with the file's channels shrunk
     beside them (:func:`_file_layers`)."""
-    cache = folder / f"small_{factor}.pkl"
+    cache = _copy_path(folder, factor)
     if cache.is_file():
         loaded: tuple[Frame, dict[str, Any] | None] = _load(cache)
         return loaded
@@ -166,9 +166,8 @@ def _shrink(folder: Path, factor: int, frame: Frame) -> tuple[Frame, dict[str, A
     """:func:`_small` of the frame read from the folder's file: made, written and kept."""
     small = downscale(frame, factor)
     score = _score(small)
-    layers = shrink_passthrough(frame, factor)
-    cache = folder / f"small_{factor}.pkl"
-    made = ((cache.with_suffix(".layers.pkl"), layers), (cache, (small, score)))
+    cache = _copy_path(folder, factor)
+    made = ((_layers_path(cache), shrink_passthrough(frame, factor)), (cache, (small, score)))
     for path, data in made:
         with atomic_path(path) as tmp, open(tmp, "wb") as f:
             pickle.dump(data, f, protocol=pickle.HIGHEST_PROTOCOL)
@@ -176,10 +175,20 @@ def _shrink(folder: Path, factor: int, frame: Frame) -> tuple[Frame, dict[str, A
     return small, score
 
 
+def _copy_path(folder: Path, factor: int) -> Path:
+    """Where the frame's copy shrunk by ``factor`` is kept, with its score."""
+    return folder / f"small_{factor}.pkl"
+
+
+def _layers_path(copy: Path) -> Path:
+    """Where the file's channels shrunk as the ``copy`` are kept."""
+    return copy.with_suffix(".layers.pkl")
+
+
 def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
     """``small`` with the file's channels (shrunk by ``factor``), for the steps that read a
     layer of the file (:data:`FILE_PARAMETERS`)."""
-    passthrough: Passthrough = _load(folder / f"small_{factor}.layers.pkl")
+    passthrough: Passthrough = _load(_layers_path(_copy_path(folder, factor)))
     return replace(small, passthrough=passthrough)
 
 
@@ -331,7 +340,7 @@ def preview_job(
     small, before = _small(Path(folder), factor, read)
     if reads_file_layers(steps):
         small = _file_layers(Path(folder), factor, small)
-    memo = _memo(Path(folder) / f"small_{factor}.pkl")
+    memo = _memo(_copy_path(Path(folder), factor))
     out, op_s = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure)),
