@@ -58,6 +58,16 @@ def captured_output() -> Iterator[list[str]]:
             yield lines
 
 
+@contextlib.contextmanager
+def terminal() -> Iterator[None]:
+    """Run the block once no capture points descriptors 1 and 2 elsewhere (another thread's
+    decode), and let none start until it ends: what the block says reaches the terminal. Not
+    from inside a capture on the same thread (the two would wait on each other). A stop
+    (Ctrl-C) cuts the wait short, as any wait on a lock."""
+    with _ONE_AT_A_TIME:
+        yield
+
+
 def _saved_descriptors() -> tuple[int, int] | None:
     """Copies of descriptors 1 and 2 numbered 3 or above, or None where either is closed (or
     cannot be copied). A closed one is never captured: the number is free for any file the

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 from gbuffer.atomic import check_outputs
 from gbuffer.camera import Camera
+from gbuffer.capture import terminal
 from gbuffer.presets import ReadOptions, find_preset
 from service.cli.args import (
     EXIT_USAGE,
@@ -140,8 +141,11 @@ def each_file(pairs: list[tuple[str, str]], one: Callable[[str, str], None]) -> 
 
 
 def _stopped(enhanced: int, failed: int, count: int) -> None:
+    """The stop line, once no read started ahead holds the terminal: a stop can come between a
+    read's start and the point where the caller keeps it to wait for (:mod:`.frames`)."""
     if count > 1:
-        note(f"depict: stopped: {_tally(enhanced, failed, count)}")
+        with terminal():
+            note(f"depict: stopped: {_tally(enhanced, failed, count)}")
 
 
 def _tally(enhanced: int, failed: int, count: int) -> str:
