@@ -15,7 +15,7 @@ from typing import Any, TypeVar
 
 import numpy as np
 
-__all__ = ["Memo"]
+__all__ = ["Memo", "held_bytes"]
 
 T = TypeVar("T")
 
@@ -53,3 +53,50 @@ class Memo:
         while len(self._kept) > self.size:
             self._kept.popitem(last=False)
         return value
+
+    @property
+    def nbytes(self) -> int:
+        """The bytes the kept results hold now (:func:`held_bytes`; not those of the arrays
+        they were computed from, which are the caller's)."""
+        inputs = [a for arrays, _ in self._kept.values() for a in arrays if a is not None]
+        return held_bytes([value for _, value in self._kept.values()], inputs)
+
+    def trim(self, nbytes: int) -> None:
+        """Let go of the least recently used results until those kept hold at most ``nbytes``."""
+        while self._kept and self.nbytes > nbytes:
+            self._kept.popitem(last=False)
+
+
+def held_bytes(value: Any, besides: Sequence[np.ndarray] = ()) -> int:
+    """The bytes of the arrays ``value`` holds, in its containers and its objects' attributes
+    (a lazily computed result's cache included), each buffer once (a view counts its base
+    array), leaving out the buffers of ``besides``."""
+    counted = {id(_base(a)) for a in besides}
+    seen: set[int] = set()
+    total, todo = 0, [value]
+    while todo:
+        item = todo.pop()
+        if isinstance(item, np.ndarray):
+            base = _base(item)
+            if id(base) not in counted:
+                counted.add(id(base))
+                total += base.nbytes
+        elif id(item) in seen:
+            continue
+        elif isinstance(item, (list, tuple, set, frozenset)):
+            seen.add(id(item))
+            todo.extend(item)
+        elif isinstance(item, dict):
+            seen.add(id(item))
+            todo.extend(item.values())
+        elif hasattr(item, "__dict__") and not callable(item):
+            seen.add(id(item))
+            todo.extend(vars(item).values())
+    return total
+
+
+def _base(array: np.ndarray) -> np.ndarray:
+    """The array that owns ``array``'s buffer (itself, or the base of a view)."""
+    while isinstance(array.base, np.ndarray):
+        array = array.base
+    return array

@@ -286,6 +286,27 @@ def test_what_a_worker_keeps_is_bounded_and_let_go_with_its_frame(
     assert pickled not in work._loaded
 
 
+def test_what_previews_keep_counts_in_the_bytes_a_worker_keeps(
+    stored: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The curvature and lights a preview keeps (:func:`work._memo`) count in
+    :data:`work.KEEP_LOADED_BYTES` beside the copy: over it, they are let go, not the copy, and
+    the preview is the same."""
+    steps = pipeline.compile([{"op": "radiance_scaling"}])
+    first = work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+    pickled = stored / "small_2.pkl"
+    kept = work._memo(pickled)
+    copy_bytes = work._loaded[pickled][2]
+    assert kept.nbytes > 0
+    assert sum(k[2] + k[3].nbytes for k in work._loaded.values()) <= work.KEEP_LOADED_BYTES
+    monkeypatch.setattr(work, "KEEP_LOADED_BYTES", copy_bytes + kept.nbytes - 1)
+    again = work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+    assert {**again, "op_s": None} == {**first, "op_s": None}
+    assert pickled in work._loaded and work._memo(pickled) is kept
+    assert copy_bytes + kept.nbytes <= work.KEEP_LOADED_BYTES
+    assert kept.nbytes > 0  # (what fits is kept: the least recently used went)
+
+
 def test_the_viewers_pictures_are_quick_pngs_of_the_same_pixels(tmp_path: Path) -> None:
     """Pictures for the browser are PNGs made for speed (OpenCV, one filter, run-length
     matching): the same pixels, in the same order of channels, as the PNG ``depict preview``

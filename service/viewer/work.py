@@ -195,7 +195,8 @@ def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
 #: What a worker keeps in memory of the files :func:`_load` reads (the last ones read): at most
 #: this many files and bytes (a 1080p render's shrunk copy for a 540-row preview and its file's
 #: channels: 95 and 89 MB; at full size, 363 and 340 MB: then the copy alone is kept). A file
-#: larger than the bytes is not kept; files deleted since (a frame forgotten or expired) are let
+#: larger than the bytes is not kept; what its previews keep (:func:`_memo`) counts in the bytes,
+#: and goes first; files deleted since (a frame forgotten or expired) are let
 #: go in the worker's next pause (:func:`forget_deleted`).
 KEEP_LOADED = 2
 KEEP_LOADED_BYTES = 512 << 20
@@ -224,11 +225,25 @@ def _keep(path: Path, value: Any) -> Any:
     :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
     _loaded.pop(path, None)
     _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in _arrays(value)), Memo())
+    _within_bounds()
+    return value
+
+
+def _within_bounds() -> None:
+    """What :func:`_load` keeps, within :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`: the
+    oldest files let go first; then, where the previews' kept results (:func:`_memo`) take it
+    over the bytes, those of the oldest file first, its least recently used first."""
     while _loaded and (
         len(_loaded) > KEEP_LOADED or sum(k[2] for k in _loaded.values()) > KEEP_LOADED_BYTES
     ):
         _loaded.pop(next(iter(_loaded)))
-    return value
+    over = sum(k[2] + k[3].nbytes for k in _loaded.values()) - KEEP_LOADED_BYTES
+    for _, _, _, memo in _loaded.values():
+        if over <= 0:
+            break
+        held = memo.nbytes
+        memo.trim(max(held - over, 0))
+        over -= held - memo.nbytes
 
 
 def _memo(path: Path) -> Memo:
@@ -342,6 +357,7 @@ def preview_job(
         small = _file_layers(Path(folder), factor, small)
     memo = _memo(_copy_path(Path(folder), factor))
     out, op_s = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
+    _within_bounds()  # (with what the run kept)
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure)),
         "size": list(out.shape[::-1]),
