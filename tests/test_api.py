@@ -362,3 +362,26 @@ def test_a_frame_of_one_pixel_422_and_the_worker_stays(client: Any, tmp_path: An
         r = client.post("/v1/enhance", headers=AUTH, files={"file": ("px.exr", data)})
         assert_problem(r, 422, "the frame is 1x1 pixels")
     assert client.get("/readyz").status_code == 200
+
+
+@pytest.mark.parametrize("size", [0, 10_000, 3 << 20])
+def test_an_upload_is_saved_whole_from_memory_or_disk(tmp_path: Any, size: int) -> None:
+    """The form parser keeps a part of up to 1 MiB in memory and a larger one on disk
+    (Starlette's spooled file); either is saved whole (copied by the kernel), as is a file
+    object without a descriptor."""
+    import io
+    import os
+    import tempfile
+
+    import anyio
+    from starlette.datastructures import UploadFile
+
+    from service.http.uploads import save
+
+    data = os.urandom(size)
+    spooled = tempfile.SpooledTemporaryFile(max_size=1 << 20)
+    spooled.write(data)
+    for n, source in enumerate([spooled, io.BytesIO(data)]):
+        target = tmp_path / f"saved{n}.exr"
+        got = anyio.run(save, UploadFile(source), target)  # type: ignore[arg-type]
+        assert got == size and target.read_bytes() == data

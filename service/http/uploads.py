@@ -6,9 +6,11 @@ command line's flags."""
 from __future__ import annotations
 
 import contextlib
+import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
+from typing import BinaryIO
 
 import anyio
 from fastapi import UploadFile
@@ -36,12 +38,32 @@ async def save(upload: UploadFile, target: Path) -> int:
     """Copy an upload to ``target`` (off the event loop); its size in bytes."""
 
     def copy() -> int:
-        upload.file.seek(0)
         with open(target, "wb") as out:
-            shutil.copyfileobj(upload.file, out, 1 << 20)
-            return out.tell()
+            return _copy_file(upload.file, out)
 
     return await anyio.to_thread.run_sync(copy)
+
+
+def _copy_file(source: BinaryIO, out: BinaryIO) -> int:
+    """All of ``source`` (from its start) into ``out``; the bytes copied. The form parser's
+    file is on disk (a part over 1 MiB) or is put there (:meth:`~tempfile.SpooledTemporaryFile.
+    fileno`): the kernel copies it (``sendfile``), where reading it through Python's buffers
+    took 0.33-0.46 s of a 135 MB upload (each buffer a fresh mapping, faulted in), about 0.03 s
+    this way. A file object with no descriptor is copied through buffers."""
+    try:
+        fd = source.fileno()
+    except (OSError, ValueError):  # (io.UnsupportedOperation is both)
+        source.seek(0)
+        shutil.copyfileobj(source, out, 1 << 20)
+        return out.tell()
+    source.flush()
+    size, sent = os.fstat(fd).st_size, 0
+    while sent < size:
+        step = os.sendfile(out.fileno(), fd, sent, size - sent)
+        if step == 0:  # (the file shrank meanwhile)
+            break
+        sent += step
+    return sent
 
 
 def check_exr(path: Path, limits: Limits) -> None:
