@@ -10,7 +10,8 @@ the lights' smoothing) need not be computed again. A :class:`Memo` given to a ru
 from __future__ import annotations
 
 from collections import OrderedDict
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Iterable, Sequence
+from types import ModuleType
 from typing import Any, TypeVar
 
 import numpy as np
@@ -27,11 +28,17 @@ class Memo:
     An entry holds its arrays, so that their identities are not reused while it lives. The
     caller vouches that nothing writes into those arrays (the viewer's copy: no operator
     writes into the frame it is given, ``tests/test_viewer_work.py``) nor into a result.
+
+    ``stable``: the arrays that outlive the memo (the viewer's copy of a frame). Given, only
+    results computed from those alone are kept: one computed from arrays an earlier step of the
+    run made (new at every run, Light Alignment's lights before Radiance Scaling) would never be
+    asked for again, and would hold those arrays.
     """
 
-    def __init__(self, size: int = 4) -> None:
+    def __init__(self, size: int = 4, stable: Iterable[np.ndarray] | None = None) -> None:
         self.size = size
         self._kept: OrderedDict[Hashable, tuple[tuple[np.ndarray | None, ...], Any]] = OrderedDict()
+        self._stable = None if stable is None else {id(a): a for a in stable}
 
     def get(
         self,
@@ -41,7 +48,7 @@ class Memo:
         compute: Callable[[], T],
     ) -> T:
         """The result of ``compute()`` for these ``arrays`` and ``params``: kept, or computed
-        now and kept."""
+        now and kept (where it may be: ``size``, ``stable``)."""
         key = (name, tuple(id(a) for a in arrays), params)
         hit = self._kept.get(key)
         if hit is not None:  # (its arrays are these: the entry holds them, their ids are theirs)
@@ -49,6 +56,10 @@ class Memo:
             result: T = hit[1]
             return result
         value = compute()
+        if self._stable is not None and any(
+            a is not None and id(a) not in self._stable for a in arrays
+        ):
+            return value
         self._kept[key] = (tuple(arrays), value)
         while len(self._kept) > self.size:
             self._kept.popitem(last=False)
@@ -56,10 +67,10 @@ class Memo:
 
     @property
     def nbytes(self) -> int:
-        """The bytes the kept results hold now (:func:`held_bytes`; not those of the arrays
-        they were computed from, which are the caller's)."""
-        inputs = [a for arrays, _ in self._kept.values() for a in arrays if a is not None]
-        return held_bytes([value for _, value in self._kept.values()], inputs)
+        """The bytes the kept entries hold now, results and the arrays they were computed from
+        (:func:`held_bytes`), but for the ``stable`` arrays."""
+        besides = [] if self._stable is None else list(self._stable.values())
+        return held_bytes(list(self._kept.values()), besides)
 
     def trim(self, nbytes: int) -> None:
         """Let go of the least recently used results until those kept hold at most ``nbytes``."""
@@ -69,8 +80,9 @@ class Memo:
 
 def held_bytes(value: Any, besides: Sequence[np.ndarray] = ()) -> int:
     """The bytes of the arrays ``value`` holds, in its containers and its objects' attributes
-    (a lazily computed result's cache included), each buffer once (a view counts its base
-    array), leaving out the buffers of ``besides``."""
+    (their ``__dict__``: a lazily computed result's cache included; not modules, functions or
+    classes), each buffer once (a view counts its base array), leaving out the buffers of
+    ``besides``."""
     counted = {id(_base(a)) for a in besides}
     seen: set[int] = set()
     total, todo = 0, [value]
@@ -81,7 +93,7 @@ def held_bytes(value: Any, besides: Sequence[np.ndarray] = ()) -> int:
             if id(base) not in counted:
                 counted.add(id(base))
                 total += base.nbytes
-        elif id(item) in seen:
+        elif id(item) in seen or callable(item) or isinstance(item, ModuleType):
             continue
         elif isinstance(item, (list, tuple, set, frozenset)):
             seen.add(id(item))
@@ -89,9 +101,11 @@ def held_bytes(value: Any, besides: Sequence[np.ndarray] = ()) -> int:
         elif isinstance(item, dict):
             seen.add(id(item))
             todo.extend(item.values())
-        elif hasattr(item, "__dict__") and not callable(item):
+        else:
             seen.add(id(item))
-            todo.extend(vars(item).values())
+            attributes = getattr(item, "__dict__", None)
+            if isinstance(attributes, dict):
+                todo.extend(attributes.values())
     return total
 
 

@@ -364,11 +364,17 @@ def test_a_frame_of_one_pixel_422_and_the_worker_stays(client: Any, tmp_path: An
     assert client.get("/readyz").status_code == 200
 
 
-@pytest.mark.parametrize("size", [0, 10_000, 3 << 20])
-def test_an_upload_is_saved_whole_from_memory_or_disk(tmp_path: Any, size: int) -> None:
+@pytest.mark.parametrize(
+    ("size", "refused"), [(0, False), (10_000, False), (3 << 20, False), (3 << 20, True)]
+)
+def test_an_upload_is_saved_whole_from_memory_or_disk(
+    tmp_path: Any, monkeypatch: pytest.MonkeyPatch, size: int, refused: bool
+) -> None:
     """The form parser keeps a part of up to 1 MiB in memory and a larger one on disk
     (Starlette's spooled file); either is saved whole (copied by the kernel), as is a file
-    object without a descriptor."""
+    object without a descriptor, and a file where the kernel refuses to copy between files
+    (``sendfile`` of macOS: EINVAL)."""
+    import errno
     import io
     import os
     import tempfile
@@ -378,6 +384,12 @@ def test_an_upload_is_saved_whole_from_memory_or_disk(tmp_path: Any, size: int) 
 
     from service.http.uploads import save
 
+    if refused:
+
+        def no_sendfile(*args: object) -> int:
+            raise OSError(errno.EINVAL, "Invalid argument")
+
+        monkeypatch.setattr(os, "sendfile", no_sendfile)
     data = os.urandom(size)
     spooled = tempfile.SpooledTemporaryFile(max_size=1 << 20)
     spooled.write(data)

@@ -307,6 +307,18 @@ def test_what_previews_keep_counts_in_the_bytes_a_worker_keeps(
     assert kept.nbytes > 0  # (what fits is kept: the least recently used went)
 
 
+def test_previews_keep_nothing_an_earlier_step_made(stored: Path) -> None:
+    """Radiance Scaling after Light Alignment smooths the lights Light Alignment made, new at
+    every preview: that result would never be asked for again, and is not kept (it held 1.8
+    times what was counted); the curvature of the copy's own normals is."""
+    steps = pipeline.compile([{"op": "light_alignment"}, {"op": "radiance_scaling"}])
+    held = []
+    for _ in range(3):
+        work.preview_job(str(stored), 2, steps, ReadRequest(), 0.0, False)
+        held.append(work._memo(stored / "small_2.pkl").nbytes)
+    assert held[0] > 0 and held == held[:1] * 3
+
+
 def test_the_viewers_pictures_are_quick_pngs_of_the_same_pixels(tmp_path: Path) -> None:
     """Pictures for the browser are PNGs made for speed (OpenCV, one filter, run-length
     matching): the same pixels, in the same order of channels, as the PNG ``depict preview``

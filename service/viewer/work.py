@@ -224,7 +224,8 @@ def _keep(path: Path, value: Any) -> Any:
     """``value``, read from or written to ``path``, kept as :func:`_load`'s (within
     :data:`KEEP_LOADED` and :data:`KEEP_LOADED_BYTES`, the oldest let go first)."""
     _loaded.pop(path, None)
-    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in _arrays(value)), Memo())
+    arrays = _arrays(value)
+    _loaded[path] = (_stamp(path), value, sum(a.nbytes for a in arrays), Memo(stable=arrays))
     _within_bounds()
     return value
 
