@@ -196,8 +196,8 @@ def _file_layers(folder: Path, factor: int, small: Frame) -> Frame:
 #: this many files and bytes (a 1080p render's shrunk copy for a 540-row preview and its file's
 #: channels: 95 and 89 MB; at full size, 363 and 340 MB: then the copy alone is kept). A file
 #: larger than the bytes is not kept; what its previews keep (:func:`_memo`) counts in the bytes,
-#: and goes first; files deleted since (a frame forgotten or expired) are let
-#: go in the worker's next pause (:func:`forget_deleted`).
+#: and goes first; files deleted since (a frame forgotten or expired) are let go in the worker's
+#: next pause (:func:`forget_deleted`).
 KEEP_LOADED = 2
 KEEP_LOADED_BYTES = 512 << 20
 _loaded: dict[Path, tuple[tuple[int, int, int], Any, int, Memo]] = {}
