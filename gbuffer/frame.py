@@ -75,6 +75,10 @@ RENDER_BUFFERS: tuple[str, ...] = (
 #: Radiance lobes, in the order the beauty is rebuilt from them.
 LOBES: tuple[str, ...] = ("ambient", "diffuse", "specular", "transmission")
 
+#: The buffers :attr:`Frame.mask` is made of (the first present): what a result that depends on
+#: the mask depends on.
+MASK_SOURCES: tuple[str, ...] = ("coverage", "depth", "alpha")
+
 
 #: Largest component of a normal taken as one (a unit vector's are at most 1): the readers
 #: renormalise a file's normals, a frame built in Python holds what its script put there.

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from pydantic import Field
 
-from gbuffer.frame import Frame
+from gbuffer.frame import MASK_SOURCES, Frame
 from ops import checks
 from ops import curvature as curv_ops
 from service.operators.base import Context, Params, register
@@ -73,7 +73,7 @@ def frame_curvature(frame: Frame, p: CurvatureParams, ctx: Context) -> curv_ops.
 
 def mask_sources(frame: Frame) -> tuple[np.ndarray | None, ...]:
     """The buffers :attr:`gbuffer.frame.Frame.mask` is made of (for :attr:`Context.memo`)."""
-    return tuple(frame.buffers.get(name) for name in ("coverage", "depth", "alpha"))
+    return tuple(frame.buffers.get(name) for name in MASK_SOURCES)
 
 
 @register(

@@ -29,7 +29,7 @@ from analysis.score import frame_shape, score_frame
 from gbuffer.atomic import atomic_path
 from gbuffer.errors import FrameError
 from gbuffer.exr import read_layout
-from gbuffer.frame import Frame, Passthrough
+from gbuffer.frame import MASK_SOURCES, Frame, Passthrough
 from gbuffer.io import describe, inspect
 from gbuffer.preview import picture, quick_png, write_png
 from service import pipeline
@@ -309,7 +309,7 @@ def _score(frame: Frame) -> dict[str, Any] | None:
 
 
 #: The buffers the score reads besides the beauty (:attr:`gbuffer.frame.Frame.mask` included).
-_SCORED_SHAPE = ("depth", "normal", "coverage", "alpha")
+_SCORED_SHAPE = ("normal", *MASK_SOURCES)
 
 
 def _same_shape(result: Frame, frame: Frame) -> bool:
