@@ -32,6 +32,8 @@ import numpy as np
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 from ops.checks import FLOAT32_MAX, holds_truth_value
+from ops.jit import kernel
+from ops.parallel import run_strips, strip_rows
 
 Projection = Literal["perspective", "orthographic"]
 
@@ -42,6 +44,24 @@ FLIP_Z = np.diag([1.0, 1.0, -1.0, 1.0])
 MIN_FOV_DEG = 1e-6
 #: The orthographic heights a camera may have, scene units.
 ORTHO_HEIGHTS = (1e-12, 1e12)
+
+
+def towards_eye(shape: tuple[int, int]) -> np.ndarray:
+    """(H, W, 3) float32 (0, 0, 1): the view vector of an orthographic camera (and of a frame
+    without one), written by strips of rows on every core."""
+    out = np.empty((*shape, 3), np.float32)
+    rows = out.reshape(shape[0], 3 * shape[1])
+    run_strips(shape[0], lambda a, b: _eye_rows(rows[a:b]), strip_rows(shape[1]))
+    return out
+
+
+@kernel
+def _eye_rows(rows):  # type: ignore[no-untyped-def]
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(r.shape[0] // 3):
+            r[3 * j], r[3 * j + 1], r[3 * j + 2] = zero, zero, one
 
 
 @dataclass
@@ -138,18 +158,25 @@ class Camera:
         -------
         (H, W, 3) float32. Orthographic cameras give (0, 0, 1) everywhere.
         """
+        if self.projection == "orthographic":
+            return towards_eye(shape)
         h, w = shape
         out = np.empty((h, w, 3), np.float32)
-        if self.projection == "orthographic":
-            out[...] = (0.0, 0.0, 1.0)
-            return out
         xs, ys = self.image_coordinates(shape, display_size, origin)
-        # the eye is at the origin; the point is at (x, -y, -1) * depth: eye - point ∝ (-x, y, 1)
-        inv = np.add(np.square(xs)[None, :], np.square(ys)[:, None])
-        inv += np.float32(1.0)
-        cv2.sqrt(inv, dst=inv)
-        cv2.divide(1.0, inv, dst=inv)
-        cv2.merge([inv * -xs[None, :], inv * ys[:, None], inv], dst=out)
+        sq_x, sq_y, neg_x = np.square(xs)[None, :], np.square(ys)[:, None], -xs[None, :]
+
+        def rows(a: int, b: int) -> None:
+            # the eye is at the origin; the point is at (x, -y, -1) * depth: eye - point ∝
+            # (-x, y, 1)
+            inv = np.add(sq_x, sq_y[a:b])
+            inv += np.float32(1.0)
+            cv2.sqrt(inv, dst=inv)
+            cv2.divide(1.0, inv, dst=inv)
+            merged = cv2.merge([inv * neg_x, inv * ys[a:b, None], inv], dst=out[a:b])
+            if not np.shares_memory(merged, out):
+                out[a:b] = merged
+
+        run_strips(h, rows, strip_rows(w))
         return out
 
     def image_coordinates(

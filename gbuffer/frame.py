@@ -21,9 +21,11 @@ from typing import Any
 import cv2
 import numpy as np
 
-from gbuffer.camera import Camera
+from gbuffer.camera import Camera, towards_eye
 from gbuffer.errors import MissingBufferError, MissingCameraError
 from ops.colorspace import LINEAR_REC709, ColorSpace
+from ops.jit import kernel
+from ops.parallel import run_strips, strip_rows
 
 #: Canonical buffers: name -> (components, description).
 BUFFERS: dict[str, tuple[int, str]] = {
@@ -87,9 +89,36 @@ NORMAL_COMPONENT_MAX = 2.0
 
 def normals_in_range(normal: np.ndarray) -> bool:
     """Whether no component of ``normal`` (H, W, 3) is past ±:data:`NORMAL_COMPONENT_MAX` (NaN
-    does not count): one OpenCV pass."""
+    does not count): :func:`normal_faults`."""
+    return not normal_faults(normal)[0]
+
+
+def normal_faults(normal: np.ndarray) -> tuple[bool, bool]:
+    """Whether some component of ``normal`` (H, W, 3) is past ±:data:`NORMAL_COMPONENT_MAX`
+    (±inf is, NaN is not), and whether some component is NaN or ±inf: one compiled pass over
+    row strips on every core."""
     n = np.ascontiguousarray(normal, np.float32)
-    return bool(cv2.norm(n.reshape(n.shape[0], -1), cv2.NORM_INF) <= NORMAL_COMPONENT_MAX)
+    if n.size == 0:
+        return False, False
+    rows = n.reshape(n.shape[0], -1)
+    step = strip_rows(rows.shape[1])
+    found = np.zeros((-(-rows.shape[0] // step), 2), np.bool_)
+    run_strips(rows.shape[0], lambda a, b: _fault_rows(rows[a:b], found[a // step]), step)
+    return bool(found[:, 0].any()), bool(found[:, 1].any())
+
+
+@kernel
+def _fault_rows(rows, out):  # type: ignore[no-untyped-def]
+    """out = (some |x| > NORMAL_COMPONENT_MAX, some x not finite) over ``rows``."""
+    most, big = np.float32(NORMAL_COMPONENT_MAX), np.float32(np.finfo(np.float32).max)
+    past, bad = False, False
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(r.shape[0]):
+            a = abs(r[j])
+            past |= a > most
+            bad |= not (a <= big)
+    out[0], out[1] = past, bad
 
 
 def _on_surface(depth: np.ndarray) -> np.ndarray:
@@ -254,9 +283,7 @@ class Frame:
         """(H, W, 3) unit vectors towards the eye (orthographic default without a camera)."""
         assert self.display_size is not None
         if self.camera is None:
-            out = np.zeros((*self.shape, 3), np.float32)
-            out[..., 2] = 1.0
-            return out
+            return towards_eye(self.shape)
         return self.camera.view_vectors(self.shape, self.display_size, self.origin)
 
     def positions(self) -> np.ndarray:

@@ -206,12 +206,24 @@ def luminance_of_sum_rows(
     rows: Sequence[np.ndarray], weights: tuple[float, float, float], out: np.ndarray
 ) -> None:
     """Rows of :func:`luminance_of_sum`: ``out`` (rows, W) = the luminance of the sum of float32
-    RGB rows ((rows, W, 3) or flat (rows, 3W)), taken in order in float32."""
-    acc = rows[0].copy()
-    for x in rows[1:]:
-        acc += x
+    RGB rows ((rows, W, 3) or flat (rows, 3W)), taken in order in float32; one compiled pass,
+    each row summed in a scratch row."""
+    flat = tuple(x.reshape(x.shape[0], -1) for x in rows)
     w0, w1, w2 = (np.float32(x) for x in weights)
-    _luma_rows(acc, w0, w1, w2, out)
+    _luma_of_sum_rows(flat, w0, w1, w2, np.empty(flat[0].shape[1], np.float32), out)
+
+
+@kernel
+def _luma_of_sum_rows(rows, w0, w1, w2, acc, out):  # type: ignore[no-untyped-def]
+    for i in range(out.shape[0]):
+        first = rows[0][i]
+        for m in range(acc.shape[0]):
+            acc[m] = first[m]
+        for t in range(1, len(rows)):
+            row = rows[t][i]
+            for m in range(acc.shape[0]):
+                acc[m] += row[m]
+        dot3_row(acc, w0, w1, w2, out[i])
 
 
 @kernel

@@ -9,7 +9,7 @@ import pytest
 import ops.pyramid._jb
 from ops.filtering import normal_pyramid
 from ops.pyramid._jb import jb_weights, jb_weights_fast
-from ops.pyramid.depth import DepthPyramid
+from ops.pyramid.depth import DepthPyramid, normalize_field
 from tests import analytic
 
 
@@ -23,6 +23,46 @@ def _sphere_before_wall() -> DepthPyramid:
 
 
 Weights = tuple[np.ndarray, np.ndarray]
+
+
+def _re_weighted_pixels(geo: DepthPyramid, k: int, k_to: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rule of the pixels ``up_sparse`` re-weights: every covered level-k_to pixel of the
+    blocks under a dirty level-k sample (one within a sample of a depth jump), by row, then
+    column."""
+    f = 1 << (k - k_to)
+    h_to, w_to = geo.shape(k_to)
+    py, px = np.nonzero(geo._dirty(k))
+    ys = (py * f)[:, None, None] + np.arange(f)[None, :, None]
+    xs = (px * f)[:, None, None] + np.arange(f)[None, None, :]
+    ys, xs = (a.reshape(-1) for a in np.broadcast_arrays(ys, xs))
+    keep = (ys < h_to) & (xs < w_to)
+    ys, xs = ys[keep], xs[keep]
+    keep = geo.mask[k_to][ys, xs] > 0
+    ys, xs = ys[keep], xs[keep]
+    order = np.lexsort((xs, ys))
+    return ys[order], xs[order]
+
+
+@pytest.mark.parametrize(("k", "k_to"), [(1, 0), (2, 0), (2, 1)])
+def test_the_re_weighted_pixels_are_the_rule(k: int, k_to: int) -> None:
+    """The pixels of a sphere before a wall, in a frame whose sides are no multiple of a
+    block and with holes in its coverage, that the upsampling from level k re-weights: the
+    rule's, in its order."""
+    s = analytic.sphere(160, radius=0.7)
+    depth = np.where(s.mask, s.depth, np.float32(s.depth[s.mask].max() + 2.0)).astype(np.float32)
+    normal = np.where(s.mask[..., None], s.normal, np.array([0.0, 0.0, 1.0], np.float32))
+    holes = np.random.default_rng(5).random((150, 157)) > 0.1
+    geo = normal_pyramid(
+        np.ascontiguousarray(normal[5:155, :157], np.float32),
+        np.ascontiguousarray(depth[5:155, :157]),
+        holes.astype(np.float32),
+        scales=5,
+    ).geometry
+    ys, xs, _, _ = geo._sparse_taps(k, k_to)
+    want_y, want_x = _re_weighted_pixels(geo, k, k_to)
+    assert ys.size > 100
+    np.testing.assert_array_equal(ys, want_y)
+    np.testing.assert_array_equal(xs, want_x)
 
 
 def _rule_and_fast(
@@ -98,3 +138,22 @@ def test_weights_on_one_surface_are_bilinear() -> None:
     idx, w = jb_weights_fast(logd_k, mask_k, 0.1, 2, ys, xs, np.array([0.51], np.float32))
     got = {int(i): float(v) for i, v in zip(idx[:, 0], w[:, 0], strict=True) if v > 0}
     assert got == pytest.approx({8: 0.5625, 9: 0.1875, 15: 0.1875, 16: 0.0625})
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_unit_fields_by_strips_are_the_per_pixel_rule(masked: bool) -> None:
+    """``normalize_field`` of a large field (planes, strips of rows on every core) is the
+    per-pixel rule of a small one, bit for bit: v / |v|, zero vectors 0, × the coverage."""
+    rng = np.random.default_rng(6)
+    v = rng.standard_normal((517, 301, 3)).astype(np.float32)
+    v[rng.random((517, 301)) < 0.05] = 0.0
+    mask = (rng.random((517, 301)) > 0.3).astype(np.float32) if masked else None
+    n2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2]
+    inv = np.zeros_like(n2)
+    np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
+    want = v * inv[..., None]
+    if mask is not None:
+        want *= mask[..., None]
+    got = normalize_field(v, mask)
+    assert got.dtype == np.float32 and got.flags.c_contiguous
+    np.testing.assert_array_equal(got, want)

@@ -9,7 +9,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from gbuffer.frame import Frame
+from gbuffer.camera import Camera, Projection
+from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normal_faults
 from service import pipeline
 from tests.exr_factory import make_scene
 
@@ -102,6 +103,31 @@ def test_nan_normals_on_the_surface_are_counted(op: str) -> None:
 
 
 @pytest.mark.parametrize(
+    ("value", "past", "bad"),
+    [
+        (np.nan, False, True),
+        (np.inf, True, True),
+        (-np.inf, True, True),
+        (NORMAL_COMPONENT_MAX, False, False),
+        (-np.nextafter(np.float32(NORMAL_COMPONENT_MAX), np.float32(3.0)), True, False),
+        (np.float32(1e20), True, False),
+    ],
+)
+@pytest.mark.parametrize("where", [(0, 0, 0), (517, 900, 1), (-1, -1, 2)])
+def test_normal_faults_are_found_in_any_strip(
+    value: float, past: bool, bad: bool, where: tuple[int, int, int]
+) -> None:
+    """One compiled pass over strips of rows tells a component past ±2 and one not finite
+    apart, wherever it is (the first pixel, a middle strip, the last component)."""
+    normal = np.random.default_rng(3).uniform(-1, 1, (600, 1001, 3)).astype(np.float32)
+    assert normal_faults(normal) == (False, False)
+    normal[where] = value
+    assert normal_faults(normal) == (past, bad)
+    assert normal_faults(normal[::2]) == (past and where[0] % 2 == 0, bad and where[0] % 2 == 0)
+    assert normal_faults(np.zeros((0, 4, 3), np.float32)) == (False, False)
+
+
+@pytest.mark.parametrize(
     "op", ["curvature", "light_alignment", "apparent_relief", "unsharp_masking"]
 )
 def test_normals_far_from_unit_on_the_surface_are_counted(op: str) -> None:
@@ -123,3 +149,28 @@ def test_normals_far_from_unit_on_the_surface_are_counted(op: str) -> None:
     longer = buffers["normal"] * np.float32(1.05)
     out = pipeline.run(Frame(buffers={**buffers, "normal": longer}), [{"op": op}])
     assert np.isfinite(out.buffers["beauty"]).all()
+
+
+@pytest.mark.parametrize("projection", ["perspective", "orthographic", None])
+def test_view_vectors_point_at_the_eye_in_every_strip(projection: Projection | None) -> None:
+    """The unit vectors towards the eye, made by strips of rows: −P/|P| of each pixel's point
+    on the image plane (perspective, a data window inside the display window), (0, 0, 1)
+    orthographic and without a camera."""
+    camera = None
+    if projection is not None:
+        camera = Camera(None, projection, fov_y_deg=50.0, ortho_height=2.0)
+    shape, display, origin = (700, 1301), (1400, 800), (60, 41)
+    frame = Frame(
+        buffers={"depth": np.ones(shape, np.float32)},
+        camera=camera,
+        display_size=display,
+        origin=origin,
+    )
+    view = frame.view_vectors()
+    if projection != "perspective":
+        assert np.array_equal(view, np.broadcast_to(np.array([0, 0, 1], np.float32), (*shape, 3)))
+        return
+    assert camera is not None
+    xs, ys = camera.image_coordinates(shape, display, origin)
+    eye = np.dstack(np.broadcast_arrays(-xs[None, :], ys[:, None], np.ones(shape))).astype(float)
+    np.testing.assert_allclose(view, eye / np.linalg.norm(eye, axis=2, keepdims=True), atol=1e-6)

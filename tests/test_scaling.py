@@ -133,7 +133,7 @@ def test_luminance_and_reflectance_delta() -> None:
             reflectance_delta(rgb, white)
 
 
-@pytest.mark.parametrize("count", [1, 3])
+@pytest.mark.parametrize("count", [1, 2, 3])
 def test_luminance_of_sum_is_the_luminance_of_the_total_bit_for_bit(count: int) -> None:
     """Summed strip by strip, never at full size, yet the same float32 values as summing whole
     frames in order and taking their luminance (the kept lighting's gain is 1 on that)."""

@@ -150,3 +150,29 @@ def _down_unit_rows(v, keep, out):
             o[q] = (acc[p] + acc[p + 3]) * _QUARTER
             o[q + 1] = (acc[p + 1] + acc[p + 4]) * _QUARTER
             o[q + 2] = (acc[p + 2] + acc[p + 5]) * _QUARTER
+
+
+@kernel
+def _children(dirty, mask_to, logd_to, f, ys, xs, logd):
+    """The covered (``mask_to`` > 0) level-k_to pixels of the ``f`` × ``f`` blocks under the
+    level-k samples where ``dirty`` (uint8) is set, by row, then column: their rows ``ys``,
+    columns ``xs`` and ``logd_to`` there (each sized for every pixel of those blocks); the
+    count written."""
+    h_to, w_to = mask_to.shape
+    n = 0
+    for py in range(dirty.shape[0]):
+        for oy in range(f):
+            y = py * f + oy
+            if y >= h_to:
+                break
+            for px in range(dirty.shape[1]):
+                if dirty[py, px] == 0:
+                    continue
+                for ox in range(f):
+                    x = px * f + ox
+                    if x >= w_to:
+                        break
+                    if mask_to[y, x] > 0:
+                        ys[n], xs[n], logd[n] = y, x, logd_to[y, x]
+                        n += 1
+    return n

@@ -16,6 +16,7 @@ from ops.parallel import run_strips, strip_rows
 from ops.pyramid._depth_kernels import (
     BACKGROUND,
     _build01_rows,
+    _children,
     _down_geometry_rows,
     _down_unit_rows,
     _gather_unit,
@@ -42,18 +43,27 @@ def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
     (H, W) float 0/1 coverage the result is multiplied by."""
     v = np.asarray(v, np.float32)
     if v.ndim == 3 and v.shape[2] == 3 and v.shape[0] * v.shape[1] >= 4096:
-        # planes (cv2.split / merge): the same arithmetic without strided or broadcast passes
-        x, y, z = cv2.split(v)
-        n2 = x * x
-        n2 += y * y
-        n2 += z * z
-        inv = np.zeros_like(n2)
-        np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
-        if mask is not None:
-            inv *= mask  # 0/1: (v inv) m = v (inv m)
-        for plane in (x, y, z):
-            plane *= inv
-        return np.asarray(cv2.merge([x, y, z]), np.float32)
+        # planes (cv2.split / merge): the same arithmetic without strided or broadcast passes,
+        # by strips of rows on every core
+        out = np.empty(v.shape, np.float32)
+
+        def rows(a: int, b: int) -> None:
+            x, y, z = cv2.split(v[a:b])
+            n2 = x * x
+            n2 += y * y
+            n2 += z * z
+            inv = np.zeros_like(n2)
+            np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
+            if mask is not None:
+                inv *= mask[a:b]  # 0/1: (v inv) m = v (inv m)
+            for plane in (x, y, z):
+                plane *= inv
+            merged = cv2.merge([x, y, z], dst=out[a:b])
+            if not np.shares_memory(merged, out):
+                out[a:b] = merged
+
+        run_strips(v.shape[0], rows, strip_rows(v.shape[1]))
+        return out
     n2 = v[..., 0] * v[..., 0] + v[..., 1] * v[..., 1] + v[..., 2] * v[..., 2]
     inv = np.zeros_like(n2)
     np.divide(1.0, np.sqrt(n2), out=inv, where=n2 > 1e-20)
@@ -420,29 +430,18 @@ class DepthPyramid:
         got = self._taps.get((k, k_to))
         if got is not None:
             return got
-        h_to, w_to = self.shape(k_to)
         f = 1 << (k - k_to)
-        w_k = self.shape(k)[1]
-        dirty = np.flatnonzero(self._dirty(k))
-        empty = np.zeros(0, np.int64)
-        ys, xs = empty, empty
-        if dirty.size:
-            py, px = np.divmod(dirty, w_k)
-            off = np.arange(f)
-            ys = (py * f)[:, None, None] + off[None, :, None]
-            xs = (px * f)[:, None, None] + off[None, None, :]
-            ys, xs = (arr.reshape(-1) for arr in np.broadcast_arrays(ys, xs))
-            inside = (ys < h_to) & (xs < w_to)
-            ys, xs = ys[inside], xs[inside]
-            covered = self.mask[k_to][ys, xs] > 0
-            ys, xs = ys[covered], xs[covered]
-            order = np.argsort(ys, kind="stable")
-            ys, xs = ys[order], xs[order]
-        if ys.size:
-            logd = self.logd[k_to][ys, xs]
+        dirty = self._dirty(k)
+        most = min(int(np.count_nonzero(dirty)) * f * f, math.prod(self.shape(k_to)))
+        ys, xs = np.empty(most, np.int64), np.empty(most, np.int64)
+        logd = np.empty(most, np.float32)
+        n = _children(dirty, self.mask[k_to], self.logd[k_to], f, ys, xs, logd)
+        ys, xs, logd = ys[:n].copy(), xs[:n].copy(), logd[:n]  # (ys, xs are kept: their size)
+        if n:
             idx, w = jb_weights_fast(self.logd[k], self.mask[k], self.depth_sigma, f, ys, xs, logd)
             got = (ys, xs, idx, w)  # (jb_weights_fast: contiguous float32)
         else:
+            empty = np.zeros(0, np.int64)
             got = (empty, empty, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
         self._taps[(k, k_to)] = got
         return got

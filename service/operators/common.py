@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from pydantic import Field, field_validator
 
-from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normals_in_range
+from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normal_faults
 from ops import checks
 from ops.color import luminance
 from ops.lighting import luminance_gain
@@ -113,7 +113,7 @@ def surface_normals(frame: Frame, why: str) -> np.ndarray:
     :class:`PipelineError` counts the covered pixels whose normal is NaN or Inf (a file's are
     refused as it is read; ``pipeline.run`` refuses those past ±2)."""
     normal = frame.need("normal", why)
-    if normals_in_range(normal) and np.isfinite(normal).all():
+    if not any(normal_faults(normal)):
         return normal
     bad = ~(np.abs(normal) <= NORMAL_COMPONENT_MAX).all(axis=2)  # (NaN: not <=)
     covered = int(np.count_nonzero(bad & frame.covered()))
