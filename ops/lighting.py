@@ -26,7 +26,7 @@ from ops.color import check_in_place
 from ops.jit import exact_kernel, inline_kernel, kernel
 from ops.parallel import run_strips
 from ops.pyramid.upsample import Upsampled, upsample_row
-from ops.unsharp import surface_blurs
+from ops.unsharp import surface_blur_rows
 
 __all__ = ["apply_lighting_gain", "luminance_gain", "weighed_gain"]
 
@@ -60,7 +60,7 @@ def luminance_gain(
     ``normal``, ``mask``, ``pixel_size`` and the scale in scene units. With ``full_change``,
     the gain :func:`weighed_gain` makes of it, in the same pass.
     """
-    lf_in, lf_out = surface_blurs(
+    low = surface_blur_rows(
         [y_before, y_after], depth, normal, mask, sigma_scene=sigma_scene, pixel_size=pixel_size
     )
     m = np.ascontiguousarray(mask)
@@ -69,21 +69,20 @@ def luminance_gain(
     weigh = full_change is not None
     y0, y1 = (np.ascontiguousarray(y, np.float32) for y in (y_before, y_after))
     k = np.float32(full_change if weigh else 0.0)
-    run_strips(  # (lf_in is surface_blurs' new array: the gain is written over it)
-        lf_in.shape[0],
-        lambda r0, r1: _gain_rows(
-            lf_in[r0:r1], lf_out[r0:r1], m[r0:r1], y0[r0:r1], y1[r0:r1], k, weigh, lf_in[r0:r1]
-        ),
-        _ROWS,
-    )
-    return lf_in
+    out = np.empty(low.shape, np.float32)
+
+    def strip(r0: int, r1: int) -> None:  # (each strip smoothed and used while in cache)
+        lf_in, lf_out = low(r0, r1)
+        _gain_rows(lf_in, lf_out, m[r0:r1], y0[r0:r1], y1[r0:r1], k, weigh, out[r0:r1])
+
+    run_strips(out.shape[0], strip, _ROWS)
+    return out
 
 
 @kernel
 def _gain_rows(lf_in, lf_out, mask, y0, y1, k, weigh, out):  # type: ignore[no-untyped-def]
-    """out = lf_in / lf_out where both are above _DARK and ``mask`` > 0, else 1 (``out`` may be
-    ``lf_in``); with ``weigh``, that gain weighed by the change from ``y0`` to ``y1``
-    (:func:`_weighed`)."""
+    """out = lf_in / lf_out where both are above _DARK and ``mask`` > 0, else 1; with ``weigh``,
+    that gain weighed by the change from ``y0`` to ``y1`` (:func:`_weighed`)."""
     dark = _DARK
     for i in range(out.shape[0]):
         for j in range(out.shape[1]):

@@ -22,6 +22,7 @@ from ops.color import (
 from ops.unsharp import (
     plain_unsharp_mask,
     surface_blur,
+    surface_blur_rows,
     surface_blurs,
     unsharp_lightness,
     unsharp_masking,
@@ -404,6 +405,27 @@ def test_surface_blurs_is_surface_blur_of_each_signal(sigma_scene: float) -> Non
         assert not np.array_equal(one[mask], sig[mask])  # smoothed
         assert np.array_equal(one[~mask], sig[~mask])  # off the surface: the input
     assert not np.array_equal(both[0], both[1])
+
+
+@pytest.mark.parametrize("sigma_scene", [0.04, 0.3])
+def test_surface_blur_rows_by_any_strips_are_the_whole_image(sigma_scene: float) -> None:
+    # the rows of the smoothed signals asked for by strips of 7 rows (crossing the bounding box
+    # of the surface, the fade to the signal at σ 0.04 and the hole) or all at once: the same
+    # numbers, and those of surface_blurs
+    beauty, depth, normal, mask, ps, _ = square_scene()
+    mask[:, :12] = False
+    mask[:9] = False
+    mask[40:44, 60:70] = False
+    signals = [beauty[..., 0], beauty[..., 1] * np.float32(3.0)]
+    kw = dict(sigma_scene=sigma_scene, pixel_size=ps)
+    rows = surface_blur_rows(signals, depth, normal, mask, **kw)
+    whole = rows(0, rows.shape[0])
+    h = rows.shape[0]
+    for k, ref in enumerate(surface_blurs(signals, depth, normal, mask, **kw)):
+        assert np.array_equal(whole[k], ref)
+        strips = np.concatenate([rows(r, min(h, r + 7))[k] for r in range(0, h, 7)])
+        assert np.array_equal(strips, ref)
+        assert not np.array_equal(ref[mask], signals[k][mask])
 
 
 def test_orthographic_pixel_size_and_slanted_plane() -> None:

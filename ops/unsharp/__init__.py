@@ -30,12 +30,21 @@ image-space baselines); the surface pyramid behind :func:`surface_blur` is priva
 """
 
 from ops.unsharp.depth import depth_unsharp_masking, plain_unsharp_mask
-from ops.unsharp.surface import surface_blur, surface_blurs, unsharp_lightness, unsharp_masking
+from ops.unsharp.surface import (
+    SurfaceBlurRows,
+    surface_blur,
+    surface_blur_rows,
+    surface_blurs,
+    unsharp_lightness,
+    unsharp_masking,
+)
 
 __all__ = [
+    "SurfaceBlurRows",
     "depth_unsharp_masking",
     "plain_unsharp_mask",
     "surface_blur",
+    "surface_blur_rows",
     "surface_blurs",
     "unsharp_lightness",
     "unsharp_masking",

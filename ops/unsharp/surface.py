@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 from ops import color
 from ops.checks import POSITIVE, UNSHARP_AMOUNT, UNSHARP_SIGMA
 from ops.colorspace import LINEAR_REC709, ColorSpace
+from ops.parallel import run_strips, strip_rows
 from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import (
     _L_EPS,
@@ -42,7 +43,14 @@ from ops.unsharp._upsample import _Upsampler
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
 
-__all__ = ["surface_blur", "surface_blurs", "unsharp_lightness", "unsharp_masking"]
+__all__ = [
+    "SurfaceBlurRows",
+    "surface_blur",
+    "surface_blur_rows",
+    "surface_blurs",
+    "unsharp_lightness",
+    "unsharp_masking",
+]
 
 
 def surface_blur(
@@ -130,6 +138,40 @@ def surface_blurs(
 ) -> list[Array]:
     """:func:`surface_blur` of each of ``signals`` ((H, W) each, at least one), the surface's
     pyramid built once for all of them."""
+    rows = surface_blur_rows(
+        signals,
+        depth,
+        normal,
+        mask,
+        sigma_scene=sigma_scene,
+        pixel_size=pixel_size,
+        depth_sigma=depth_sigma,
+        normal_sigma=normal_sigma,
+    )
+    outs = [np.empty(rows.shape, np.float32) for _ in signals]
+
+    def strip(r0: int, r1: int) -> None:
+        for out, got in zip(outs, rows(r0, r1), strict=True):
+            out[r0:r1] = got
+
+    run_strips(rows.shape[0], strip, strip_rows(rows.shape[1]))
+    return outs
+
+
+def surface_blur_rows(
+    signals: Sequence[Array],
+    depth: Array,
+    normal: Array | None,
+    mask: Array,
+    *,
+    sigma_scene: float,
+    pixel_size: Array | float,
+    depth_sigma: float = 1.0,
+    normal_sigma: float | None = 1.0,
+) -> SurfaceBlurRows:
+    """:func:`surface_blurs`, given by strips of rows: the pyramid is built here, and each call
+    of the result upsamples and finishes only the rows asked for (safe from several threads at
+    once), so a caller uses the smoothed rows while they are in cache."""
     sigs = [np.ascontiguousarray(s, dtype=np.float32) for s in signals]
     for sig in sigs:
         if sig.ndim != 2 or sig.shape != sigs[0].shape:
@@ -143,7 +185,7 @@ def surface_blurs(
     nrm = None if normal is None else _normals(normal, shape)
     valid, ps_range, box, _ = _valid(depth_a, ps, _mask(mask, shape))
     if box is None:
-        return [sig.copy() for sig in sigs]
+        return SurfaceBlurRows(shape, sigs)
     ys, xs = box
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     first_box = sigs[0][box]
@@ -162,25 +204,59 @@ def surface_blurs(
     subs = [sub, *(np.ascontiguousarray(sig[box]) for sig in sigs[1:])]
     res = _surface_pyramid(surf, subs, first, sigma, None, ns)
     if res is None:
-        return [sig.copy() for sig in sigs]
-    fade = _fade(sigma, surf, ps[box])
-    off = _cv.subtract(1, surf.valid)  # 0/1: pixels of the box off the surface keep the signal
-    outs = []
-    for sig, full, sub_i in zip(sigs, res[0].full(), subs, strict=True):
-        if fade is not None:  # (1 − a0) sub + a0 full, in the box where a0 < 1
-            fb, a0 = fade
-            fs, ss = full[fb], sub_i[fb]
-            _write(_cv.scaleAdd(_cv.multiply(_cv.subtract(fs, ss), a0), 1.0, ss, dst=fs), full, fb)
-        # the smoothed signal on the surface, the signal itself elsewhere: made in the box's
-        # upsampled array (cv2.copyTo: many times faster than np.copyto's where=)
-        _write(_cv.copyTo(sig[box], off, dst=full), full, slice(None))
-        if full.shape == shape:
-            outs.append(np.ascontiguousarray(full))
-        else:
-            out = _outside(sig, box)
-            out[box] = full
-            outs.append(out)
-    return outs
+        return SurfaceBlurRows(shape, sigs)
+    # 0/1: pixels of the box off the surface keep the signal
+    smooth = _BoxRows(box, res[0], subs, _fade(sigma, surf, ps[box]), _cv.subtract(1, surf.valid))
+    return SurfaceBlurRows(shape, sigs, smooth)
+
+
+@dataclass(frozen=True)
+class _BoxRows:
+    """The smoothed signals in the bounding box of the surface, by strips of its rows."""
+
+    box: tuple[slice, slice]  # the box in the image
+    up: _Upsampler  # the pyramid's smoothed signals, upsampled to the box
+    subs: list[Array]  # the signals in the box
+    fade: tuple[tuple[slice, slice], Array] | None  # see _fade
+    off: Array  # uint8 1 where a pixel of the box is off the surface
+
+    def into(self, sigs: list[Array], r0: int, r1: int, outs: list[Array]) -> None:
+        """Rows r0 … r1 − 1 of the image (``outs``: those rows of ``sigs``) with the box's
+        columns smoothed where the rows meet the box."""
+        ys, xs = self.box
+        a, b = max(r0, ys.start), min(r1, ys.stop)
+        if a >= b:
+            return
+        rb = slice(a - ys.start, b - ys.start)
+        for sig, full, sub_i, out in zip(sigs, self.up.rows(rb), self.subs, outs, strict=True):
+            if self.fade is not None:  # (1 − a0) sub + a0 full, where a0 < 1
+                (fy, fx), a0 = self.fade
+                f0, f1 = max(rb.start, fy.start), min(rb.stop, fy.stop)
+                if f0 < f1:
+                    at = (slice(f0 - rb.start, f1 - rb.start), fx)
+                    fs, ss, a0_r = full[at], sub_i[f0:f1, fx], a0[f0 - fy.start : f1 - fy.start]
+                    diff = _cv.multiply(_cv.subtract(fs, ss), a0_r)
+                    _write(_cv.scaleAdd(diff, 1.0, ss, dst=fs), full, at)
+            # the smoothed signal on the surface, the signal itself elsewhere (cv2.copyTo:
+            # many times faster than np.copyto's where=)
+            _write(_cv.copyTo(sig[a:b, xs], self.off[rb], dst=full), full, slice(None))
+            out[a - r0 : b - r0, xs] = full
+
+
+class SurfaceBlurRows:
+    """What :func:`surface_blur_rows` returns: called with rows (r0, r1), the (r1 − r0, W)
+    rows of each smoothed signal (new arrays)."""
+
+    def __init__(self, shape: tuple[int, int], sigs: list[Array], box: _BoxRows | None = None):
+        self.shape = shape
+        self._sigs = sigs
+        self._box = box
+
+    def __call__(self, r0: int, r1: int) -> list[Array]:
+        outs = [sig[r0:r1].copy() for sig in self._sigs]
+        if self._box is not None:
+            self._box.into(self._sigs, r0, r1, outs)
+        return outs
 
 
 # ---------------------------------------------------------------------------------------------
