@@ -4,9 +4,11 @@ Per-pixel work cut into strips of rows stays in the CPU caches, and OpenCV and N
 GIL inside their loops, so strips run in parallel on threads. :func:`run_strips` is the only
 strip runner in ``ops/``:
 
-* at most ``min(cv2.getNumThreads(), os.cpu_count())`` strips run at once
-  (``cv2.setNumThreads(1)`` makes everything sequential), each worker taking the next strip when
-  it is done (strips of unequal cost balance themselves);
+* at most ``min(cv2.getNumThreads(), os.cpu_count())`` strips run at once, one of them on the
+  calling thread (``cv2.setNumThreads(1)`` makes everything sequential), each worker taking the
+  next strip when it is done (strips of unequal cost balance themselves);
+* a strip that raises stops the others taking more; the call returns (raising that error) once
+  no strip of it runs;
 * called from inside a strip it runs sequentially, so nested strip work cannot deadlock the pool;
 * a forked child (Dask or multiprocessing workers) starts a pool of its own.
 
@@ -18,7 +20,7 @@ from __future__ import annotations
 import os
 import threading
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import cv2
 
@@ -74,18 +76,30 @@ def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
         pool = _POOL
     todo = iter(starts)
     lock = threading.Lock()
+    failed = threading.Event()  # a strip raised: the others take no more
 
     def worker() -> None:
         _IN_STRIP.active = True
         try:
-            while True:
+            while not failed.is_set():
                 with lock:
                     a = next(todo, None)
                 if a is None:
                     return
-                fn(a, min(n, a + step))
+                try:
+                    fn(a, min(n, a + step))
+                except BaseException:
+                    failed.set()
+                    raise
         finally:
             _IN_STRIP.active = False
 
-    for fut in [pool.submit(worker) for _ in range(count)]:
+    # the calling thread takes strips too: one task fewer to hand over, and no wait for a
+    # thread to wake when the last strip is done; it returns once no strip runs
+    futures = [pool.submit(worker) for _ in range(count - 1)]
+    try:
+        worker()
+    finally:
+        wait(futures)
+    for fut in futures:
         fut.result()

@@ -1,0 +1,56 @@
+"""The row strips every operator runs on (ops.parallel.run_strips): each row once, the calling
+thread working too, a failing strip stopping the rest, nested calls sequential."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from ops.parallel import run_strips, workers
+
+needs_two = pytest.mark.skipif(workers() < 2, reason="one worker: strips run sequentially")
+
+
+@needs_two
+def test_every_row_once_and_the_calling_thread_takes_strips() -> None:
+    taken: list[tuple[int, int, int]] = []
+
+    def strip(a: int, b: int) -> None:
+        time.sleep(0.002)  # (long enough for every worker to take some)
+        taken.append((threading.get_ident(), a, b))
+
+    run_strips(1001, strip, 10)
+    rows = sorted(r for _, a, b in taken for r in range(a, b))
+    assert rows == list(range(1001))
+    threads = {t for t, _, _ in taken}
+    assert threading.get_ident() in threads and len(threads) == workers()
+
+
+@needs_two
+def test_a_failing_strip_stops_the_others_and_none_runs_after_the_call() -> None:
+    started: list[int] = []
+
+    def strip(a: int, b: int) -> None:
+        started.append(a)
+        if a == 30:
+            raise ValueError("strip 30")
+        time.sleep(0.005)
+
+    with pytest.raises(ValueError, match="strip 30"):
+        run_strips(1000, strip, 10)
+    count = len(started)
+    time.sleep(0.05)
+    assert len(started) == count < 20  # (of 100 strips)
+
+
+def test_strips_of_a_strip_run_on_its_thread() -> None:
+    inner: list[tuple[int, int]] = []
+
+    def strip(a: int, b: int) -> None:
+        me = threading.get_ident()
+        run_strips(4, lambda c, d: inner.append((me, threading.get_ident())), 1)
+
+    run_strips(64, strip, 8)
+    assert len(inner) == 32 and all(outer == own for outer, own in inner)
