@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ops.jit import kernel
+from ops.jit import exact_kernel, kernel
 
 #: Log depth of background pixels at level 0 is at least this (a finite sentinel, so that
 #: products with zero weights stay 0).
@@ -176,3 +176,33 @@ def _children(dirty, mask_to, logd_to, f, ys, xs, logd):
                         ys[n], xs[n], logd[n] = y, x, logd_to[y, x]
                         n += 1
     return n
+
+
+@exact_kernel
+def _jump_rows(logd, m, tau, step, r0, r1, out):
+    """Rows r0 … r1 − 1 of :meth:`~ops.pyramid.depth.DepthPyramid._jumps` (``m`` bool
+    coverage): a covered sample whose second difference of ``logd`` along a row or column,
+    between two covered neighbours, exceeds ``tau``, or whose step to a covered 4-neighbour
+    exceeds ``step``. Each difference rounded as NumPy rounds it (no fused multiply-add)."""
+    h, w = logd.shape
+    two = np.float32(2.0)
+    for i in range(r0, r1):
+        for j in range(w):
+            if not m[i, j]:
+                out[i, j] = False
+                continue
+            c = logd[i, j]
+            hit = False
+            if 0 < j < w - 1 and m[i, j - 1] and m[i, j + 1]:
+                hit = abs(logd[i, j - 1] + logd[i, j + 1] - two * c) > tau
+            if not hit and 0 < i < h - 1 and m[i - 1, j] and m[i + 1, j]:
+                hit = abs(logd[i - 1, j] + logd[i + 1, j] - two * c) > tau
+            if not hit and j > 0 and m[i, j - 1]:
+                hit = abs(c - logd[i, j - 1]) > step
+            if not hit and j < w - 1 and m[i, j + 1]:
+                hit = abs(logd[i, j + 1] - c) > step
+            if not hit and i > 0 and m[i - 1, j]:
+                hit = abs(c - logd[i - 1, j]) > step
+            if not hit and i < h - 1 and m[i + 1, j]:
+                hit = abs(logd[i + 1, j] - c) > step
+            out[i, j] = hit

@@ -20,6 +20,7 @@ from ops.pyramid._depth_kernels import (
     _down_geometry_rows,
     _down_unit_rows,
     _gather_unit,
+    _jump_rows,
 )
 from ops.pyramid._jb import jb_weights_fast
 
@@ -343,23 +344,14 @@ class DepthPyramid:
         if got is not None:
             return got
         logd, m = self.logd[k], self.mask[k] > 0
-        lp = np.pad(logd, 1, mode="edge")
-        mp = np.pad(m, 1, mode="constant")
+        jump = np.empty(m.shape, np.bool_)
         tau = np.float32(2.0 * self.depth_sigma)
-        jump = (np.abs(lp[1:-1, :-2] + lp[1:-1, 2:] - 2.0 * logd) > tau) & mp[1:-1, :-2]
-        jump &= mp[1:-1, 2:]
-        jy = (np.abs(lp[:-2, 1:-1] + lp[2:, 1:-1] - 2.0 * logd) > tau) & mp[:-2, 1:-1]
-        jump |= jy & mp[2:, 1:-1]
-        # steps to a covered neighbour larger than a steep slope makes (e.g. at a sample with
-        # background on the other side, where there is no second difference)
-        step = np.float32(_STEP * self.depth_sigma)
-        sx = (np.abs(logd[:, 1:] - logd[:, :-1]) > step) & m[:, 1:] & m[:, :-1]
-        jump[:, 1:] |= sx
-        jump[:, :-1] |= sx
-        sy = (np.abs(logd[1:] - logd[:-1]) > step) & m[1:] & m[:-1]
-        jump[1:] |= sy
-        jump[:-1] |= sy
-        jump &= m
+        step = np.float32(_STEP * self.depth_sigma)  # (steeper than a steep slope)
+        run_strips(
+            m.shape[0],
+            lambda r0, r1: _jump_rows(logd, m, tau, step, r0, r1, jump),
+            strip_rows(m.shape[1]),
+        )
         self._masks[key] = jump
         return jump
 
