@@ -220,15 +220,34 @@ class _BoxRows:
     fade: tuple[tuple[slice, slice], Array] | None  # see _fade
     off: Array  # uint8 1 where a pixel of the box is off the surface
 
-    def into(self, sigs: list[Array], r0: int, r1: int, outs: list[Array]) -> None:
-        """Rows r0 … r1 − 1 of the image (``outs``: those rows of ``sigs``) with the box's
-        columns smoothed where the rows meet the box."""
+    def rows(self, sigs: list[Array], r0: int, r1: int) -> list[Array]:
+        """Rows r0 … r1 − 1 of the image: the signals ``sigs`` with the box's columns smoothed
+        where the rows meet the box (the smoothed rows themselves where the box holds them
+        whole)."""
         ys, xs = self.box
         a, b = max(r0, ys.start), min(r1, ys.stop)
         if a >= b:
-            return
-        rb = slice(a - ys.start, b - ys.start)
-        for sig, full, sub_i, out in zip(sigs, self.up.rows(rb), self.subs, outs, strict=True):
+            return [sig[r0:r1].copy() for sig in sigs]
+        outs = []
+        for sig, full in zip(sigs, self._smoothed(sigs, a, b), strict=True):
+            if (a, b, xs.start, xs.stop) == (r0, r1, 0, sig.shape[1]):
+                outs.append(full)
+                continue
+            out = np.empty((r1 - r0, sig.shape[1]), np.float32)
+            out[: a - r0], out[b - r0 :] = sig[r0:a], sig[b:r1]
+            mid = out[a - r0 : b - r0]
+            mid[:, : xs.start], mid[:, xs.stop :] = sig[a:b, : xs.start], sig[a:b, xs.stop :]
+            mid[:, xs] = full
+            outs.append(out)
+        return outs
+
+    def _smoothed(self, sigs: list[Array], a: int, b: int) -> list[Array]:
+        """Image rows a … b − 1 (inside the box) of the box's columns: each signal smoothed on
+        the surface, faded to itself where σ_px < s_1, itself off the surface."""
+        xs = self.box[1]
+        rb = slice(a - self.box[0].start, b - self.box[0].start)
+        fulls = self.up.rows(rb)
+        for sig, full, sub_i in zip(sigs, fulls, self.subs, strict=True):
             if self.fade is not None:  # (1 − a0) sub + a0 full, where a0 < 1
                 (fy, fx), a0 = self.fade
                 f0, f1 = max(rb.start, fy.start), min(rb.stop, fy.stop)
@@ -237,10 +256,9 @@ class _BoxRows:
                     fs, ss, a0_r = full[at], sub_i[f0:f1, fx], a0[f0 - fy.start : f1 - fy.start]
                     diff = _cv.multiply(_cv.subtract(fs, ss), a0_r)
                     _write(_cv.scaleAdd(diff, 1.0, ss, dst=fs), full, at)
-            # the smoothed signal on the surface, the signal itself elsewhere (cv2.copyTo:
-            # many times faster than np.copyto's where=)
+            # (cv2.copyTo: many times faster than np.copyto's where=)
             _write(_cv.copyTo(sig[a:b, xs], self.off[rb], dst=full), full, slice(None))
-            out[a - r0 : b - r0, xs] = full
+        return fulls
 
 
 class SurfaceBlurRows:
@@ -253,10 +271,9 @@ class SurfaceBlurRows:
         self._box = box
 
     def __call__(self, r0: int, r1: int) -> list[Array]:
-        outs = [sig[r0:r1].copy() for sig in self._sigs]
-        if self._box is not None:
-            self._box.into(self._sigs, r0, r1, outs)
-        return outs
+        if self._box is None:
+            return [sig[r0:r1].copy() for sig in self._sigs]
+        return self._box.rows(self._sigs, r0, r1)
 
 
 # ---------------------------------------------------------------------------------------------
