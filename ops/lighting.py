@@ -37,6 +37,10 @@ _DARK = np.float32(1e-6)
 
 #: Rows per strip of the compiled passes.
 _ROWS = 64
+#: Rows per strip of the gain: each strip upsamples the smoothed levels over its rows and a
+#: margin of cells (a taller strip spends less on the margin: 128 rows against 64, 0.7 ms of
+#: the covered 1080p frame's 29).
+_GAIN_ROWS = 128
 
 
 def luminance_gain(
@@ -75,7 +79,7 @@ def luminance_gain(
         lf_in, lf_out = low(r0, r1)
         _gain_rows(lf_in, lf_out, m[r0:r1], y0[r0:r1], y1[r0:r1], k, weigh, out[r0:r1])
 
-    run_strips(out.shape[0], strip, _ROWS)
+    run_strips(out.shape[0], strip, _GAIN_ROWS)
     return out
 
 
