@@ -32,7 +32,6 @@ import numpy as np
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 from ops.checks import FLOAT32_MAX, holds_truth_value
-from ops.jit import kernel
 from ops.parallel import run_strips, strip_rows
 
 Projection = Literal["perspective", "orthographic"]
@@ -49,19 +48,11 @@ ORTHO_HEIGHTS = (1e-12, 1e12)
 def towards_eye(shape: tuple[int, int]) -> np.ndarray:
     """(H, W, 3) float32 (0, 0, 1): the view vector of an orthographic camera (and of a frame
     without one), written by strips of rows on every core."""
+    from ops.numerics import fill_triples  # (compiled: loaded by what computes)
+
     out = np.empty((*shape, 3), np.float32)
-    rows = out.reshape(shape[0], 3 * shape[1])
-    run_strips(shape[0], lambda a, b: _eye_rows(rows[a:b]), strip_rows(shape[1]))
+    fill_triples(out, (0.0, 0.0, 1.0))
     return out
-
-
-@kernel
-def _eye_rows(rows):  # type: ignore[no-untyped-def]
-    zero, one = np.float32(0.0), np.float32(1.0)
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        for j in range(r.shape[0] // 3):
-            r[3 * j], r[3 * j + 1], r[3 * j + 2] = zero, zero, one
 
 
 @dataclass

@@ -24,8 +24,6 @@ import numpy as np
 from gbuffer.camera import Camera, towards_eye
 from gbuffer.errors import MissingBufferError, MissingCameraError
 from ops.colorspace import LINEAR_REC709, ColorSpace
-from ops.jit import kernel
-from ops.parallel import run_strips, strip_rows
 
 #: Canonical buffers: name -> (components, description).
 BUFFERS: dict[str, tuple[int, str]] = {
@@ -97,28 +95,12 @@ def normal_faults(normal: np.ndarray) -> tuple[bool, bool]:
     """Whether some component of ``normal`` (H, W, 3) is past ±:data:`NORMAL_COMPONENT_MAX`
     (±inf is, NaN is not), and whether some component is NaN or ±inf: one compiled pass over
     row strips on every core."""
+    from ops.numerics import past_and_not_finite  # (compiled: loaded by what computes)
+
     n = np.ascontiguousarray(normal, np.float32)
     if n.size == 0:
         return False, False
-    rows = n.reshape(n.shape[0], -1)
-    step = strip_rows(rows.shape[1])
-    found = np.zeros((-(-rows.shape[0] // step), 2), np.bool_)
-    run_strips(rows.shape[0], lambda a, b: _fault_rows(rows[a:b], found[a // step]), step)
-    return bool(found[:, 0].any()), bool(found[:, 1].any())
-
-
-@kernel
-def _fault_rows(rows, out):  # type: ignore[no-untyped-def]
-    """out = (some |x| > NORMAL_COMPONENT_MAX, some x not finite) over ``rows``."""
-    most, big = np.float32(NORMAL_COMPONENT_MAX), np.float32(np.finfo(np.float32).max)
-    past, bad = False, False
-    for i in range(rows.shape[0]):
-        r = rows[i]
-        for j in range(r.shape[0]):
-            a = abs(r[j])
-            past |= a > most
-            bad |= not (a <= big)
-    out[0], out[1] = past, bad
+    return past_and_not_finite(n.reshape(n.shape[0], -1), NORMAL_COMPONENT_MAX)
 
 
 def _on_surface(depth: np.ndarray) -> np.ndarray:

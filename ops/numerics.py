@@ -14,6 +14,9 @@ its error; the tests compare them with NumPy's float64 functions.
   sizes from depth), on row strips;
 * :func:`clip_new_negatives`: the values an operation made negative set to 0 (the others bit
   for bit), on row strips;
+* :func:`past_and_not_finite`: whether some value of a plane is past a bound, and whether some
+  is not finite, in one pass on row strips (a frame's normals);
+* :func:`fill_triples`: rows of interleaved triples set to one triple, on row strips;
 * :func:`put_points`: values at scattered pixels written into a window of planes (a strip's
   sparse upsampled values), without Python's lock, where NumPy's fancy indexing holds it.
 
@@ -323,3 +326,43 @@ def _clip_new_negatives_rows(a, b):
         for j in range(ra.shape[0]):
             if (ra[j] < zero) & (ra[j] != rb[j]):
                 ra[j] = zero
+
+
+def past_and_not_finite(rows: np.ndarray, bound: float) -> tuple[bool, bool]:
+    """Whether some value of the float32 plane ``rows`` (H, N) has |x| > ``bound`` (±inf has,
+    NaN has not), and whether some is NaN or ±inf: one compiled pass over row strips."""
+    step = strip_rows(rows.shape[1])
+    found = np.zeros((-(-rows.shape[0] // step), 2), np.bool_)
+    most = np.float32(bound)
+    run_strips(rows.shape[0], lambda a, b: _past_rows(rows[a:b], most, found[a // step]), step)
+    return bool(found[:, 0].any()), bool(found[:, 1].any())
+
+
+@kernel
+def _past_rows(rows, most, out):
+    big = np.float32(np.finfo(np.float32).max)
+    past, bad = False, False
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(r.shape[0]):
+            a = abs(r[j])
+            past |= a > most
+            bad |= not (a <= big)
+    out[0], out[1] = past, bad
+
+
+def fill_triples(out: np.ndarray, value: tuple[float, float, float]) -> None:
+    """Every pixel of the float32 (H, W, 3) C-contiguous ``out`` set to ``value``, by a compiled
+    pass over row strips (a broadcast assignment of a triple is several times slower)."""
+    hgt, wid = out.shape[:2]
+    rows = out.reshape(hgt, 3 * wid)
+    x, y, z = (np.float32(v) for v in value)
+    run_strips(hgt, lambda a, b: _fill_rows(rows[a:b], x, y, z), strip_rows(wid))
+
+
+@kernel
+def _fill_rows(rows, x, y, z):
+    for i in range(rows.shape[0]):
+        r = rows[i]
+        for j in range(r.shape[0] // 3):
+            r[3 * j], r[3 * j + 1], r[3 * j + 2] = x, y, z
