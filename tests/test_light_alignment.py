@@ -354,10 +354,11 @@ def test_align_lights_handles_directional_and_point_lights() -> None:
 
 
 def test_align_lights_is_each_light_aligned_alone() -> None:
-    # two lights on one pyramid (the joint bilateral taps and the view's coarse levels made
-    # once) come out bit for bit as each light aligned alone on a pyramid of its own; a sphere
-    # before a wall (depth jumps: joint bilateral upsampling) with a per-pixel view for the
-    # specular and transmission guides
+    # three lights aligned in one pass over each level's strips (the fields, the view and the
+    # joint bilateral taps made once for all) come out bit for bit as each light aligned alone
+    # on a pyramid of its own, and so on full-resolution fields; a sphere before a wall (depth
+    # jumps: joint bilateral upsampling) with a per-pixel view for the specular and
+    # transmission guides, directional and point lights mixed
     s = analytic.sphere(160, radius=0.7)
     depth = np.where(s.mask, s.depth, np.float32(s.depth[s.mask].max() + 2.0)).astype(np.float32)
     normal = np.where(s.mask[..., None], s.normal, np.float32([0.0, 0.0, 1.0])).astype(np.float32)
@@ -368,6 +369,7 @@ def test_align_lights_is_each_light_aligned_alone() -> None:
     lights = [
         shading.Light("directional", (1.0, 1.0, 1.0)),
         shading.Light("point", (2.0, 1.0, -8.0)),
+        shading.Light("directional", (-0.5, 0.2, 1.0)),
     ]
     comps = {"diffuse": [0.5] * 4, "specular": [0.3] * 4, "transmission": [0.4] * 4}
 
@@ -379,17 +381,20 @@ def test_align_lights_is_each_light_aligned_alone() -> None:
     used.up_sparse([q[::2, ::2] for q in planes], 2, 1)
     got, want = used.up_sparse(planes, 1, 0), fresh.up_sparse(planes, 1, 0)
     assert got[0].size and all(np.array_equal(a, b) for a, b in zip(got, want, strict=True))
-    out = align_lights(lights, pyramid(), position, view, comps)
-    for i, light in enumerate(lights):
-        ldir = light.vector if light.kind == "directional" else None
-        alone = align_components(
-            shading.light_vectors(light, position) if ldir is None else np.asarray(ldir),
-            pyramid(),
-            comps,
-            view=view,
-        )
-        for g in comps:
-            assert np.array_equal(out[g][i], alone[g]), (i, g)
+    fields = pyramid().full_list()
+    for normals in (pyramid, lambda: fields):
+        out = align_lights(lights, normals(), position, view, comps)
+        for i, light in enumerate(lights):
+            ldir = light.vector if light.kind == "directional" else None
+            alone = align_components(
+                shading.light_vectors(light, position) if ldir is None else np.asarray(ldir),
+                normals(),
+                comps,
+                view=view,
+            )
+            for g in comps:
+                assert np.array_equal(out[g][i], alone[g]), (i, g)
+        assert not np.array_equal(out["diffuse"][0], out["diffuse"][2])
 
 
 # -- parameters -----------------------------------------------------------------------------

@@ -150,8 +150,36 @@ def _strip_rows(width: int) -> int:
     return max(_ROWS, -(-_STRIP_PIXELS // max(1, width)))
 
 
+class _LightIn:
+    """One light of an alignment: its direction (constant or per pixel), the original light at
+    coarse levels, and the outputs its components are written in."""
+
+    def __init__(
+        self, shape: tuple[int, int], comps: dict[str, list[float]], const: F32 | None,
+        lfield: F32 | None,
+    ) -> None:  # fmt: skip
+        self.const = const
+        self.lfield = lfield
+        self.rows: F32 | None = None
+        if const is not None:  # a strip of the constant light (level-0 rows are copied from it)
+            self.rows = np.empty((min(shape[0], _strip_rows(shape[1])), shape[1], 3), np.float32)
+            self.rows[:] = np.tile(const, (shape[1], 1))
+        self.outs = {g: np.empty((*shape, 3), np.float32) for g in comps}
+        self._planes: dict[int, SoA] = {}
+
+    def planes(self, k: int, pyr: NormalPyramid) -> SoA:
+        """The original (per-pixel) light at level k > 0, 0 on background (cached)."""
+        got = self._planes.get(k)
+        if got is None:
+            assert self.lfield is not None
+            got = self._planes[k] = _soa(pyr.geometry.down(self.lfield, 0, k))
+        return got
+
+
 class _Inputs:
-    """What every stage of one :func:`align_components` call shares."""
+    """What every stage of one alignment shares: the lights (each aligned in the same pass over
+    each strip, so that the fields and the view are read and upsampled once for all), the
+    guides and their σ_i, the view and the pyramid."""
 
     def __init__(
         self,
@@ -161,12 +189,10 @@ class _Inputs:
         ior: float,
         view: F32 | None,
         view_const: F32 | None,
-        const: F32 | None,
-        lfield: F32 | None,
+        lights: list[tuple[F32 | None, F32 | None]],
         pyr: NormalPyramid | None = None,
         fields: list[F32] | None = None,
         mask: F32 | None = None,
-        views: dict[int, SoA] | None = None,
     ) -> None:
         self.shape = shape
         self.comps = comps
@@ -174,8 +200,7 @@ class _Inputs:
         self.ior = ior
         self.view = view
         self.view_const = view_const
-        self.const = const
-        self.lfield = lfield
+        self.lights = [_LightIn(shape, comps, const, lfield) for const, lfield in lights]
         self.pyr = pyr
         self.fields = fields
         if pyr is not None:
@@ -183,15 +208,7 @@ class _Inputs:
         else:
             assert mask is not None
             self.masks = [mask]
-        # the view at coarse levels (view_planes); ``views``: a cache shared by the calls of
-        # one view and pyramid (align_lights)
-        self.views: dict[int, SoA] = {} if views is None else views
-        self._lights: dict[int, SoA] = {}
-        self.rows: F32 | None = None
-        if const is not None:  # a strip of the constant light (level-0 rows are copied from it)
-            self.rows = np.empty((min(shape[0], _strip_rows(shape[1])), shape[1], 3), np.float32)
-            self.rows[:] = np.tile(const, (shape[1], 1))
-        self.outs = {g: np.empty((*shape, 3), np.float32) for g in comps}
+        self.views: dict[int, SoA] = {}  # the view at coarse levels (view_planes)
 
     def needs_view(self, comps: Sequence[str]) -> bool:
         return any(g != "diffuse" for g in comps)
@@ -223,14 +240,6 @@ class _Inputs:
             got = self.views[k] = _soa(normalize_field(small))
         return got
 
-    def light_planes(self, k: int) -> SoA:
-        """The original (per-pixel) light at level k > 0, 0 on background (cached)."""
-        got = self._lights.get(k)
-        if got is None:
-            assert self.lfield is not None and self.pyr is not None
-            got = self._lights[k] = _soa(self.pyr.geometry.down(self.lfield, 0, k))
-        return got
-
 
 class _Stage:
     """The scales aligned at one pyramid level k, strip by strip, on the columns that hold
@@ -239,10 +248,12 @@ class _Stage:
     structure-of-arrays buffers, and Eq. 1 is applied from the coarsest scale of the level to
     the finest. At level 0 the result is written to the outputs, whose other pixels (background,
     components left unchanged) keep the original light; at coarser levels it becomes the
-    components' new states (0 on background)."""
+    components' new states (0 on background). Every light of the inputs in each strip, one
+    after the other, on the fields and view made once for all of them (``states``: one dict
+    per light; the lights are aligned in step, so they all have a state or none)."""
 
     def __init__(
-        self, inp: _Inputs, k: int, steps: list[int], states: dict[str, State | None]
+        self, inp: _Inputs, k: int, steps: list[int], states: list[dict[str, State | None]]
     ) -> None:
         self.inp = inp
         self.k = k
@@ -251,18 +262,19 @@ class _Stage:
         comps = inp.comps
         active = [g for g, sig in comps.items() if any(sig[j] > 0.0 for j in steps)]
         if k == 0:
-            active = [g for g in comps if g in active or states.get(g) is not None]
+            active = [g for g in comps if g in active or states[0].get(g) is not None]
         self.active = active
         self.mask = inp.masks[k]
         self.shape = (int(self.mask.shape[0]), int(self.mask.shape[1]))
-        self.new: dict[str, SoA] = {}
+        self.new: list[dict[str, SoA]] = [{} for _ in inp.lights]
         if k > 0:
-            for g in active:
-                self.new[g] = (
-                    np.zeros(self.shape, np.float32),
-                    np.zeros(self.shape, np.float32),
-                    np.zeros(self.shape, np.float32),
-                )
+            for new in self.new:
+                for g in active:
+                    new[g] = (
+                        np.zeros(self.shape, np.float32),
+                        np.zeros(self.shape, np.float32),
+                        np.zeros(self.shape, np.float32),
+                    )
         # what comes from coarser levels: the fields z = a_{j+1} and the lights aligned so far
         by_level: dict[int, list[tuple[str, SoA]]] = {}
         pyr = inp.pyr
@@ -272,10 +284,11 @@ class _Stage:
                     by_level.setdefault(pyr.levels[j + 1], []).append(
                         (f"n{j + 1}", pyr.planes(j + 1))
                     )
-            for g in active:
-                state = states.get(g)
-                if state is not None:
-                    by_level.setdefault(state[0], []).append((f"light:{g}", state[1]))
+            for li, light_states in enumerate(states):
+                for g in active:
+                    state = light_states.get(g)
+                    if state is not None:
+                        by_level.setdefault(state[0], []).append((f"light{li}:{g}", state[1]))
         self.sources: list[tuple[int, list[str], list[F32], tuple[Any, Any, Any]]] = []
         for lvl, items in sorted(by_level.items()):
             planes = [plane for _, vec in items for plane in vec]
@@ -339,30 +352,31 @@ class _Stage:
             return _copy_in(ws.vec("view"), inp.view[r0:r1, x0:x1]), 0, False, None
         return _rows(inp.view_planes(self.k), r0, r1), x0, False, None
 
-    def light(self, g: str, win: Win, ws: _Work, ups: dict[str, Src]) -> Src:
-        if self.states.get(g) is not None:
-            return ups[f"light:{g}"]
+    def light(self, li: int, g: str, win: Win, ws: _Work, ups: dict[str, Src]) -> Src:
+        if self.states[li].get(g) is not None:
+            return ups[f"light{li}:{g}"]
         r0, r1, x0, x1 = win
-        inp = self.inp
-        if inp.lfield is None:
-            assert inp.const is not None
-            return _fill(ws.vec("light_in"), inp.const), 0, False, None
+        light = self.inp.lights[li]
+        if light.lfield is None:
+            assert light.const is not None
+            return _fill(ws.vec("light_in"), light.const), 0, False, None
         if self.k == 0:
-            return _copy_in(ws.vec("light_in"), inp.lfield[r0:r1, x0:x1]), 0, False, None
-        return _rows(inp.light_planes(self.k), r0, r1), x0, False, None
+            return _copy_in(ws.vec("light_in"), light.lfield[r0:r1, x0:x1]), 0, False, None
+        assert self.inp.pyr is not None
+        return _rows(light.planes(self.k, self.inp.pyr), r0, r1), x0, False, None
 
     # -- a strip ------------------------------------------------------------------------------
 
-    def fill(self, out: F32, r0: int, r1: int, x0: int, x1: int) -> None:
-        """Level 0: the original light on rows r0:r1, columns x0:x1 of an output."""
-        inp = self.inp
+    @staticmethod
+    def fill(light: _LightIn, out: F32, r0: int, r1: int, x0: int, x1: int) -> None:
+        """Level 0: the original ``light`` on rows r0:r1, columns x0:x1 of an output."""
         if x1 <= x0:
             return
-        if inp.lfield is not None:
-            np.copyto(out[r0:r1, x0:x1], inp.lfield[r0:r1, x0:x1])
+        if light.lfield is not None:
+            np.copyto(out[r0:r1, x0:x1], light.lfield[r0:r1, x0:x1])
         else:  # from rows of the light (a (3,) broadcast over (h, w, 3) is ~10x slower)
-            assert inp.rows is not None
-            out[r0:r1, x0:x1] = inp.rows[: r1 - r0, x0:x1]
+            assert light.rows is not None
+            out[r0:r1, x0:x1] = light.rows[: r1 - r0, x0:x1]
 
     def strip(self, r0: int, r1: int) -> None:
         k = self.k
@@ -371,8 +385,9 @@ class _Stage:
         cols = np.flatnonzero(self.mask[r0:r1].max(axis=0)) if self.active else np.zeros(0, int)
         if not cols.size:
             if k == 0:  # all background, or no component changes
-                for dst in inp.outs.values():
-                    self.fill(dst, r0, r1, 0, width)
+                for given in inp.lights:
+                    for dst in given.outs.values():
+                        self.fill(given, dst, r0, r1, 0, width)
             return
         # window width rounded up (a few scratch-buffer shapes serve every strip)
         x0 = int(cols[0])
@@ -381,9 +396,10 @@ class _Stage:
         x0 = min(x0, width - wd)
         win = (r0, r1, x0, x0 + wd)
         if k == 0:  # components left unchanged keep the original light (the others: write)
-            for g, dst in inp.outs.items():
-                if g not in self.active:
-                    self.fill(dst, r0, r1, 0, width)
+            for given in inp.lights:
+                for g, dst in given.outs.items():
+                    if g not in self.active:
+                        self.fill(given, dst, r0, r1, 0, width)
         ws = _Work.get((r1 - r0, wd))
         ups = self.upsample(win, ws)
         view = self.view(win, ws) if self.with_view else None
@@ -391,75 +407,78 @@ class _Stage:
         eta = np.float32(1.0 / inp.ior)
         egam = np.float32(inp.egam)
         for g in self.active:
-            light = self.light(g, win, ws, ups)
-            ping = 0
-            for j in self.steps:
-                sig = inp.comps[g][j]
-                if sig <= 0.0:
-                    continue
-                for i in (j, j + 1):
-                    if i not in fields:
-                        fields[i] = self.field(i, win, ws, ups)
-                if fields[j + 1][3] is not None:  # z = a_{i+1} is read from planes
-                    fields[j + 1] = self.field_planes(j + 1, win, ws)
-                na, oa, _, fa = fields[j]
-                nb, ob, norm_b, _ = fields[j + 1]
-                vw, ov, _, fv = view if view is not None else (_NO_PLANES, 0, False, None)
-                out = ws.vec(f"light{ping}")
-                _eq1_rows(
-                    na, nb, vw, light[0], out,
-                    _NO_FLAT if fa is None else fa, _NO_FLAT if fv is None else fv,
-                    (oa, ob, ov, light[1]), _GUIDE_CODE[g], (eta, np.float32(sig), egam),
-                    (norm_b, light[2]),
-                )  # fmt: skip
-                light = (out, 0, False, None)
-                ping = 1 - ping
-            self.write(g, light, win)
+            for li in range(len(inp.lights)):
+                light = self.light(li, g, win, ws, ups)
+                ping = 0
+                for j in self.steps:
+                    sig = inp.comps[g][j]
+                    if sig <= 0.0:
+                        continue
+                    for i in (j, j + 1):
+                        if i not in fields:
+                            fields[i] = self.field(i, win, ws, ups)
+                    if fields[j + 1][3] is not None:  # z = a_{i+1} is read from planes
+                        fields[j + 1] = self.field_planes(j + 1, win, ws)
+                    na, oa, _, fa = fields[j]
+                    nb, ob, norm_b, _ = fields[j + 1]
+                    vw, ov, _, fv = view if view is not None else (_NO_PLANES, 0, False, None)
+                    out = ws.vec(f"light{ping}")
+                    _eq1_rows(
+                        na, nb, vw, light[0], out,
+                        _NO_FLAT if fa is None else fa, _NO_FLAT if fv is None else fv,
+                        (oa, ob, ov, light[1]), _GUIDE_CODE[g], (eta, np.float32(sig), egam),
+                        (norm_b, light[2]),
+                    )  # fmt: skip
+                    light = (out, 0, False, None)
+                    ping = 1 - ping
+                self.write(li, g, light, win)
 
-    def write(self, g: str, light: Src, win: Win) -> None:
+    def write(self, li: int, g: str, light: Src, win: Win) -> None:
         r0, r1, x0, x1 = win
-        inp = self.inp
         planes, ol, norm_l, _ = light
         if self.k == 0:  # the window's covered pixels; the original light everywhere else
-            out = inp.outs[g][r0:r1]
-            if inp.lfield is not None:
-                orig = inp.lfield[r0:r1]
+            given = self.inp.lights[li]
+            out = given.outs[g][r0:r1]
+            if given.lfield is not None:
+                orig = given.lfield[r0:r1]
             else:
-                assert inp.rows is not None
-                orig = inp.rows[: r1 - r0]
+                assert given.rows is not None
+                orig = given.rows[: r1 - r0]
             flat = (r1 - r0, 3 * self.shape[1])
             _write_rows(
                 planes, ol, norm_l, self.mask[r0:r1], orig.reshape(flat), out.reshape(flat),
                 x0, x1 - x0,
             )  # fmt: skip
             return
-        _store_rows(planes, ol, norm_l, self.mask[r0:r1], _rows(self.new[g], r0, r1), x0, x1 - x0)
+        new = _rows(self.new[li][g], r0, r1)
+        _store_rows(planes, ol, norm_l, self.mask[r0:r1], new, x0, x1 - x0)
 
     def run(self) -> None:
         rows = _strip_rows(self.shape[1])
         run_strips(self.shape[0], self.strip, rows=rows)
-        for g, planes in self.new.items():
-            self.states[g] = (self.k, planes)
+        for light_states, new in zip(self.states, self.new, strict=True):
+            for g, planes in new.items():
+                light_states[g] = (self.k, planes)
 
 
-def _align_full(inp: _Inputs) -> dict[str, F32]:
+def _align_full(inp: _Inputs) -> list[dict[str, F32]]:
     """Every scale at full resolution, strip by strip."""
     assert inp.fields is not None
-    _Stage(inp, 0, list(range(len(inp.fields) - 1)), {}).run()
-    return inp.outs
+    _Stage(inp, 0, list(range(len(inp.fields) - 1)), [{} for _ in inp.lights]).run()
+    return [light.outs for light in inp.lights]
 
 
-def _align_pyramid(inp: _Inputs) -> dict[str, F32]:
+def _align_pyramid(inp: _Inputs) -> list[dict[str, F32]]:
     """Each scale at the level of its fine field, coarsest first, and the lights carried to
     finer levels by the pyramid's edge-aware upsampling; level 0 writes the outputs."""
     pyr = inp.pyr
     assert pyr is not None
     active = [j for j in range(pyr.scales - 1) if any(sig[j] > 0.0 for sig in inp.comps.values())]
-    states: dict[str, State | None] = {g: None for g in inp.comps}
+    states: list[dict[str, State | None]] = [{g: None for g in inp.comps} for _ in inp.lights]
     for k in sorted({pyr.levels[j] for j in active} | {0}, reverse=True):
         if k > 0 and inp.needs_view(list(inp.comps)):
             for lv in sorted({pyr.levels[j] for j in active if 0 < pyr.levels[j] <= k}):
                 if inp.view is not None:
                     inp.view_planes(lv)  # finest first: each from the previous
         _Stage(inp, k, [j for j in active if pyr.levels[j] == k], states).run()
-    return inp.outs
+    return [light.outs for light in inp.lights]

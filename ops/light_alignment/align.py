@@ -9,7 +9,7 @@ import numpy as np
 
 from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
 from ops.filtering import F32, NormalPyramid
-from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide, SoA
+from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
 from ops.pyramid import normalize_field
 from ops.shading import Light, light_vectors, need_positions
@@ -73,21 +73,20 @@ def align_components(
     -------
     dict guide -> (H, W, 3) float32 unit directions ℓ_1; background keeps ``light_dir``.
     """
-    return _align_components(light_dir, normals, components, gamma, view, ior, mask, None)
+    return _align_components([light_dir], normals, components, gamma, view, ior, mask)[0]
 
 
 def _align_components(
-    light_dir: np.ndarray,
+    light_dirs: Sequence[np.ndarray],
     normals: Sequence[np.ndarray] | NormalPyramid,
     components: Mapping[str, Sequence[float]],
     gamma: float,
     view: np.ndarray | None,
     ior: float,
     mask: np.ndarray | None,
-    views: dict[int, SoA] | None,
-) -> dict[str, F32]:
-    """:func:`align_components`; ``views``: a cache of the view at the pyramid's coarse levels
-    (see ``_Inputs.view_planes``) shared by calls with the same view and pyramid, or None."""
+) -> list[dict[str, F32]]:
+    """:func:`align_components` of each of ``light_dirs``, in one pass over each level's strips
+    (the fields and the view read and upsampled once for all of them)."""
     gamma = LLA_GAMMA.check(gamma, "gamma")
     ior = IOR.check(ior, "ior")
     pyr = normals if isinstance(normals, NormalPyramid) else None
@@ -128,7 +127,7 @@ def _align_components(
             view_f = view_a
         else:
             raise ValueError(f"view must be (3,) or (H, W, 3) = {(*shape, 3)}, got {view_a.shape}")
-    const, lfield = _const_or_field(light_dir, shape)
+    lights = [_const_or_field(light_dir, shape) for light_dir in light_dirs]
     if fields is not None:
         if mask is None:
             n1 = fields[0]
@@ -146,17 +145,15 @@ def _align_components(
             ior,
             view_f,
             view_c,
-            const,
-            lfield,
+            lights,
             fields=[np.asarray(f, np.float32) for f in fields],
             mask=m0.astype(np.float32),
         )
         return _align_full(inp)
     assert pyr is not None
-    inp = _Inputs(
-        shape, comps, math.exp(-gamma), ior, view_f, view_c, const, lfield, pyr=pyr, views=views
+    return _align_pyramid(
+        _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, lights, pyr=pyr)
     )
-    return _align_pyramid(inp)
 
 
 def align_light(
@@ -225,14 +222,13 @@ def align_lights(
     -------
     dict guide -> one (H, W, 3) float32 field of unit directions per light, in ``lights`` order.
     """
-    out: dict[str, list[F32]] = {g: [] for g in components}
-    views: dict[int, SoA] = {}  # one view, one pyramid: its coarse levels made once
-    for light in lights:
-        if light.kind == "directional":
-            ldir: np.ndarray = np.asarray(light.vector, np.float32)
-        else:
-            ldir = light_vectors(light, need_positions(position))
-        res = _align_components(ldir, normals, components, gamma, view, ior, mask, views)
-        for g in components:
-            out[g].append(res[g])
-    return out
+    directions: list[np.ndarray] = [
+        np.asarray(light.vector, np.float32)
+        if light.kind == "directional"
+        else light_vectors(light, need_positions(position))
+        for light in lights
+    ]
+    if not directions:
+        return {g: [] for g in components}
+    res = _align_components(directions, normals, components, gamma, view, ior, mask)
+    return {g: [per_light[g] for per_light in res] for g in components}
