@@ -207,7 +207,9 @@ def align_lights(
     """Aligned directions of every light for every shading component (LLA §4-6, Eq. 1).
 
     Directional lights use their direction; point lights the per-pixel direction towards their
-    position from ``position`` (:func:`ops.shading.light_vectors`).
+    position from ``position`` (:func:`ops.shading.light_vectors`). All lights are aligned in one
+    pass over each level's strips (the fields and the view made once for all of them), each as
+    :func:`align_components` aligns it alone, bit for bit.
 
     Parameters
     ----------
