@@ -208,7 +208,7 @@ def luminance_of_sum_rows(
     """Rows of :func:`luminance_of_sum`: ``out`` (rows, W) = the luminance of the sum of float32
     RGB rows ((rows, W, 3) or flat (rows, 3W)), taken in order in float32; one compiled pass,
     each row summed in a scratch row."""
-    flat = tuple(x.reshape(x.shape[0], -1) for x in rows)
+    flat = tuple(np.ascontiguousarray(x, np.float32).reshape(x.shape[0], -1) for x in rows)
     w0, w1, w2 = (np.float32(x) for x in weights)
     _luma_of_sum_rows(flat, w0, w1, w2, np.empty(flat[0].shape[1], np.float32), out)
 

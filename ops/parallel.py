@@ -86,20 +86,29 @@ def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
                     a = next(todo, None)
                 if a is None:
                     return
-                try:
-                    fn(a, min(n, a + step))
-                except BaseException:
-                    failed.set()
-                    raise
+                fn(a, min(n, a + step))
+        except BaseException:
+            failed.set()
+            raise
         finally:
             _IN_STRIP.active = False
 
     # the calling thread takes strips too: one task fewer to hand over, and no wait for a
-    # thread to wake when the last strip is done; it returns once no strip runs
+    # thread to wake when the last strip is done
     futures = [pool.submit(worker) for _ in range(count - 1)]
+    stop: BaseException | None = None
     try:
         worker()
-    finally:
-        wait(futures)
+    except BaseException as exc:
+        stop = exc
+    while True:  # no strip runs once the call returns, even on an interrupt while waiting
+        try:
+            wait(futures)
+            break
+        except BaseException as exc:
+            failed.set()
+            stop = stop or exc
+    if stop is not None:
+        raise stop
     for fut in futures:
         fut.result()

@@ -3,6 +3,7 @@ thread working too, a failing strip stopping the rest, nested calls sequential."
 
 from __future__ import annotations
 
+import signal
 import threading
 import time
 
@@ -54,3 +55,35 @@ def test_strips_of_a_strip_run_on_its_thread() -> None:
 
     run_strips(64, strip, 8)
     assert len(inner) == 32 and all(outer == own for outer, own in inner)
+
+
+@needs_two
+def test_an_interrupt_while_the_call_waits_is_raised_once_no_strip_runs() -> None:
+    """Ctrl-C while the calling thread, its own strips done, waits for a pool thread's strip:
+    the interrupt is raised once that strip has finished, not while it runs on."""
+    main = threading.get_ident()
+    done: list[int] = []
+    pool_started = threading.Event()
+
+    def strip(a: int, b: int) -> None:
+        if threading.get_ident() == main:  # (once a pool thread holds a strip)
+            pool_started.wait(5.0)
+        else:
+            pool_started.set()
+            time.sleep(0.5)
+        done.append(a)
+
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.2)
+        with pytest.raises(KeyboardInterrupt):
+            run_strips(40, strip, 1)
+        count = len(done)
+        time.sleep(0.6)
+        assert len(done) == count == 40
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ops.color import luminance, luminance_of_sum
+from ops.color import luminance, luminance_of_sum, luminance_of_sum_rows
+from ops.colorspace import REC709_Y
 from ops.curvature import isotropic, principal_curvatures
 from ops.pyramid.upsample import Upsampled
 from ops.radiance_scaling import (
@@ -148,6 +149,17 @@ def test_luminance_of_sum_is_the_luminance_of_the_total_bit_for_bit(count: int) 
     got = luminance_of_sum(rgbs, weights)
     assert got.shape == (301, 257) and got.dtype == np.float32
     assert np.array_equal(got, luminance(whole, weights))
+
+
+def test_luminance_of_sum_rows_takes_rows_of_any_layout() -> None:
+    """Rows as (rows, W, 3), flat (rows, 3W) and a column window of a wider frame (not
+    contiguous) are summed alike: the luminance of their total."""
+    rng = np.random.default_rng(9)
+    a, b, c = (rng.random((5, 7, 3), dtype=np.float32) for _ in range(3))
+    wide = np.concatenate([c, c], axis=1)
+    out = np.empty((5, 7), np.float32)
+    luminance_of_sum_rows([a, b.reshape(5, 21), wide[:, :7]], REC709_Y, out)
+    assert np.array_equal(out, luminance(a + b + c, REC709_Y))
 
 
 @pytest.mark.parametrize("odd", [False, True])

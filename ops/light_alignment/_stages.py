@@ -193,6 +193,7 @@ class _Inputs:
         pyr: NormalPyramid | None = None,
         fields: list[F32] | None = None,
         mask: F32 | None = None,
+        views: dict[int, SoA] | None = None,
     ) -> None:
         self.shape = shape
         self.comps = comps
@@ -208,7 +209,9 @@ class _Inputs:
         else:
             assert mask is not None
             self.masks = [mask]
-        self.views: dict[int, SoA] = {}  # the view at coarse levels (view_planes)
+        # the view at coarse levels (view_planes); ``views``: a cache shared by the passes of
+        # one view and pyramid
+        self.views: dict[int, SoA] = {} if views is None else views
 
     def needs_view(self, comps: Sequence[str]) -> bool:
         return any(g != "diffuse" for g in comps)

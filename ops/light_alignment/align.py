@@ -9,12 +9,18 @@ import numpy as np
 
 from ops.checks import IOR, LLA_GAMMA, LLA_SIGMA, check_sequence
 from ops.filtering import F32, NormalPyramid
-from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide
+from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide, SoA
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
 from ops.pyramid import normalize_field
 from ops.shading import Light, light_vectors, need_positions
 
-__all__ = ["align_components", "align_light", "align_lights"]
+__all__ = ["LIGHTS_PER_PASS", "align_components", "align_light", "align_lights"]
+
+#: Lights aligned in one pass over the strips: a pass makes the fields and the view once for
+#: its lights and holds every one's states and upsampled rows, so its memory grows with them
+#: (six lights, two components, 1080p: 561 MiB at the peak all at once, 346 in pairs, 338 one
+#: by one).
+LIGHTS_PER_PASS = 2
 
 
 def _check_sigmas(sigmas: Sequence[float], scales: int, name: str = "sigmas") -> list[float]:
@@ -73,7 +79,7 @@ def align_components(
     -------
     dict guide -> (H, W, 3) float32 unit directions ℓ_1; background keeps ``light_dir``.
     """
-    return _align_components([light_dir], normals, components, gamma, view, ior, mask)[0]
+    return _align_components([light_dir], normals, components, gamma, view, ior, mask, None)[0]
 
 
 def _align_components(
@@ -84,9 +90,12 @@ def _align_components(
     view: np.ndarray | None,
     ior: float,
     mask: np.ndarray | None,
+    views: dict[int, SoA] | None,
 ) -> list[dict[str, F32]]:
     """:func:`align_components` of each of ``light_dirs``, in one pass over each level's strips
-    (the fields and the view read and upsampled once for all of them)."""
+    (the fields and the view read and upsampled once for all of them); ``views``: a cache of
+    the view at the pyramid's coarse levels (see ``_Inputs.view_planes``) shared by calls with
+    the same view and pyramid, or None."""
     gamma = LLA_GAMMA.check(gamma, "gamma")
     ior = IOR.check(ior, "ior")
     pyr = normals if isinstance(normals, NormalPyramid) else None
@@ -152,7 +161,7 @@ def _align_components(
         return _align_full(inp)
     assert pyr is not None
     return _align_pyramid(
-        _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, lights, pyr=pyr)
+        _Inputs(shape, comps, math.exp(-gamma), ior, view_f, view_c, lights, pyr=pyr, views=views)
     )
 
 
@@ -207,9 +216,9 @@ def align_lights(
     """Aligned directions of every light for every shading component (LLA §4-6, Eq. 1).
 
     Directional lights use their direction; point lights the per-pixel direction towards their
-    position from ``position`` (:func:`ops.shading.light_vectors`). All lights are aligned in one
-    pass over each level's strips (the fields and the view made once for all of them), each as
-    :func:`align_components` aligns it alone, bit for bit.
+    position from ``position`` (:func:`ops.shading.light_vectors`). The lights are aligned
+    :data:`LIGHTS_PER_PASS` at a time in one pass over each level's strips (the fields and the
+    view made once for them), each as :func:`align_components` aligns it alone, bit for bit.
 
     Parameters
     ----------
@@ -224,13 +233,14 @@ def align_lights(
     -------
     dict guide -> one (H, W, 3) float32 field of unit directions per light, in ``lights`` order.
     """
-    directions: list[np.ndarray] = [
-        np.asarray(light.vector, np.float32)
-        if light.kind == "directional"
-        else light_vectors(light, need_positions(position))
-        for light in lights
-    ]
-    if not directions:
-        return {g: [] for g in components}
-    res = _align_components(directions, normals, components, gamma, view, ior, mask)
+    views: dict[int, SoA] = {}  # one view, one pyramid: its coarse levels made once
+    res: list[dict[str, F32]] = []
+    for at in range(0, len(lights), LIGHTS_PER_PASS):
+        group = [  # (a point light's field per pass: made when its pass comes)
+            np.asarray(light.vector, np.float32)
+            if light.kind == "directional"
+            else light_vectors(light, need_positions(position))
+            for light in lights[at : at + LIGHTS_PER_PASS]
+        ]
+        res += _align_components(group, normals, components, gamma, view, ior, mask, views)
     return {g: [per_light[g] for per_light in res] for g in components}
