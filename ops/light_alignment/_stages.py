@@ -381,16 +381,21 @@ class _Stage:
             assert light.rows is not None
             out[r0:r1, x0:x1] = light.rows[: r1 - r0, x0:x1]
 
+    def keep(self, r0: int, r1: int, skip: Sequence[str] = ()) -> None:
+        """Level 0: the original light on rows r0:r1 of every light's outputs, but those of the
+        components in ``skip``."""
+        for given in self.inp.lights:
+            for g, dst in given.outs.items():
+                if g not in skip:
+                    self.fill(given, dst, r0, r1, 0, self.shape[1])
+
     def strip(self, r0: int, r1: int) -> None:
         k = self.k
-        inp = self.inp
         width = self.shape[1]
         cols = np.flatnonzero(self.mask[r0:r1].max(axis=0)) if self.active else np.zeros(0, int)
         if not cols.size:
             if k == 0:  # all background, or no component changes
-                for given in inp.lights:
-                    for dst in given.outs.values():
-                        self.fill(given, dst, r0, r1, 0, width)
+                self.keep(r0, r1)
             return
         # window width rounded up (a few scratch-buffer shapes serve every strip)
         x0 = int(cols[0])
@@ -399,42 +404,54 @@ class _Stage:
         x0 = min(x0, width - wd)
         win = (r0, r1, x0, x0 + wd)
         if k == 0:  # components left unchanged keep the original light (the others: write)
-            for given in inp.lights:
-                for g, dst in given.outs.items():
-                    if g not in self.active:
-                        self.fill(given, dst, r0, r1, 0, width)
+            self.keep(r0, r1, self.active)
         ws = _Work.get((r1 - r0, wd))
         ups = self.upsample(win, ws)
         view = self.view(win, ws) if self.with_view else None
         fields: dict[int, Src] = {}
-        eta = np.float32(1.0 / inp.ior)
-        egam = np.float32(inp.egam)
         for g in self.active:
-            for li in range(len(inp.lights)):
-                light = self.light(li, g, win, ws, ups)
-                ping = 0
-                for j in self.steps:
-                    sig = inp.comps[g][j]
-                    if sig <= 0.0:
-                        continue
-                    for i in (j, j + 1):
-                        if i not in fields:
-                            fields[i] = self.field(i, win, ws, ups)
-                    if fields[j + 1][3] is not None:  # z = a_{i+1} is read from planes
-                        fields[j + 1] = self.field_planes(j + 1, win, ws)
-                    na, oa, _, fa = fields[j]
-                    nb, ob, norm_b, _ = fields[j + 1]
-                    vw, ov, _, fv = view if view is not None else (_NO_PLANES, 0, False, None)
-                    out = ws.vec(f"light{ping}")
-                    _eq1_rows(
-                        na, nb, vw, light[0], out,
-                        _NO_FLAT if fa is None else fa, _NO_FLAT if fv is None else fv,
-                        (oa, ob, ov, light[1]), _GUIDE_CODE[g], (eta, np.float32(sig), egam),
-                        (norm_b, light[2]),
-                    )  # fmt: skip
-                    light = (out, 0, False, None)
-                    ping = 1 - ping
-                self.write(li, g, light, win)
+            for li in range(len(self.inp.lights)):
+                self.align(li, g, win, ws, ups, view, fields)
+
+    def align(
+        self,
+        li: int,
+        g: str,
+        win: Win,
+        ws: _Work,
+        ups: dict[str, Src],
+        view: Src | None,
+        fields: dict[int, Src],
+    ) -> None:
+        """Light ``li``'s component ``g`` on a strip's window: Eq. 1 from the coarsest scale of
+        the level to the finest, then written (``fields``: the strip's fields, made as they are
+        first needed and kept for the other lights and components)."""
+        inp = self.inp
+        eta, egam = np.float32(1.0 / inp.ior), np.float32(inp.egam)
+        light = self.light(li, g, win, ws, ups)
+        ping = 0
+        for j in self.steps:
+            sig = inp.comps[g][j]
+            if sig <= 0.0:
+                continue
+            for i in (j, j + 1):
+                if i not in fields:
+                    fields[i] = self.field(i, win, ws, ups)
+            if fields[j + 1][3] is not None:  # z = a_{i+1} is read from planes
+                fields[j + 1] = self.field_planes(j + 1, win, ws)
+            na, oa, _, fa = fields[j]
+            nb, ob, norm_b, _ = fields[j + 1]
+            vw, ov, _, fv = view if view is not None else (_NO_PLANES, 0, False, None)
+            out = ws.vec(f"light{ping}")
+            _eq1_rows(
+                na, nb, vw, light[0], out,
+                _NO_FLAT if fa is None else fa, _NO_FLAT if fv is None else fv,
+                (oa, ob, ov, light[1]), _GUIDE_CODE[g], (eta, np.float32(sig), egam),
+                (norm_b, light[2]),
+            )  # fmt: skip
+            light = (out, 0, False, None)
+            ping = 1 - ping
+        self.write(li, g, light, win)
 
     def write(self, li: int, g: str, light: Src, win: Win) -> None:
         r0, r1, x0, x1 = win

@@ -433,8 +433,7 @@ class DepthPyramid:
             idx, w = jb_weights_fast(self.logd[k], self.mask[k], self.depth_sigma, f, ys, xs, logd)
             got = (ys, xs, idx, w)  # (jb_weights_fast: contiguous float32)
         else:
-            empty = np.zeros(0, np.int64)
-            got = (empty, empty, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
+            got = (ys, xs, np.zeros((9, 0), np.int64), np.zeros((9, 0), np.float32))
         self._taps[(k, k_to)] = got
         return got
 

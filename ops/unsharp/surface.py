@@ -185,7 +185,7 @@ def surface_blur_rows(
     nrm = None if normal is None else _normals(normal, shape)
     valid, ps_range, box, _ = _valid(depth_a, ps, _mask(mask, shape))
     if box is None:
-        return SurfaceBlurRows(shape, sigs)
+        return SurfaceBlurRows(sigs)
     ys, xs = box
     centre = (0.5 * shape[1] - xs.start, 0.5 * shape[0] - ys.start)
     first_box = sigs[0][box]
@@ -204,10 +204,10 @@ def surface_blur_rows(
     subs = [sub, *(np.ascontiguousarray(sig[box]) for sig in sigs[1:])]
     res = _surface_pyramid(surf, subs, first, sigma, None, ns)
     if res is None:
-        return SurfaceBlurRows(shape, sigs)
+        return SurfaceBlurRows(sigs)
     # 0/1: pixels of the box off the surface keep the signal
     smooth = _BoxRows(box, res[0], subs, _fade(sigma, surf, ps[box]), _cv.subtract(1, surf.valid))
-    return SurfaceBlurRows(shape, sigs, smooth)
+    return SurfaceBlurRows(sigs, smooth)
 
 
 @dataclass(frozen=True)
@@ -265,8 +265,8 @@ class SurfaceBlurRows:
     """What :func:`surface_blur_rows` returns: called with rows (r0, r1), the (r1 − r0, W)
     rows of each smoothed signal (new arrays)."""
 
-    def __init__(self, shape: tuple[int, int], sigs: list[Array], box: _BoxRows | None = None):
-        self.shape = shape
+    def __init__(self, sigs: list[Array], box: _BoxRows | None = None):
+        self.shape: tuple[int, int] = sigs[0].shape
         self._sigs = sigs
         self._box = box
 
