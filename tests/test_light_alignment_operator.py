@@ -18,8 +18,7 @@ from gbuffer.errors import MissingBufferError
 from gbuffer.frame import Frame
 from ops.shading import parse_light, shade_directions
 from service import pipeline
-from service.operators.common import DEFAULT_LIGHTS
-from service.operators.light_alignment import holds_light
+from service.operators.common import DEFAULT_LIGHTS, holds_light
 from service.registry import PipelineError
 from tests import analytic
 from tests.test_operators import covered, field, remainder, run, spot_frame
@@ -177,8 +176,9 @@ def test_only_the_components_the_result_depends_on_are_aligned(spot: Frame) -> N
 def test_a_lobe_without_light_is_left_as_it_is(spot: Frame) -> None:
     # Blender writes transmission passes of a scene without glass: zeros. The ratio form leaves
     # that lobe and its light as they are (ρ · 0 is 0) instead of shading it twice: the same
-    # pixels as a frame without it, the very arrays given back, and its component still aligned
-    # (the layers of a sequence do not depend on what a frame holds)
+    # pixels as a frame without it, the very arrays given back; its light is not aligned, and
+    # its layers hold the lights as they are (the layers of a sequence do not depend on what a
+    # frame holds)
     zero = np.zeros_like(spot.buffers["diffuse"])
     dark = spot.copy()
     dark.buffers.update({"transmission": zero, "transmission.light": zero.copy()})
@@ -187,7 +187,13 @@ def test_a_lobe_without_light_is_left_as_it_is(spot: Frame) -> None:
         assert np.array_equal(out.buffers[name], without.buffers[name]), name
     for name in ("transmission", "transmission.light"):
         assert out.buffers[name] is dark.buffers[name]
-    assert "lla_light.transmission" in _aligned(out)
+    assert _aligned(out) == _aligned(without) | {
+        "lla_light.transmission",
+        "lla_light2.transmission",
+    }
+    for k, text in enumerate(DEFAULT_LIGHTS):
+        own = np.broadcast_to(np.float32(parse_light(text).vector), (*spot.shape, 3))
+        assert np.array_equal(field(out, f"lla_light{k + 1 if k else ''}.transmission"), own)
     # light in the lobe's light alone (or a NaN) is light: the lobe is relit
     lit = dark.copy()
     lit.buffers["transmission.light"] = spot.buffers["diffuse.light"]

@@ -273,6 +273,29 @@ def test_lobe_selection_scales_only_the_named_lobes(blender_frame: Frame) -> Non
     )
 
 
+def test_a_lobe_without_light_is_left_as_it_is(blender_frame: Frame) -> None:
+    # Blender writes transmission passes of a scene without glass: zeros. By default such a lobe
+    # is not scaled (σ̄ · 0 is 0): the same beauty as a frame without it, the very arrays given
+    # back, no σ̄ of it
+    dark, without = blender_frame.copy(), blender_frame.copy()
+    beauty = blender_frame.buffers["beauty"] - blender_frame.buffers["transmission"]
+    zero = np.zeros_like(beauty)
+    dark.buffers.update({"beauty": beauty, "transmission": zero, "transmission.light": zero + 0})
+    without.buffers["beauty"] = beauty
+    for name in ("transmission", "transmission.light", "transmission.color"):
+        del without.buffers[name]
+    out, ref = rs_run(dark, debug=True), rs_run(without, debug=True)
+    np.testing.assert_array_equal(out.buffers["beauty"], ref.buffers["beauty"])
+    for name in ("transmission", "transmission.light"):
+        assert out.buffers[name] is dark.buffers[name]
+    assert {k for k in out.outputs if k.startswith("rs_sigma.")} == {
+        "rs_sigma.diffuse.X",
+        "rs_sigma.specular.X",
+    }
+    named = rs_run(dark, debug=True, lobes=["diffuse", "transmission"])  # (asked for: scaled)
+    assert "rs_sigma.transmission.X" in named.outputs
+
+
 def test_auto_scenario(blender_frame: Frame) -> None:
     f = blender_frame
     auto = rs_run(f, gamma=2.0)

@@ -203,3 +203,15 @@ def channels(field: np.ndarray, names: str = "XYZ", *, copy: bool = True) -> dic
         return {n: field[..., i] for i, n in enumerate(names)}
     planes = cv2.split(np.ascontiguousarray(field))
     return {n: np.asarray(planes[i]) for i, n in enumerate(names)}
+
+
+def holds_light(frame: Frame, lobe: str) -> bool:
+    """Whether the frame has ``lobe`` with light in it: a value other than 0 (NaN counts) in the
+    lobe or in its light. One early-exit pass over each."""
+    for name in (lobe, f"{lobe}.light"):
+        buffer = frame.buffers.get(name)
+        if buffer is not None:
+            plane = np.ascontiguousarray(buffer, np.float32)
+            if cv2.hasNonZero(plane.reshape(plane.shape[0], -1)):
+                return True
+    return False

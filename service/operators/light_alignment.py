@@ -20,12 +20,14 @@ vector; transmission: refracted view vector, §6), then the frame is shaded with
 ``auto``
     ``ratio`` when the frame has a diffuse, specular or transmission lobe, else ``relight``.
 
-Only the components the result depends on are aligned (ratio: those with a lobe in the frame;
-relight: diffuse, specular unless ``specular: "none"``, transmission with a
+Only the components the result depends on are aligned (ratio: those with a lobe in the frame that
+holds light; relight: diffuse, specular unless ``specular: "none"``, transmission with a
 ``transmission_weight``). Their aligned directions are written as
 ``lla_light.<component>.X/Y/Z`` (the first light; ``lla_light<k>.<component>`` for the k-th,
-k ≥ 2), camera space, for any shader downstream; ``--debug-layers`` adds the multi-scale
-normals ``lla_n<i>.X/Y/Z`` (i = 1 finest … S).
+k ≥ 2), camera space, for any shader downstream. A lobe of the ratio form with no light in it
+(Blender's transmission passes of a scene without glass) is not aligned: its layers hold the
+lights' own directions, so that every frame of a sequence has the same layers.
+``--debug-layers`` adds the multi-scale normals ``lla_n<i>.X/Y/Z`` (i = 1 finest … S).
 """
 
 from __future__ import annotations
@@ -45,7 +47,9 @@ from ops.shading import (
     Relit,
     Shading,
     apply_gain,
+    light_vectors,
     lobe_radiance,
+    need_positions,
     ratio_relight,
     shading,
 )
@@ -54,6 +58,7 @@ from service.operators.common import (
     LightsParams,
     channels,
     frame_albedo,
+    holds_light,
     kept_lighting_gain,
     surface_normals,
 )
@@ -104,7 +109,8 @@ class LightAlignmentParams(LightsParams):
         min_length=1,
         description="components whose light may be aligned (others keep the original light); "
         "of these only those the result depends on are aligned and written: ratio, those with "
-        "a lobe in the frame; relight, diffuse, specular unless 'none', transmission with a "
+        "a lobe in the frame (a lobe with no light in it is not aligned: its layers hold the "
+        "light as it is); relight, diffuse, specular unless 'none', transmission with a "
         "transmission_weight",
     )
     gamma: float = Field(DEFAULT_GAMMA, **checks.LLA_GAMMA.bounds, description="γ of W_γ (Eq. 1)")
@@ -199,12 +205,13 @@ def _form(frame: Frame, p: LightAlignmentParams) -> str:
     return "ratio" if has_lobes else "relight"
 
 
-def _shaded(frame: Frame, p: LightAlignmentParams, form: str, component: str) -> bool:
-    """Whether the result depends on ``component``'s light: ratio, a lobe of the frame;
-    relight, a lobe of its shading (diffuse; specular unless 'none'; transmission with a
-    weight). Only those are aligned."""
-    if form == "ratio":
-        return component in frame.buffers
+def _shaded(p: LightAlignmentParams, lit: dict[str, bool] | None, component: str) -> bool:
+    """Whether the result depends on ``component``'s light: ratio (``lit``: which lobes of the
+    frame hold light, :func:`holds_light`), a lobe of the frame with light in it; relight
+    (``lit`` None), a lobe of its shading (diffuse; specular unless 'none'; transmission with
+    a weight). Only those are aligned."""
+    if lit is not None:
+        return lit[component]
     if component == "specular":
         return p.specular != "none"
     return component == "diffuse" or p.transmission_weight > 0.0
@@ -261,8 +268,14 @@ def _align_and_shade(
     view = frame.view_vectors()
     # (camera-space positions: only point lights read them)
     position = frame.positions() if any(li.kind != "directional" for li in lights) else None
+    # the ratio form shades the lobes that hold light: a lobe that is 0 everywhere, with its
+    # light (Blender's transmission passes of a scene without glass), stays as it is, as ρ · 0,
+    # and its light is not aligned (its layers hold the light as it is)
+    lit: dict[str, bool] | None = None
+    if form == "ratio":
+        lit = {c: holds_light(frame, c) for c in COMPONENTS}
     components: dict[str, list[float]] = {
-        c: p.sigmas_of(c) for c in p.components if _shaded(frame, p, form, c)
+        c: p.sigmas_of(c) for c in p.components if _shaded(p, lit, c)
     }
     aligned = (
         align_lights(
@@ -271,12 +284,8 @@ def _align_and_shade(
         if components
         else {}
     )
-    # the ratio form shades the lobes that hold light: a lobe that is 0 everywhere, with its
-    # light (Blender's transmission passes of a scene without glass), stays as it is, as ρ · 0
-    with_transmission = (
-        p.transmission_weight > 0.0 if form == "relight" else holds_light(frame, "transmission")
-    )
-    specular = p.specular if form == "relight" or holds_light(frame, "specular") else "none"
+    with_transmission = p.transmission_weight > 0.0 if lit is None else lit["transmission"]
+    specular = p.specular if lit is None or lit["specular"] else "none"
     roughness: float | np.ndarray = (
         p.roughness if p.roughness != "frame" else frame.need("roughness", "roughness='frame'")
     )
@@ -303,19 +312,25 @@ def _align_and_shade(
         _relight(frame, p, shade(directions).arrays())
         return aligned, None, debug_normals
     relit = _ratio(frame, p, shade(None), shade(directions), lights_power(lights))
+    assert lit is not None
+    dark = [c for c in p.components if c in frame.buffers and not lit[c]]
+    if dark:  # their layers hold the lights as they are: a sequence keeps one set of layers
+        own = _own_directions(frame.shape, lights, position)
+        aligned.update({c: own for c in dark})
     return aligned, relit, debug_normals
 
 
-def holds_light(frame: Frame, lobe: str) -> bool:
-    """Whether the frame has ``lobe`` with light in it: a value other than 0 (NaN counts) in the
-    lobe or in its light. One early-exit pass over each."""
-    for name in (lobe, f"{lobe}.light"):
-        buffer = frame.buffers.get(name)
-        if buffer is not None:
-            plane = np.ascontiguousarray(buffer, np.float32)
-            if cv2.hasNonZero(plane.reshape(plane.shape[0], -1)):
-                return True
-    return False
+def _own_directions(
+    shape: tuple[int, int], lights: list[Light], position: np.ndarray | None
+) -> list[np.ndarray]:
+    """Each light's own direction at every pixel, (H, W, 3): a read-only broadcast view of a
+    directional light's vector, a point light's field from ``position``."""
+    return [
+        np.broadcast_to(np.asarray(light.vector, np.float32), (*shape, 3))
+        if light.kind == "directional"
+        else light_vectors(light, need_positions(position))
+        for light in lights
+    ]
 
 
 def lights_power(lights: list[Light]) -> float:

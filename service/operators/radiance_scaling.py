@@ -24,6 +24,7 @@ from service.operators.common import (
     Gamma,
     LightsParams,
     frame_albedo,
+    holds_light,
     kept_lighting_gain,
     statistic,
     user_image,
@@ -112,7 +113,7 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
     lobes: list[str] | None = Field(
         None,
         min_length=1,  # ([] scaled every lobe, as leaving it out does)
-        description="renderer lobes to scale (default: every lobe the frame has)",
+        description="renderer lobes to scale (default: every lobe the frame has with light in it)",
     )
     ambient: float = Field(0.1, **checks.AMBIENT.bounds, description="k_a of Phong")
     specular: float = Field(0.3, **checks.WEIGHT.bounds, description="k_s of Phong")
@@ -202,7 +203,11 @@ def _scale_renderer_lobes(
 ) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Eq. 4 on the renderer's lobes; the beauty is rebuilt as Σ σ̄_j lobe_j + remainder (with
     the kept lighting, Σ σ̄_j lobe_j is corrected before the remainder is added)."""
-    names = p.lobes or [lobe for lobe in LOBES if lobe in frame.buffers]
+    present = [lobe for lobe in LOBES if lobe in frame.buffers]
+    # a lobe with no light in it (Blender's transmission passes of a scene without glass) stays
+    # 0 when scaled: by default it is left as it is, neither read nor written
+    lit = [lobe for lobe in present if holds_light(frame, lobe)]
+    names = p.lobes or lit or present
     if not names:
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
     lobes = {n: frame.need(n, "a lobe to scale (parameter 'lobes')") for n in names}
@@ -213,8 +218,8 @@ def _scale_renderer_lobes(
     white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
     remainder = frame.buffers.get("remainder")
     if remainder is not None:  # beauty minus every lobe: add back the lobes left unscaled
-        for lobe in LOBES:
-            if lobe in frame.buffers and lobe not in lobes:
+        for lobe in lit:
+            if lobe not in lobes:
                 remainder = remainder + frame.buffers[lobe]
     beauty = frame.buffers.get("beauty") if remainder is None else None
     scaled, sigmas = scale_lobes(
