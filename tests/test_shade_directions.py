@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import cv2
 import numpy as np
 import pytest
 
@@ -241,3 +242,33 @@ def test_shade_directions_validation(
 def test_shade_directions_rejects_a_bad_normal_shape(ball: analytic.Scene) -> None:
     with pytest.raises(ValueError, match="normal"):
         shade_directions(ball.normal[..., :2], np.float32([0, 0, 1]), positions(ball), LIGHTS)
+
+
+@pytest.mark.parametrize("power", [1, 2, 3, 7, 24, 32, 33, 100, 1000])
+def test_whole_exponents_are_raised_in_the_kernels_as_cv2_pow_raises_them(power: int) -> None:
+    # Blinn-Phong's (n·h)^s and the transmission lobe's power: a whole exponent is raised inside
+    # the pass that adds the terms, bit for bit what cv2.pow gives (its binary powers)
+    from ops.shading._kernels import _add_gated, _add_terms, int_power
+
+    assert int_power(float(power)) == power
+    assert int_power(32.5) == int_power(0.0) == int_power(1e9) == 0
+    rng = np.random.default_rng(power)
+    rows, wid = 5, 37
+    base = rng.random((rows, wid), dtype=np.float32)
+    base[0, :4] = [0.0, 1.0, np.float32(1) - np.float32(6e-8), 1e-3]
+    gate = (rng.random((rows, wid)) > 0.3).astype(np.float32)
+    d_term = rng.random((rows, wid), dtype=np.float32)
+    e = np.float32([0.8, 1.0, 0.6])
+    raised = np.asarray(cv2.pow(base, float(power)), np.float32)
+    for first in (True, False):
+        start = rng.random((rows, 3 * wid), dtype=np.float32)
+        od = [start.copy() for _ in range(2)]
+        os_ = [start.copy() for _ in range(2)]
+        _add_terms(d_term.copy(), raised.copy(), gate, e, first, True, 0, od[0], os_[0])
+        _add_terms(d_term.copy(), base.copy(), gate, e, first, True, power, od[1], os_[1])
+        np.testing.assert_array_equal(os_[1], os_[0])
+        np.testing.assert_array_equal(od[1], od[0])
+        out = [start.copy() for _ in range(2)]
+        _add_gated(raised.copy(), gate, e, first, 0, out[0])
+        _add_gated(base.copy(), gate, e, first, power, out[1])
+        np.testing.assert_array_equal(out[1], out[0])

@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ops.jit import kernel
+from ops.jit import inline_kernel, kernel
+
+#: Largest exponent raised by :func:`_ipow_row` (cv2.pow takes larger ones).
+MAX_INT_POWER = 1 << 16
 
 
 @kernel
@@ -47,17 +50,56 @@ def _terms_rows(nrm, ld, ldc, ls, lsc, v, vc, half, spec, d_term, nh, gate):
             gr[j] = cov if nl > zero else zero
 
 
+def int_power(p: float) -> int:
+    """``p`` as the exponent :func:`_ipow_row` raises to in the kernels, or 0 where it does not
+    (not a whole number from 1 to :data:`MAX_INT_POWER`: the caller raises with cv2.pow)."""
+    return int(p) if float(p).is_integer() and 1 <= p <= MAX_INT_POWER else 0
+
+
+@inline_kernel
+def _ipow_row(b, p, acc):
+    """``acc`` = ``b`` ** ``p`` for a whole ``p`` ≥ 1 by binary powers, the products cv2.pow
+    takes for a whole exponent (1 · b, then b², b⁴, … times in order: bit for bit its result);
+    ``b`` is overwritten."""
+    started = False
+    q = p
+    while q > 1:
+        if q & 1:
+            if started:
+                for j in range(b.shape[0]):
+                    acc[j] = acc[j] * b[j]
+            else:
+                for j in range(b.shape[0]):
+                    acc[j] = b[j]
+                started = True
+        for j in range(b.shape[0]):
+            b[j] = b[j] * b[j]
+        q >>= 1
+    if started:
+        for j in range(b.shape[0]):
+            acc[j] = acc[j] * b[j]
+    else:
+        for j in range(b.shape[0]):
+            acc[j] = b[j]
+
+
 @kernel
-def _add_terms(d_term, nh, gate, e, first, spec, od, os_):
-    """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh × gate × E,
-    E = ``e`` (3,) the light's irradiance; outputs (rows, 3W)."""
+def _add_terms(d_term, nh, gate, e, first, spec, power, od, os_):
+    """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh^power × gate
+    × E (``power`` 0: ``nh`` is raised already), E = ``e`` (3,) the light's irradiance; outputs
+    (rows, 3W); ``nh`` is overwritten."""
     e0, e1, e2 = e[0], e[1], e[2]
     for i in range(od.shape[0]):
         _add_row(d_term[i], e0, e1, e2, first, od[i])
         if spec:
             hr, gr, t = nh[i], gate[i], d_term[i]  # d_term's row is free now: nh × gate there
-            for j in range(hr.shape[0]):
-                t[j] = hr[j] * gr[j]
+            if power > 0:
+                _ipow_row(hr, power, t)
+                for j in range(hr.shape[0]):
+                    t[j] = t[j] * gr[j]
+            else:
+                for j in range(hr.shape[0]):
+                    t[j] = hr[j] * gr[j]
             _add_row(t, e0, e1, e2, first, os_[i])
 
 
@@ -104,14 +146,21 @@ def _transmission_rows(nrm, lt, ltc, v, vc, eta, base, gate):
 
 
 @kernel
-def _add_gated(term, gate, e, first, out):
-    """``out`` (=, or += unless ``first``) term × gate × E, E = ``e`` (3,); ``term`` is
-    overwritten by term × gate; ``out`` (rows, 3W)."""
+def _add_gated(term, gate, e, first, power, out):
+    """``out`` (=, or += unless ``first``) term^power × gate × E (``power`` 0: ``term`` is
+    raised already), E = ``e`` (3,); ``term`` is overwritten by that product before E;
+    ``out`` (rows, 3W)."""
     e0, e1, e2 = e[0], e[1], e[2]
+    acc = np.empty(term.shape[1], np.float32)
     for i in range(out.shape[0]):
         t, g = term[i], gate[i]
-        for j in range(t.shape[0]):
-            t[j] = t[j] * g[j]
+        if power > 0:
+            _ipow_row(t, power, acc)
+            for j in range(t.shape[0]):
+                t[j] = acc[j] * g[j]
+        else:
+            for j in range(t.shape[0]):
+                t[j] = t[j] * g[j]
         _add_row(t, e0, e1, e2, first, out[i])
 
 

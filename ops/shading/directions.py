@@ -11,7 +11,13 @@ import numpy as np
 
 from ops.checks import EXPONENT, FRACTION, IOR, ROUGHNESS, SHININESS
 from ops.parallel import run_strips
-from ops.shading._kernels import _add_gated, _add_terms, _terms_rows, _transmission_rows
+from ops.shading._kernels import (
+    _add_gated,
+    _add_terms,
+    _terms_rows,
+    _transmission_rows,
+    int_power,
+)
 from ops.shading.brdf import _blinn_phong_rows, _ggx, _transmission, half_lambert
 from ops.shading.lights import Light, light_irradiance, light_vectors, need_positions
 from ops.shading.vectors import _dot_rows, _dots, dot
@@ -298,8 +304,9 @@ class _Directional(Shading):
     """:func:`shade_directions` for directional lights, Lambert or half-Lambert, Blinn-Phong or
     no specular, and transmission where ``lobes`` has it (``models``: diffuse, specular,
     shininess, ior, transmission exponent), made strip by strip: per light, one compiled pass
-    for the terms (:func:`_terms_rows`, :func:`_transmission_rows`), the powers with cv2.pow on
-    the strip, and one pass adding them times the irradiance. Every pixel's numbers are the
+    for the terms (:func:`_terms_rows`, :func:`_transmission_rows`), and one pass raising them to
+    the lobe's exponent (a whole one; others with cv2.pow on the strip) and adding them times
+    the irradiance. Every pixel's numbers are the
     same whatever the strips."""
 
     def __init__(
@@ -348,6 +355,8 @@ class _Directional(Shading):
         nh = np.empty((n, wid), np.float32)
         gate = np.empty((n, wid), np.float32)
         spec, (shininess, exponent) = self._spec, self._powers
+        # whole exponents raised in the kernels that use them (cv2.pow's products), others here
+        s_pow, t_pow = int_power(shininess), int_power(exponent)
         od = out["diffuse"]
         os_ = out["specular"] if spec else od[:0]
         ot = out.get("transmission")
@@ -358,14 +367,15 @@ class _Directional(Shading):
             d_rows, s_rows = _rows_of(ld, r0, r1), _rows_of(ls, r0, r1)
             args = (d_rows, ld[1], s_rows, ls[1], v_rows, vc, self._half, spec, d_term, nh, gate)
             _terms_rows(nrm, *args)
-            if spec:
+            if spec and not s_pow:
                 cv2.pow(nh, shininess, dst=nh)
-            _add_terms(d_term, nh, gate, e, i == 0, spec, od, os_)
+            _add_terms(d_term, nh, gate, e, i == 0, spec, s_pow, od, os_)
             if ot is not None:  # (nh and gate are free again)
                 lt_rows = _rows_of(lt, r0, r1)
                 _transmission_rows(nrm, lt_rows, lt[1], v_rows, vc, self._eta, nh, gate)
-                cv2.pow(nh, exponent, dst=nh)
-                _add_gated(nh, gate, e, i == 0, ot)
+                if not t_pow:
+                    cv2.pow(nh, exponent, dst=nh)
+                _add_gated(nh, gate, e, i == 0, t_pow, ot)
 
     def arrays(self) -> dict[str, np.ndarray]:
         hgt, wid = self.shape
