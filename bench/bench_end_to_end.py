@@ -25,7 +25,8 @@ Rows, each a ratio to its reference measured just before or after it:
   median of the runs' ratios: ``Report.paired``); then, without a target, what their defaults
   add to the papers' operators: Radiance Scaling without the kept lighting and with the paper's
   preset, Light Alignment without the kept lighting, in the relight form and with the paper's
-  preset.
+  preset; and the three operators' defaults on the Cycles frame as read (no target: a
+  renderer's frame, with background, a floor and a transmission pass with no light in it).
 
 Targets (issue 20): enhance <= 1.0x oiiotool; HTTP and batch >= 0.8x its throughput;
 curvature <= 6x, Radiance Scaling <= 10x, Light Alignment <= 60x a copy; peak memory <= 2x.
@@ -302,6 +303,19 @@ def pipeline_rows() -> None:
         report.paired(f"  … {op} {name}", partial(pipeline.run, frame, compiled), 5)
 
 
+def real_pipeline_rows(path: Path) -> None:
+    """``pipeline.run`` of each operator's defaults on a renderer's frame as read (Cycles:
+    noise, a floor, background, a transmission pass with no light in it), without targets."""
+    import gbuffer
+    from service import pipeline
+
+    frame = gbuffer.read(path)
+    report = Report(f"pipeline.run on {path.name}", frame.shape)
+    for op in ("curvature", "radiance_scaling", "light_alignment"):
+        compiled = pipeline.compile([{"op": op}])
+        report.paired(f"pipeline.run {op}", partial(pipeline.run, frame, compiled), 5)
+
+
 SECTIONS = ("enhance", "http", "batch", "pipeline")
 
 
@@ -331,6 +345,8 @@ def main(argv: Sequence[str] = ()) -> None:
             batch_row(main_frame, work)
         if "pipeline" in sections:
             pipeline_rows()
+            if cycles is not None:
+                real_pipeline_rows(cycles)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
