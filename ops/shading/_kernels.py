@@ -83,6 +83,19 @@ def _ipow_row(b, p, acc):
             acc[j] = b[j]
 
 
+@inline_kernel
+def _gated_power(base, power, gate, acc, out):
+    """A row ``out`` = ``base`` ** ``power`` × ``gate`` (``power`` 0: ``base`` as it is),
+    ``acc`` a scratch row (``out`` may be it); ``base`` is overwritten."""
+    if power > 0:
+        _ipow_row(base, power, acc)
+        for j in range(base.shape[0]):
+            out[j] = acc[j] * gate[j]
+    else:
+        for j in range(base.shape[0]):
+            out[j] = base[j] * gate[j]
+
+
 @kernel
 def _add_terms(d_term, nh, gate, e, first, spec, power, od, os_):
     """``od`` (=, or += unless ``first``) d_term × E and, with ``spec``, ``os_`` nh^power × gate
@@ -92,14 +105,8 @@ def _add_terms(d_term, nh, gate, e, first, spec, power, od, os_):
     for i in range(od.shape[0]):
         _add_row(d_term[i], e0, e1, e2, first, od[i])
         if spec:
-            hr, gr, t = nh[i], gate[i], d_term[i]  # d_term's row is free now: nh × gate there
-            if power > 0:
-                _ipow_row(hr, power, t)
-                for j in range(hr.shape[0]):
-                    t[j] = t[j] * gr[j]
-            else:
-                for j in range(hr.shape[0]):
-                    t[j] = hr[j] * gr[j]
+            t = d_term[i]  # d_term's row is free now: nh^power × gate there
+            _gated_power(nh[i], power, gate[i], t, t)
             _add_row(t, e0, e1, e2, first, os_[i])
 
 
@@ -153,14 +160,8 @@ def _add_gated(term, gate, e, first, power, out):
     e0, e1, e2 = e[0], e[1], e[2]
     acc = np.empty(term.shape[1], np.float32)
     for i in range(out.shape[0]):
-        t, g = term[i], gate[i]
-        if power > 0:
-            _ipow_row(t, power, acc)
-            for j in range(t.shape[0]):
-                t[j] = acc[j] * g[j]
-        else:
-            for j in range(t.shape[0]):
-                t[j] = t[j] * g[j]
+        t = term[i]
+        _gated_power(t, power, gate[i], acc, t)
         _add_row(t, e0, e1, e2, first, out[i])
 
 
