@@ -164,6 +164,9 @@ def test_only_the_components_the_result_depends_on_are_aligned(spot: Frame) -> N
     glass = spot.copy()
     glass.buffers["transmission"] = spot.buffers["diffuse"]
     assert "lla_light.transmission" in _aligned(run(glass, "light_alignment"))
+    light_alone = spot.copy()  # (a lobe's light without the lobe relights nothing)
+    light_alone.buffers["transmission.light"] = spot.buffers["diffuse.light"]
+    assert _aligned(run(light_alone, "light_alignment")) == both
     relight = {"form": "relight", "specular": "none"}
     assert _aligned(run(spot, "light_alignment", relight)) == {
         "lla_light.diffuse",

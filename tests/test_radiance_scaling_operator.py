@@ -294,6 +294,14 @@ def test_a_lobe_without_light_is_left_as_it_is(blender_frame: Frame) -> None:
     }
     named = rs_run(dark, debug=True, lobes=["diffuse", "transmission"])  # (asked for: scaled)
     assert "rs_sigma.transmission.X" in named.outputs
+    # its white level is measured all the same: a sequence whose glass comes into view after
+    # the first frame scales it with the level pinned on the first
+    first = Context()
+    rs_run(dark, context=first)
+    assert "radiance_scaling.white.transmission" in first.measured
+    later = Context(pinned=dict(first.measured))
+    rs_run(blender_frame, context=later)
+    assert later.measured == {}
 
 
 def test_auto_scenario(blender_frame: Frame) -> None:

@@ -15,8 +15,9 @@ vector; transmission: refracted view vector, §6), then the frame is shaded with
     lights, so the renderer's textures, shadows and indirect light are kept and only the
     alignment is added; the beauty is rebuilt with the change of the lobes, emission and
     everything unmapped untouched. Right for production renders with lobes — with lights given
-    as the ones of the shot. A lobe with no light in it (0 everywhere, with its light) is left
-    as it is, not shaded (:func:`holds_light`).
+    as the ones of the shot. A specular or transmission lobe with no light in it (0 everywhere,
+    with its light: :func:`service.operators.common.holds_light`) is left as it is, not shaded
+    (a diffuse one is relit, to 0).
 ``auto``
     ``ratio`` when the frame has a diffuse, specular or transmission lobe, else ``relight``.
 
@@ -272,8 +273,8 @@ def _align_and_shade(
     # light (Blender's transmission passes of a scene without glass), stays as it is, as ρ · 0,
     # and its light is not aligned (its layers hold the light as it is)
     lit: dict[str, bool] | None = None
-    if form == "ratio":
-        lit = {c: holds_light(frame, c) for c in COMPONENTS}
+    if form == "ratio":  # (a lobe's light alone, without the lobe, relights nothing)
+        lit = {c: c in frame.buffers and holds_light(frame, c) for c in COMPONENTS}
     components: dict[str, list[float]] = {
         c: p.sigmas_of(c) for c in p.components if _shaded(p, lit, c)
     }

@@ -113,7 +113,8 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
     lobes: list[str] | None = Field(
         None,
         min_length=1,  # ([] scaled every lobe, as leaving it out does)
-        description="renderer lobes to scale (default: every lobe the frame has with light in it)",
+        description="renderer lobes to scale (default: every lobe the frame has with light in "
+        "it; all of them when none has)",
     )
     ambient: float = Field(0.1, **checks.AMBIENT.bounds, description="k_a of Phong")
     specular: float = Field(0.3, **checks.WEIGHT.bounds, description="k_s of Phong")
@@ -205,8 +206,8 @@ def _scale_renderer_lobes(
     the kept lighting, Σ σ̄_j lobe_j is corrected before the remainder is added)."""
     present = [lobe for lobe in LOBES if lobe in frame.buffers]
     # a lobe with no light in it (Blender's transmission passes of a scene without glass) stays
-    # 0 when scaled: by default it is left as it is, neither read nor written
-    lit = [lobe for lobe in present if holds_light(frame, lobe)]
+    # 0 when scaled: by default it is left as it is, neither scaled nor written
+    lit = present if p.lobes else [lobe for lobe in present if holds_light(frame, lobe)]
     names = p.lobes or lit or present
     if not names:
         frame.need("diffuse", "scenario 'lobes' needs at least one radiance lobe")
@@ -216,6 +217,11 @@ def _scale_renderer_lobes(
     mask = frame.mask > 0
     weights = frame.colorspace.weights
     white = {n: _white(ctx, p, n, lights[n], mask, weights) for n in names}
+    # a dark lobe left out: its white level is measured all the same (the level a sequence pins
+    # on its first frame serves the frames where the lobe has light)
+    left_out = [] if p.lobes or not lit else [n for n in present if n not in lit]
+    for n in left_out:
+        _white(ctx, p, n, frame.buffers.get(f"{n}.light", frame.buffers[n]), mask, weights)
     remainder = frame.buffers.get("remainder")
     if remainder is not None:  # beauty minus every lobe: add back the lobes left unscaled
         for lobe in lit:
