@@ -57,6 +57,18 @@ def int_power(p: float) -> int:
 
 
 @inline_kernel
+def _fold(acc, b, started):
+    """``acc`` = ``acc`` × ``b``, or ``b`` where nothing is in ``acc`` yet (cv2.pow's 1 · b:
+    the same number)."""
+    if started:
+        for j in range(b.shape[0]):
+            acc[j] = acc[j] * b[j]
+    else:
+        for j in range(b.shape[0]):
+            acc[j] = b[j]
+
+
+@inline_kernel
 def _ipow_row(b, p, acc):
     """``acc`` = ``b`` ** ``p`` for a whole ``p`` ≥ 1 by binary powers, the products cv2.pow
     takes for a whole exponent (1 · b, then b², b⁴, … times in order: bit for bit its result);
@@ -65,22 +77,12 @@ def _ipow_row(b, p, acc):
     q = p
     while q > 1:
         if q & 1:
-            if started:
-                for j in range(b.shape[0]):
-                    acc[j] = acc[j] * b[j]
-            else:
-                for j in range(b.shape[0]):
-                    acc[j] = b[j]
-                started = True
+            _fold(acc, b, started)
+            started = True
         for j in range(b.shape[0]):
             b[j] = b[j] * b[j]
         q >>= 1
-    if started:
-        for j in range(b.shape[0]):
-            acc[j] = acc[j] * b[j]
-    else:
-        for j in range(b.shape[0]):
-            acc[j] = b[j]
+    _fold(acc, b, started)
 
 
 @inline_kernel
