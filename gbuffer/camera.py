@@ -32,6 +32,7 @@ import numpy as np
 from gbuffer.atomic import read_text
 from gbuffer.errors import FrameError
 from ops.checks import FLOAT32_MAX, holds_truth_value
+from ops.opencv import written
 from ops.parallel import run_strips, strip_rows
 
 Projection = Literal["perspective", "orthographic"]
@@ -163,9 +164,9 @@ class Camera:
             inv += np.float32(1.0)
             cv2.sqrt(inv, dst=inv)
             cv2.divide(1.0, inv, dst=inv)
-            merged = cv2.merge([inv * neg_x, inv * ys[a:b, None], inv], dst=out[a:b])
-            if not np.shares_memory(merged, out):
-                out[a:b] = merged
+            written(
+                cv2.merge([inv * neg_x, inv * ys[a:b, None], inv], dst=out[a:b]), out, slice(a, b)
+            )
 
         run_strips(h, rows, strip_rows(w))
         return out

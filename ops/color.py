@@ -43,6 +43,7 @@ from ops.checks import PERCENTILE, WHITE
 from ops.colorspace import REC709_RGB_TO_XYZ, REC709_Y
 from ops.jit import kernel
 from ops.numerics import dot3_row
+from ops.opencv import written
 from ops.parallel import run_strips, strip_rows
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -134,11 +135,6 @@ def _from_t(white: float, rgb_to_xyz: np.ndarray) -> np.ndarray:
     """t -> linear RGB (3×3 float32), the inverse of :func:`_to_t`."""
     m = np.asarray(rgb_to_xyz, np.float64)
     return (np.linalg.inv(m) * (m.sum(axis=1)[None, :] * white)).astype(np.float32)
-
-
-def _write(res: np.ndarray, out: np.ndarray) -> None:
-    if not np.shares_memory(res, out):
-        out[...] = res  # OpenCV allocated anew (a view it cannot write through)
 
 
 def _check_rgb(rgb: np.ndarray, name: str) -> np.ndarray:
@@ -304,7 +300,7 @@ def rgb_to_lab_phi(
 
     def strip(r: slice) -> None:
         t = _cv.transform(arr[r], m, dst=out[r])
-        _write(t, out[r])
+        written(t, out[r])
         _phi_inplace(_flat(out[r]))
 
     row_strips(h, w, strip)
@@ -331,7 +327,7 @@ def lab_phi_to_rgb(
     def strip(r: slice) -> None:
         cube = arr[r].copy()
         _unphi_inplace(_flat(cube))
-        _write(_cv.transform(cube, m_inv, dst=res[r]), res[r])
+        written(_cv.transform(cube, m_inv, dst=res[r]), res[r])
 
     row_strips(h, w, strip)
     return res
@@ -363,8 +359,7 @@ def lightness(
         if not y.flags.c_contiguous:  # work in a contiguous strip
             y = np.empty(y.shape, np.float32)
         kernel(arr[r], y)
-        if not np.shares_memory(y, res):
-            res[r] = y
+        written(y, res, r)
 
     row_strips(h, w, strip)
     return res
@@ -380,7 +375,7 @@ def lightness_rows(
     m = _to_t(WHITE.check(white, "white"), rgb_to_xyz)[1:2]
 
     def fn(rgb: np.ndarray, out: np.ndarray) -> None:
-        _write(_cv.transform(rgb, m, dst=out), out)
+        written(_cv.transform(rgb, m, dst=out), out)
         _phi_inplace(out)
         np.multiply(out, _116, out=out)  # (exact: OpenCV would multiply in double, slower)
 
@@ -449,9 +444,9 @@ def scale_lab(
         _phi_inplace(_flat(t))
         _cv.multiply(t, _cv.merge([kr, kr, kr]), dst=t)
         _unphi_inplace(_flat(t))
-        _write(_cv.transform(t, m_inv, dst=dst), dst)
+        written(_cv.transform(t, m_inv, dst=dst), dst)
         if kp is not None and _cv.countNonZero(kp):
-            _write(_cv.copyTo(src, kp, dst), dst)
+            written(_cv.copyTo(src, kp, dst), dst)
 
     row_strips(hh, ww, strip)
     return res

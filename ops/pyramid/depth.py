@@ -12,6 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ops.numerics import put_points
+from ops.opencv import written
 from ops.parallel import run_strips, strip_rows
 from ops.pyramid._depth_kernels import (
     BACKGROUND,
@@ -59,9 +60,7 @@ def normalize_field(v: np.ndarray, mask: np.ndarray | None = None) -> F32:
                 inv *= mask[a:b]  # 0/1: (v inv) m = v (inv m)
             for plane in (x, y, z):
                 plane *= inv
-            merged = cv2.merge([x, y, z], dst=out[a:b])
-            if not np.shares_memory(merged, out):
-                out[a:b] = merged
+            written(cv2.merge([x, y, z], dst=out[a:b]), out, slice(a, b))
 
         run_strips(v.shape[0], rows, strip_rows(v.shape[1]))
         return out

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 
 from ops import color
+from ops.opencv import written
 from ops.parallel import STRIP_PIXELS, run_strips, strip_rows
 from ops.pyramid.reduce import halve
 from ops.unsharp._common import _MIN_LEVEL_SIDE, Array
@@ -67,7 +68,7 @@ def _valid(
     def strip(r: slice) -> None:
         v = _cv.bitwise_and(_cv.inRange(d[r], 1e-30, 3.0e38), _cv.inRange(ps[r], 1e-30, 3.0e38))
         v = _cv.bitwise_and(v, m[r], dst=out[r])  # (0/1: the mask is)
-        _write(v, out, r)
+        written(v, out, r)
         x, y, w, h = _cv.boundingRect(v)
         if not (w and h):
             return
@@ -94,13 +95,6 @@ def _valid(
 
     lo, hi = min(f[0] for f in found), max(f[1] for f in found)
     return valid, (lo, hi), union(rects[0]), union(rects[1])
-
-
-def _write(res: Array, dst: Array, box: tuple[slice, slice] | slice) -> None:
-    """Make sure ``dst[box]`` holds ``res`` (the result of a cv2 call given ``dst=dst[box]``:
-    OpenCV writes through views of rows with a stride, but allocates anew for others)."""
-    if not np.shares_memory(res, dst):
-        dst[box] = res
 
 
 def _outside(img: Array, box: tuple[slice, slice]) -> Array:
@@ -178,7 +172,7 @@ class _Guide:
             masked_rows(depth, valid, 0.0, out)
         else:  # ln 1 = 0 off the surface
             masked_rows(depth, valid, 1.0, out)
-            _write(_cv.log(out, dst=out), out, slice(None))
+            written(_cv.log(out, dst=out), out, slice(None))
         # × iz_scale: OpenCV multiplies by a scalar in double precision (and rounds once), 5x
         # slower than NumPy's float32 product, which is the same number when the factor is a
         # float32 (as f = median(z / pixel_size) is when depth_sigma is 1)
@@ -186,7 +180,7 @@ class _Guide:
         if float(factor32) == self.iz_scale:
             np.multiply(out, factor32, out=out)
         else:
-            _write(_cv.multiply(out, self.iz_scale, dst=out), out, slice(None))
+            written(_cv.multiply(out, self.iz_scale, dst=out), out, slice(None))
 
 
 def _surface(
@@ -260,7 +254,7 @@ def _surface(
         guide.rows(depth[r], v, iz_r)
         if lps is not None:
             masked_rows(pixel_size[r], v, 1.0, lps[r])
-            _write(_cv.log(lps[r], dst=lps[r]), lps, r)
+            written(_cv.log(lps[r], dst=lps[r]), lps, r)
         s_r = sig[r]
         signal(r, s_r)
         if not first:

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike
 from ops import color
 from ops.checks import POSITIVE, UNSHARP_AMOUNT, UNSHARP_SIGMA
 from ops.colorspace import LINEAR_REC709, ColorSpace
+from ops.opencv import written
 from ops.parallel import run_strips, strip_rows
 from ops.pyramid.masked import masked_gaussian
 from ops.unsharp._common import (
@@ -38,7 +39,7 @@ from ops.unsharp._common import (
 )
 from ops.unsharp._levels import _sub_resize
 from ops.unsharp._pyramid import _fade, _surface_pyramid
-from ops.unsharp._surface import _box, _outside, _Surface, _surface, _valid, _write
+from ops.unsharp._surface import _box, _outside, _Surface, _surface, _valid
 from ops.unsharp._upsample import _Upsampler
 
 _cv: Any = cv2  # OpenCV's stubs reject scalar operands (cv2.max(a, 0.0))
@@ -255,9 +256,9 @@ class _BoxRows:
                     at = (slice(f0 - rb.start, f1 - rb.start), fx)
                     fs, ss, a0_r = full[at], sub_i[f0:f1, fx], a0[f0 - fy.start : f1 - fy.start]
                     diff = _cv.multiply(_cv.subtract(fs, ss), a0_r)
-                    _write(_cv.scaleAdd(diff, 1.0, ss, dst=fs), full, at)
+                    written(_cv.scaleAdd(diff, 1.0, ss, dst=fs), full, at)
             # (cv2.copyTo: many times faster than np.copyto's where=)
-            _write(_cv.copyTo(sig[a:b, xs], self.off[rb], dst=full), full, slice(None))
+            written(_cv.copyTo(sig[a:b, xs], self.off[rb], dst=full), full, slice(None))
         return fulls
 
 
@@ -372,7 +373,7 @@ class _LightnessRows:
             return
         a0 = _cv.divide(self.c_fade, _cv.max(ps, 1e-30))
         _cv.multiply(a0, a0, dst=a0)
-        _write(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
+        written(_cv.multiply(part, _cv.min(a0, 1.0, dst=a0), dst=part), lam_r, fb)
 
 
 def unsharp_lightness(
