@@ -167,6 +167,14 @@ class _LightIn:
         self.outs = {g: np.empty((*shape, 3), np.float32) for g in comps}
         self._planes: dict[int, SoA] = {}
 
+    def original(self, r0: int, r1: int) -> F32:
+        """Rows r0:r1 of the light as given, (r1 − r0, W, 3): of its field, or of the constant's
+        rows (a (3,) broadcast over (h, w, 3) is ~10x slower to copy from)."""
+        if self.lfield is not None:
+            return self.lfield[r0:r1]
+        assert self.rows is not None
+        return self.rows[: r1 - r0]
+
     def planes(self, k: int, pyr: NormalPyramid) -> SoA:
         """The original (per-pixel) light at level k > 0, 0 on background (cached)."""
         got = self._planes.get(k)
@@ -370,24 +378,13 @@ class _Stage:
 
     # -- a strip ------------------------------------------------------------------------------
 
-    @staticmethod
-    def fill(light: _LightIn, out: F32, r0: int, r1: int, x0: int, x1: int) -> None:
-        """Level 0: the original ``light`` on rows r0:r1, columns x0:x1 of an output."""
-        if x1 <= x0:
-            return
-        if light.lfield is not None:
-            np.copyto(out[r0:r1, x0:x1], light.lfield[r0:r1, x0:x1])
-        else:  # from rows of the light (a (3,) broadcast over (h, w, 3) is ~10x slower)
-            assert light.rows is not None
-            out[r0:r1, x0:x1] = light.rows[: r1 - r0, x0:x1]
-
     def keep(self, r0: int, r1: int, skip: Sequence[str] = ()) -> None:
         """Level 0: the original light on rows r0:r1 of every light's outputs, but those of the
         components in ``skip``."""
         for given in self.inp.lights:
             for g, dst in given.outs.items():
                 if g not in skip:
-                    self.fill(given, dst, r0, r1, 0, self.shape[1])
+                    np.copyto(dst[r0:r1], given.original(r0, r1))
 
     def strip(self, r0: int, r1: int) -> None:
         k = self.k
@@ -458,12 +455,7 @@ class _Stage:
         planes, ol, norm_l, _ = light
         if self.k == 0:  # the window's covered pixels; the original light everywhere else
             given = self.inp.lights[li]
-            out = given.outs[g][r0:r1]
-            if given.lfield is not None:
-                orig = given.lfield[r0:r1]
-            else:
-                assert given.rows is not None
-                orig = given.rows[: r1 - r0]
+            out, orig = given.outs[g][r0:r1], given.original(r0, r1)
             flat = (r1 - r0, 3 * self.shape[1])
             _write_rows(
                 planes, ol, norm_l, self.mask[r0:r1], orig.reshape(flat), out.reshape(flat),
