@@ -306,8 +306,7 @@ class _Directional(Shading):
     shininess, ior, transmission exponent), made strip by strip: per light, one compiled pass
     for the terms (:func:`_terms_rows`, :func:`_transmission_rows`), and one pass raising them to
     the lobe's exponent (a whole one; others with cv2.pow on the strip) and adding them times
-    the irradiance. Every pixel's numbers are the
-    same whatever the strips."""
+    the irradiance. Every pixel's numbers are the same whatever the strips."""
 
     def __init__(
         self,
@@ -340,6 +339,9 @@ class _Directional(Shading):
         self._spec = specular != "none"
         self._half = diffuse != "lambert"
         self._powers = (float(shininess), float(exponent))
+        # whole exponents are raised in the kernels that use them (cv2.pow's products), others
+        # by cv2.pow on the strip
+        self._whole = (int_power(shininess), int_power(exponent))
         self._eta = np.float32(1.0 / ior)
 
     def rows(self, r0: int, r1: int) -> dict[str, np.ndarray]:
@@ -354,9 +356,7 @@ class _Directional(Shading):
         d_term = np.empty((n, wid), np.float32)
         nh = np.empty((n, wid), np.float32)
         gate = np.empty((n, wid), np.float32)
-        spec, (shininess, exponent) = self._spec, self._powers
-        # whole exponents raised in the kernels that use them (cv2.pow's products), others here
-        s_pow, t_pow = int_power(shininess), int_power(exponent)
+        spec, (shininess, exponent), (s_pow, t_pow) = self._spec, self._powers, self._whole
         od = out["diffuse"]
         os_ = out["specular"] if spec else od[:0]
         ot = out.get("transmission")
