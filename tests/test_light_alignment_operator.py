@@ -16,7 +16,7 @@ import pytest
 
 from gbuffer.errors import MissingBufferError
 from gbuffer.frame import Frame
-from ops.shading import parse_light, shade_directions
+from ops.shading import light_vectors, parse_light, shade_directions
 from service import pipeline
 from service.operators.common import DEFAULT_LIGHTS, holds_light
 from service.registry import PipelineError
@@ -197,6 +197,11 @@ def test_a_lobe_without_light_is_left_as_it_is(spot: Frame) -> None:
     for k, text in enumerate(DEFAULT_LIGHTS):
         own = np.broadcast_to(np.float32(parse_light(text).vector), (*spot.shape, 3))
         assert np.array_equal(field(out, f"lla_light{k + 1 if k else ''}.transmission"), own)
+    # a point light's: the direction towards it from every surface point
+    point = "point:0.5,1,1*4"
+    near = run(dark, "light_alignment", {"lights": [point]})
+    towards = light_vectors(parse_light(point), dark.positions())
+    assert np.array_equal(field(near, "lla_light.transmission"), towards)
     # light in the lobe's light alone (or a NaN) is light: the lobe is relit
     lit = dark.copy()
     lit.buffers["transmission.light"] = spot.buffers["diffuse.light"]

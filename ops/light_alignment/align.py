@@ -12,7 +12,7 @@ from ops.filtering import F32, NormalPyramid
 from ops.light_alignment._common import DEFAULT_GAMMA, GUIDES, Guide, SoA
 from ops.light_alignment._stages import _align_full, _align_pyramid, _Inputs
 from ops.pyramid import normalize_field
-from ops.shading import Light, light_vectors, need_positions
+from ops.shading import Light, light_direction
 
 __all__ = ["LIGHTS_PER_PASS", "align_components", "align_light", "align_lights"]
 
@@ -236,11 +236,7 @@ def align_lights(
     views: dict[int, SoA] = {}  # one view, one pyramid: its coarse levels made once
     res: list[dict[str, F32]] = []
     for at in range(0, len(lights), LIGHTS_PER_PASS):
-        group = [  # (a point light's field per pass: made when its pass comes)
-            np.asarray(light.vector, np.float32)
-            if light.kind == "directional"
-            else light_vectors(light, need_positions(position))
-            for light in lights[at : at + LIGHTS_PER_PASS]
-        ]
+        # (a point light's field per pass: made when its pass comes)
+        group = [light_direction(light, position) for light in lights[at : at + LIGHTS_PER_PASS]]
         res += _align_components(group, normals, components, gamma, view, ior, mask, views)
     return {g: [per_light[g] for per_light in res] for g in components}

@@ -44,6 +44,7 @@ from ops.shading.directions import (
 from ops.shading.lights import (
     LIGHT_SYNTAX,
     Light,
+    light_direction,
     light_irradiance,
     light_vectors,
     need_positions,
@@ -71,6 +72,7 @@ __all__ = [
     "ggx",
     "half_lambert",
     "lambert",
+    "light_direction",
     "light_irradiance",
     "light_vectors",
     "lobe_radiance",

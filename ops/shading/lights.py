@@ -130,6 +130,14 @@ def need_positions(position: np.ndarray | None) -> np.ndarray:
     return np.asarray(position, np.float32)
 
 
+def light_direction(light: Light, position: np.ndarray | None) -> np.ndarray:
+    """The direction towards ``light``: a directional light's (3,) vector, a point light's
+    (H, W, 3) field from ``position`` (:func:`light_vectors`; ValueError without positions)."""
+    if light.kind == "directional":
+        return np.asarray(light.vector, np.float32)
+    return light_vectors(light, need_positions(position))
+
+
 def light_vectors(light: Light, position: np.ndarray) -> np.ndarray:
     """(H, W, 3) unit directions from each surface point towards ``light`` (camera space)."""
     position = np.asarray(position, np.float32)

@@ -48,9 +48,8 @@ from ops.shading import (
     Relit,
     Shading,
     apply_gain,
-    light_vectors,
+    light_direction,
     lobe_radiance,
-    need_positions,
     ratio_relight,
     shading,
 )
@@ -324,14 +323,9 @@ def _align_and_shade(
 def _own_directions(
     shape: tuple[int, int], lights: list[Light], position: np.ndarray | None
 ) -> list[np.ndarray]:
-    """Each light's own direction at every pixel, (H, W, 3): a read-only broadcast view of a
-    directional light's vector, a point light's field from ``position``."""
-    return [
-        np.broadcast_to(np.asarray(light.vector, np.float32), (*shape, 3))
-        if light.kind == "directional"
-        else light_vectors(light, need_positions(position))
-        for light in lights
-    ]
+    """Each light's own direction at every pixel, (H, W, 3), read-only (a directional light's
+    vector broadcast, a point light's field from ``position``)."""
+    return [np.broadcast_to(light_direction(light, position), (*shape, 3)) for light in lights]
 
 
 def lights_power(lights: list[Light]) -> float:
