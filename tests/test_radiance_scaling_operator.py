@@ -276,7 +276,7 @@ def test_lobe_selection_scales_only_the_named_lobes(blender_frame: Frame) -> Non
 def test_a_lobe_without_light_is_left_as_it_is(blender_frame: Frame) -> None:
     # Blender writes transmission passes of a scene without glass: zeros. By default such a lobe
     # is not scaled (σ̄ · 0 is 0): the same beauty as a frame without it, the very arrays given
-    # back, no σ̄ of it
+    # back; its σ̄ is 1 (with debug layers, every frame of a sequence has the same layers)
     dark, without = blender_frame.copy(), blender_frame.copy()
     beauty = blender_frame.buffers["beauty"] - blender_frame.buffers["transmission"]
     zero = np.zeros_like(beauty)
@@ -288,10 +288,14 @@ def test_a_lobe_without_light_is_left_as_it_is(blender_frame: Frame) -> None:
     np.testing.assert_array_equal(out.buffers["beauty"], ref.buffers["beauty"])
     for name in ("transmission", "transmission.light"):
         assert out.buffers[name] is dark.buffers[name]
-    assert {k for k in out.outputs if k.startswith("rs_sigma.")} == {
-        "rs_sigma.diffuse.X",
-        "rs_sigma.specular.X",
-    }
+    lit = rs_run(blender_frame, debug=True)
+    sigma_layers = {k for k in out.outputs if k.startswith("rs_sigma.")}
+    assert sigma_layers == {k for k in lit.outputs if k.startswith("rs_sigma.")}
+    assert sigma_layers == {f"rs_sigma.{lobe}.X" for lobe in LOBES if lobe != "ambient"}
+    assert np.all(np.asarray(out.outputs["rs_sigma.transmission.X"]) == 1.0)
+    for lobe in ("diffuse", "specular"):
+        name = f"rs_sigma.{lobe}.X"
+        np.testing.assert_array_equal(out.outputs[name], ref.outputs[name])
     named = rs_run(dark, debug=True, lobes=["diffuse", "transmission"])  # (asked for: scaled)
     assert "rs_sigma.transmission.X" in named.outputs
     # its white level is measured all the same: a sequence whose glass comes into view after

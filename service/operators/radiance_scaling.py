@@ -242,6 +242,9 @@ def _scale_renderer_lobes(
         weights=weights,
     )
     del lights  # frame-sized, and no longer needed by the kept lighting
+    if ctx.debug_layers:  # a lobe left out is not scaled: σ̄ = 1, so a sequence keeps its layers
+        unscaled = np.broadcast_to(np.float32(1.0), frame.shape)
+        sigmas.update({n: unscaled for n in left_out})
     if not p.keep_lighting:
         return scaled, sigmas
     # (Σ lobe_j summed as the kernel does)
