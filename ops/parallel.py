@@ -8,7 +8,7 @@ strip runner in ``ops/``:
   calling thread (``cv2.setNumThreads(1)`` makes everything sequential), each worker taking the
   next strip when it is done (strips of unequal cost balance themselves);
 * a strip that raises stops the others taking more; the call returns (raising that error) once
-  no strip of it runs;
+  no strip of it runs; a stop (Ctrl-C, SIGTERM) waits :data:`STOP_WAIT_S` at most for them;
 * called from inside a strip it runs sequentially, so nested strip work cannot deadlock the pool;
 * a forked child (Dask or multiprocessing workers) starts a pool of its own.
 
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 
@@ -32,6 +33,13 @@ STRIP_PIXELS = 1 << 17
 #: The machine's cores, read once (``os.cpu_count()`` reads sysfs: ~8 µs, and :func:`workers` is
 #: asked at every strip run).
 _CORES = os.cpu_count() or 1
+
+#: The longest a call stopped by Ctrl-C or SIGTERM waits for the strips still running before it
+#: raises the stop all the same. The stop is raised wherever the calling thread is, possibly
+#: inside a library that holds a lock then (llvmlite's, as Numba loads a kernel): that lock is
+#: never released, and a strip waiting for it never ends. The process is ending: it must not wait
+#: for ever.
+STOP_WAIT_S = 2.0
 _POOL: ThreadPoolExecutor | None = None
 _POOL_LOCK = threading.Lock()
 _IN_STRIP = threading.local()
@@ -101,14 +109,21 @@ def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
         worker()
     except BaseException as exc:
         stop = exc
+    deadline = None if stop is None or isinstance(stop, Exception) else _stop_deadline()
     while True:  # no strip runs once the call returns, even on an interrupt while waiting
-        try:
-            wait(futures)
+        try:  # (stopped: not past the deadline, a strip still running then may never end)
+            wait(futures, None if deadline is None else max(0.0, deadline - time.monotonic()))
             break
         except BaseException as exc:
             failed.set()
             stop = stop or exc
+            if deadline is None and not isinstance(exc, Exception):
+                deadline = _stop_deadline()
     if stop is not None:
         raise stop
     for fut in futures:
         fut.result()
+
+
+def _stop_deadline() -> float:
+    return time.monotonic() + STOP_WAIT_S

@@ -9,6 +9,7 @@ import time
 
 import pytest
 
+import ops.parallel
 from ops.parallel import run_strips, workers
 
 needs_two = pytest.mark.skipif(workers() < 2, reason="one worker: strips run sequentially")
@@ -87,3 +88,45 @@ def test_an_interrupt_while_the_call_waits_is_raised_once_no_strip_runs() -> Non
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, old)
+
+
+@needs_two
+def test_a_stop_does_not_wait_for_ever_for_a_strip_that_cannot_end(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Ctrl-C raised in the calling thread while it held a lock (as llvmlite's, when Numba loads
+    a kernel): the lock is never released, and a pool thread's strip waiting for it never ends.
+    The stop is raised after STOP_WAIT_S all the same, not after the strip."""
+    monkeypatch.setattr(ops.parallel, "STOP_WAIT_S", 0.5)
+    main = threading.get_ident()
+    held = threading.Lock()  # (held by the calling thread, as the lock a stop leaves held)
+    held.acquire()
+    freed = threading.Timer(10.0, held.release)  # (the code before waited until then)
+
+    pool_started = threading.Event()
+
+    def strip(a: int, b: int) -> None:
+        if threading.get_ident() == main:  # (once a pool thread holds a strip)
+            pool_started.wait(5.0)
+            return
+        pool_started.set()
+        with held:
+            pass
+
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    freed.start()
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.2)
+        t0 = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            run_strips(40, strip, 1)
+        assert time.monotonic() - t0 < 3.0
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+        freed.cancel()
+        if held.locked():
+            held.release()  # (the pool thread's strip ends)
