@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import os
 import stat
+import warnings
 from pathlib import Path
 
 import cv2
@@ -270,15 +271,29 @@ def test_nan_and_inf_radiance_are_holes_passed_through(
     assert not np.array_equal(result["R"], original["R"])  # the operator did work elsewhere
 
 
-def test_nan_in_normals_is_refused_by_enhance_but_described_by_inspect(
-    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+@pytest.mark.parametrize(
+    ("buffer", "k", "value", "channel"),
+    [
+        ("normal", 0, np.nan, "N.X"),
+        ("normal", 1, np.inf, "N.Y"),  # (Inf was let through, and reached the result)
+        ("position", 2, -np.inf, "P.Z"),
+    ],
+)
+def test_nan_or_inf_in_a_data_channel_is_refused_by_enhance_but_described_by_inspect(
+    tmp_path: Path,
+    capfd: pytest.CaptureFixture[str],
+    buffer: str,
+    k: int,
+    value: float,
+    channel: str,
 ) -> None:
-    src = render_with_nan(tmp_path / "nan.exr", (64, 48), {"normal": [(24, 32, 0, np.nan)]})
+    src = render_with_nan(tmp_path / "nan.exr", (64, 48), {buffer: [(24, 32, k, value)]})
     assert depict("enhance", src, "-o", tmp_path / "o.exr") == 2
-    one_error(capfd, "channel 'N.X' has 1 NaN/Inf value(s) on covered pixels")
+    one_error(capfd, f"channel '{channel}' has 1 NaN/Inf value(s) on covered pixels")
+    assert not (tmp_path / "o.exr").exists()
     assert depict("inspect", src) == 0
     out = capfd.readouterr().out
-    assert "warning: NaN/Inf in data channels on covered pixels (N.X: 1): masked here" in out
+    assert f"warning: NaN/Inf in data channels on covered pixels ({channel}: 1): masked here" in out
 
 
 def test_out_of_memory_is_one_line_naming_the_limits() -> None:
@@ -411,3 +426,17 @@ def test_an_exr_output_named_otherwise_is_written_with_a_note(
     assert out.read_bytes()[:4] == b"\x76\x2f\x31\x01"
     assert depict("enhance", copy, "-o", tmp_path / "shot.EXR") == 0
     assert capfd.readouterr().err == ""
+
+
+def test_a_huge_normal_is_no_numpy_warning(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """A normal component of 1e38 (finite: its square overflows) is a normal of no length there,
+    with no RuntimeWarning on stderr."""
+    src = render_with_nan(tmp_path / "big.exr", (64, 48), {"normal": [(24, 32, 0, 1e38)]})
+    capfd.readouterr()
+    with warnings.catch_warnings(record=True) as caught:  # (what the process prints on stderr)
+        warnings.simplefilter("always")
+        assert depict("enhance", src, "-o", tmp_path / "o.exr") == 0
+    assert [str(w.message) for w in caught] == []
+    assert "Warning" not in capfd.readouterr().err

@@ -367,11 +367,12 @@ def test_world_normals_without_camera_can_be_left_out(tmp_path: Path, scene: F.S
     assert any("normals N.X,Y,Z left out" in w for w in describe(frame)["warnings"])
 
 
-def test_nan_in_normals(tmp_path: Path, scene: F.Scene) -> None:
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_nan_or_inf_in_normals(tmp_path: Path, scene: F.Scene, bad: float) -> None:
     n = scene.normal.copy()
     ys, xs = np.nonzero(inner(scene))
-    n[ys[3], xs[3], 1] = np.nan
-    n[0, 0, 0] = np.nan  # background: tolerated
+    n[ys[3], xs[3], 1] = bad
+    n[0, 0, 0] = bad  # background: tolerated, made 0
     chans = F.canonical_channels(scene)
     chans.update(F._split(n, F.XYZ, "N", np.float32))
     path = F.write_exr(tmp_path / "nan.exr", {}, chans)

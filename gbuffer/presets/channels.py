@@ -238,12 +238,14 @@ def check_finite(
     """NaN/Inf on covered pixels (and, for radiance, values beyond ±:data:`RADIANCE_MAX`): a
     hole for radiance (and, when the reader is not strict, for data), else a FrameError naming
     the channel; the values become 0 either way."""
-    limit = RADIANCE_MAX if radiance else np.inf
-    if radiance and (arr.size == 0 or (arr.max() <= limit and arr.min() >= -limit)):
-        return  # (a NaN fails both comparisons)
-    if not radiance and np.isfinite(arr).all():
-        return
-    bad = ~(np.abs(arr) <= limit)
+    if radiance:
+        if arr.size == 0 or (arr.max() <= RADIANCE_MAX and arr.min() >= -RADIANCE_MAX):
+            return  # (a NaN fails both comparisons)
+        bad = ~(np.abs(arr) <= RADIANCE_MAX)
+    else:
+        bad = ~np.isfinite(arr)
+        if not bad.any():
+            return
     for k, name in enumerate(names):
         bad_k = bad if arr.ndim == 2 else bad[..., k]
         if background is not None:

@@ -354,7 +354,8 @@ class _Build:
             self.warnings.append(f"normals {src} left out: world space and no camera")
             return
         n = to_camera_normals(n, space, camera)
-        length = np.sqrt(cv2.transform(n * n, np.ones((1, 3), np.float32)))
+        with np.errstate(over="ignore"):  # (a component past 1.8e19: its length is inf)
+            length = np.sqrt(cv2.transform(n * n, np.ones((1, 3), np.float32)))
         length = np.asarray(length, np.float32).reshape(self.reader.shape)
         empty = length < 1e-6
         # one pass: n * (1 / |n|), 0 where empty or background
