@@ -34,6 +34,7 @@ def output_target(path: str | Path) -> Path:
     Raises :class:`OutputError` when that file exists and is not a regular file (a FIFO, a
     device such as ``/dev/null``, a socket, a directory): replacing it would destroy it.
     """
+    _not_a_folder_name(path)
     given = Path(path)
     target = Path(os.path.realpath(given)) if given.is_symlink() else given
     try:
@@ -48,6 +49,15 @@ def output_target(path: str | Path) -> Path:
             f"cannot write {path}: it is {kind}, not a regular file; choose a file name"
         )
     return target
+
+
+def _not_a_folder_name(path: str | Path) -> None:
+    """:class:`OutputError` for an output named as a folder (``out/``): a file written there would
+    take the folder's name."""
+    if isinstance(path, str) and path.endswith(("/", os.sep)):
+        raise OutputError(
+            f"cannot write {path}: it names a folder (it ends in /); give a file name"
+        )
 
 
 def regular_file(path: str | Path) -> Path:
@@ -87,6 +97,9 @@ def check_outputs(
     """:class:`OutputError` when an output names an input (or another output), or a file that
     cannot be replaced (see :func:`output_target`). ``None`` entries are skipped."""
     ins = [Path(p) for p in inputs if p]
+    for given in outputs:
+        if given:
+            _not_a_folder_name(given)
     seen: list[Path] = []
     for out in (Path(p) for p in outputs if p):
         output_target(out)

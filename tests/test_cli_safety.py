@@ -428,6 +428,25 @@ def test_an_exr_output_named_otherwise_is_written_with_a_note(
     assert capfd.readouterr().err == ""
 
 
+def test_an_output_named_as_a_folder_is_a_folder(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """``-o results/``: enhance writes into that folder, made for it (one input or several); a
+    command that writes one file refuses it, rather than write a file named ``results``."""
+    other = tmp_path / "other.exr"
+    other.write_bytes(frame.read_bytes())
+    assert depict("enhance", frame, "-o", f"{tmp_path / 'one'}/") == 0
+    assert [p.name for p in (tmp_path / "one").iterdir()] == ["frame.exr"]
+    assert depict("enhance", frame, other, "-o", f"{tmp_path / 'two'}/") == 0
+    assert sorted(p.name for p in (tmp_path / "two").iterdir()) == ["frame.exr", "other.exr"]
+    capfd.readouterr()
+    assert depict("preview", frame, "-o", f"{tmp_path / 'shots'}/") == 2
+    one_error(capfd, "it names a folder (it ends in /); give a file name")
+    assert not (tmp_path / "shots").exists()
+    assert depict("enhance", frame, other, "-o", tmp_path / "three") == 2
+    one_error(capfd, "-o names a folder for their outputs (one that exists, or a name ending in /)")
+
+
 def test_a_huge_normal_is_no_numpy_warning(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:

@@ -5,6 +5,7 @@ this module: see :mod:`service.cli.args`.)"""
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -85,16 +86,17 @@ def report_written(out: str, warnings: list[str]) -> None:
 
 def enhance_targets(args: argparse.Namespace) -> list[tuple[str, str]]:
     """(input, output) of each file ``depict enhance`` names: ``-o`` is the output of a single
-    input, or an existing folder that receives each input's output under the input's name.
-    Every output is checked before anything is read (none may name an input or another)."""
+    input, or a folder that receives each input's output under the input's name (one that
+    exists, or a name ending in /, made as the first output is written). Every output is
+    checked before anything is read (none may name an input or another)."""
     inputs: list[str] = list(args.input)
     folder = Path(args.output)
-    if folder.is_dir():
+    if folder.is_dir() or args.output.endswith(("/", os.sep)):
         pairs = [(src, str(folder / Path(src).name)) for src in inputs]
     elif len(inputs) > 1:
         raise UsageError(
-            f"-o {args.output}: with {len(inputs)} inputs, -o names an existing folder for "
-            "their outputs"
+            f"-o {args.output}: with {len(inputs)} inputs, -o names a folder for their "
+            "outputs (one that exists, or a name ending in /)"
         )
     else:
         pairs = [(inputs[0], args.output)]

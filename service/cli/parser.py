@@ -100,7 +100,8 @@ def add_frame_commands(sub: Any) -> None:
         "--output",
         required=True,
         type=named_path,
-        help="output EXR, or an existing folder for outputs named as their inputs (several inputs)",
+        help="output EXR, or a folder for outputs named as their inputs (one that exists, or a "
+        "name ending in /)",
     )
     add_pipeline_options(p)
     add_write_options(p)
