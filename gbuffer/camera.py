@@ -118,10 +118,20 @@ class Camera:
 
     # -- intrinsics ---------------------------------------------------------------------------
 
+    @property
+    def has_intrinsics(self) -> bool:
+        """Whether it tells a pixel's size: a perspective camera's field of view, an orthographic
+        one's height (a file's ``worldToCamera`` alone gives only the pose)."""
+        if self.projection == "orthographic":
+            return self.ortho_height is not None
+        return self.fov_y_deg is not None
+
     def focal_px(self, display_height: int) -> float:
         """Focal length in pixels for a display window ``display_height`` pixels high."""
         if self.projection != "perspective" or self.fov_y_deg is None:
-            raise FrameError("focal length asked of a camera without a perspective field of view")
+            raise FrameError(
+                f"the camera ({self.source or 'given'}) has no perspective field of view"
+            )
         return 0.5 * display_height / math.tan(math.radians(self.fov_y_deg) / 2.0)
 
     def pixel_size_at(self, depth: np.ndarray, display_height: int) -> np.ndarray:

@@ -233,14 +233,24 @@ class Frame:
             ) from None
 
     def need_camera(self, why: str) -> Camera:
+        """The frame's camera, one that tells a pixel's size (:attr:`Camera.has_intrinsics`)."""
         if self.camera is None:
-            raise MissingCameraError(
-                f"no camera in the file, none given and no world-space position pass to solve "
-                f"it from ({why}); give a camera JSON (--camera CAM.json on the command line, "
-                'the camera form field over HTTP): {"world_to_camera": [[...4 rows...]], '
-                '"fov_y_deg": 40}'
+            lacks = (
+                "no camera in the file, none given and no world-space position pass to solve it "
+                "from"
             )
-        return self.camera
+        elif not self.camera.has_intrinsics:
+            lacks = (
+                f"the camera ({self.camera.source or 'given'}) has no field of view (a file's "
+                "worldToCamera needs worldToNDC or depict/fovYDeg beside it)"
+            )
+        else:
+            return self.camera
+        raise MissingCameraError(
+            f"{lacks} ({why}); give a camera JSON (--camera CAM.json on the command line, "
+            'the camera form field over HTTP): {"world_to_camera": [[...4 rows...]], '
+            '"fov_y_deg": 40}'
+        )
 
     @property
     def mask(self) -> np.ndarray:
@@ -264,7 +274,7 @@ class Frame:
     def view_vectors(self) -> np.ndarray:
         """(H, W, 3) unit vectors towards the eye (orthographic default without a camera)."""
         assert self.display_size is not None
-        if self.camera is None:
+        if self.camera is None or not self.camera.has_intrinsics:
             return towards_eye(self.shape)
         return self.camera.view_vectors(self.shape, self.display_size, self.origin)
 
@@ -273,13 +283,14 @@ class Frame:
 
         Perspective: the point on the eye ray at planar depth d, (x d, −y d, −d) with (x, y) the
         pixel on the image plane at unit depth. Orthographic: (x, y, −d) with x, y from the
-        pixel's place in the display window. Without a camera: (0, 0, −d).
+        pixel's place in the display window. Without a camera (or one without a field of view):
+        (0, 0, −d).
         """
         if "position" in self.buffers:
             return self.buffers["position"]
         depth = self.need("depth", "to rebuild camera-space positions")
         d = np.where(np.isfinite(depth), depth, 0.0).astype(np.float32)
-        camera = self.camera
+        camera = self.camera if self.camera is not None and self.camera.has_intrinsics else None
         if camera is not None and camera.projection == "orthographic":
             assert self.display_size is not None and camera.ortho_height is not None
             dw, dh = self.display_size

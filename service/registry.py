@@ -44,6 +44,14 @@ def operators() -> dict[str, Operator]:
     return REGISTRY
 
 
+def _tells_pixel_sizes(camera: dict[str, Any] | None) -> bool:
+    """Whether an inspected camera (:meth:`gbuffer.camera.Camera.to_dict`) has its intrinsics."""
+    if camera is None:
+        return False
+    orthographic = camera.get("projection") == "orthographic"
+    return camera.get("ortho_height" if orthographic else "fov_y_deg") is not None
+
+
 def runnable(info: dict[str, Any]) -> dict[str, Any]:
     """Which operators can run on the inspected frame, and what the others lack."""
     have = set(info["buffers"])
@@ -52,8 +60,8 @@ def runnable(info: dict[str, Any]) -> dict[str, Any]:
     blocked = {}
     for op in operators().values():
         lacks = [b for b in op.needs if b not in have]
-        if op.needs_camera and info["camera"] is None:
-            lacks.append("camera")
+        if op.needs_camera and not _tells_pixel_sizes(info["camera"]):
+            lacks.append("camera" if info["camera"] is None else "a camera field of view")
         if lacks:
             blocked[op.name] = lacks
     return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}

@@ -447,6 +447,34 @@ def test_an_output_named_as_a_folder_is_a_folder(
     one_error(capfd, "-o names a folder for their outputs (one that exists, or a name ending in /)")
 
 
+def test_a_camera_with_a_pose_but_no_field_of_view(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """A header with ``worldToCamera`` and neither ``worldToNDC`` nor ``depict/fovYDeg``: sizes
+    relative to the image run as without a camera, sizes in scene units ask for one in one line
+    (not "focal length asked of a camera ..."), and ``inspect`` says so."""
+    with OpenEXR.File(str(frame), separate_channels=True) as f:
+        header = dict(f.header())
+        chans = {name: c.pixels.copy() for name, c in f.channels().items()}
+    assert "worldToCamera" in header
+    for key in ("worldToNDC", "depict/fovYDeg"):
+        header.pop(key, None)
+    src = tmp_path / "pose.exr"
+    OpenEXR.File(header, chans).write(str(src))
+    capfd.readouterr()
+    assert depict("enhance", src, "-o", tmp_path / "o.exr") == 0
+    err = capfd.readouterr().err
+    assert "has no field of view" in err and "Traceback" not in err
+    out = tmp_path / "u.exr"
+    assert depict("enhance", src, "-o", out, "--op", "unsharp_masking", "--set", "sigma=0.1") == 2
+    one_error(capfd, "the camera (file header (worldToCamera)) has no field of view (a file's ")
+    assert not out.exists()
+    assert depict("inspect", src) == 0
+    assert "warning: the camera in the file (file header (worldToCamera)) has no field of view" in (
+        capfd.readouterr().out
+    )
+
+
 def test_a_huge_normal_is_no_numpy_warning(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:

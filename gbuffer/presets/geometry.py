@@ -135,8 +135,17 @@ def check_facing(
 
 
 def file_camera(header: dict[str, Any], warnings: list[str]) -> Camera | None:
+    """The camera of a part's header (:meth:`Camera.from_header`); one that cannot be read is
+    ignored, one without a field of view kept for its pose, each with a warning."""
     try:
-        return Camera.from_header(header)
+        camera = Camera.from_header(header)
     except Exception as exc:
         warnings.append(f"camera in the file ignored ({exc})")
         return None
+    if camera is not None and not camera.has_intrinsics:
+        warnings.append(
+            f"the camera in the file ({camera.source}) has no field of view (no worldToNDC or "
+            "depict/fovYDeg beside worldToCamera): its pose is used, and sizes in scene units "
+            "need a camera JSON with one (--camera CAM.json)"
+        )
+    return camera

@@ -147,10 +147,11 @@ NOMINAL_FOV_Y_DEG = 40.0
 
 
 def relative_pixel_sizes(frame: Frame, why: str) -> np.ndarray:
-    """:func:`pixel_sizes` with the frame's camera, else with a perspective camera of
-    :data:`NOMINAL_FOV_Y_DEG`: enough for smoothing whose size is relative to the image height
-    (its size in scene units is taken at the covered pixels' median pixel size)."""
-    if frame.camera is not None:
+    """:func:`pixel_sizes` with the frame's camera (one with a field of view), else with a
+    perspective camera of :data:`NOMINAL_FOV_Y_DEG`: enough for smoothing whose size is relative
+    to the image height (its size in scene units is taken at the covered pixels' median pixel
+    size)."""
+    if frame.camera is not None and frame.camera.has_intrinsics:
         return pixel_sizes(frame, why)
     depth = frame.need("depth", why)
     focal = 0.5 * frame.image_height / math.tan(math.radians(NOMINAL_FOV_Y_DEG) / 2.0)
