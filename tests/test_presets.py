@@ -571,3 +571,19 @@ def test_real_blender_render() -> None:
     expected = rgb("Emit") + rgb("Env")
     err = np.abs(frame.buffers["remainder"] - expected)
     assert np.percentile(err, 99) < 0.05 * max(1.0, float(np.abs(expected).max()))
+
+
+def test_a_channel_two_buffers_read_counts_its_holes_once(tmp_path: Path) -> None:
+    """NaN at 2 covered pixels of Blender's DiffCol.G (read by the diffuse lobe and its colour):
+    the warning counts 2 there, not 4."""
+    src = Path(__file__).parent / "fixtures" / "blender" / "cycles_multilayer.exr"
+    with OpenEXR.File(str(src), separate_channels=True) as f:
+        header = dict(f.header())
+        chans = {name: c.pixels.copy() for name, c in f.channels().items()}
+    ys, xs = np.nonzero(chans["ViewLayer.Depth.Z"] < 1e3)
+    for i in (10, 20):
+        chans["ViewLayer.DiffCol.G"][ys[i], xs[i]] = np.nan
+    path = tmp_path / "holes.exr"
+    OpenEXR.File(header, chans).write(str(path))
+    warnings = describe(read(path))["warnings"]
+    assert any("(ViewLayer.DiffCol.G: 2) treated as holes" in w for w in warnings), warnings

@@ -103,14 +103,26 @@ class ChannelReader:
         self.grid = (0, 0, 0, 0)
         #: pixels with NaN/Inf radiance (or, when not strict, data): holes of the frame
         self.holes: np.ndarray | None = None
-        self.hole_channels: dict[str, int] = {}  # channel -> non-finite values there
-        self.masked_channels: dict[str, int] = {}  # data channels, when not strict
+        #: channel -> its pixels with non-finite values (radiance; data, when not strict)
+        self._bad: tuple[dict[str, np.ndarray], dict[str, np.ndarray]] = ({}, {})
 
     def add_holes(self, name: str, bad: np.ndarray, radiance: bool) -> None:
-        """Make ``bad`` pixels holes; count the channel's non-finite values."""
+        """Make ``bad`` pixels holes, and mark them on the channel (a channel two buffers read,
+        as a lobe's colour is, counts each pixel once)."""
         self.holes = bad.copy() if self.holes is None else self.holes | bad
-        counts = self.hole_channels if radiance else self.masked_channels
-        counts[name] = counts.get(name, 0) + int(bad.sum())
+        marked = self._bad[0 if radiance else 1]
+        before = marked.get(name)
+        marked[name] = bad.copy() if before is None else before | bad
+
+    @property
+    def hole_channels(self) -> dict[str, int]:
+        """Radiance channel -> its pixels with non-finite values."""
+        return {name: int(np.count_nonzero(bad)) for name, bad in self._bad[0].items()}
+
+    @property
+    def masked_channels(self) -> dict[str, int]:
+        """Data channel (read when not strict) -> its pixels with non-finite values."""
+        return {name: int(np.count_nonzero(bad)) for name, bad in self._bad[1].items()}
 
     def set_primary(self, index: int) -> None:
         self.primary = index
