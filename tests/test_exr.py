@@ -249,6 +249,25 @@ def test_unknown_pixel_type(tmp_path: Path) -> None:
         exr.read_parts(src)
 
 
+@pytest.mark.parametrize("sampling", [(3, 1), (1, 2)])
+def test_a_sampling_the_window_is_no_multiple_of_is_named(
+    tmp_path: Path, sampling: tuple[int, int]
+) -> None:
+    """OpenEXR refuses such a file, and its binding says only "Unable to open ... for read"."""
+    src = write_raw_exr(tmp_path / "s.exr", {"N.X": rand(5, 4, np.float32)})
+    data = bytearray(src.read_bytes())
+    at = data.index(b"N.X\0") + 4 + 4 + 4  # (name, pixel type, pLinear and reserved)
+    struct.pack_into("<2i", data, at, *sampling)
+    src.write_bytes(bytes(data))
+    axis, step, size = ("x", 3, 4) if sampling[0] != 1 else ("y", 2, 5)
+    with pytest.raises(
+        FrameError,
+        match=rf"channel 'N\.X' has {axis} sampling {step}, which the data window's {axis} "
+        rf"origin 0 and size {size} are not multiples of \(OpenEXR refuses it\)",
+    ):
+        exr.read_parts(src)
+
+
 def test_max_pixels_must_be_positive(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="max_pixels"):
         exr.read_parts(single_part(tmp_path), max_pixels=0)

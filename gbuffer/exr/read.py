@@ -16,7 +16,7 @@ import OpenEXR
 
 from gbuffer.capture import captured_output
 from gbuffer.errors import FrameError
-from gbuffer.exr.layout import PIXEL_TYPES, FileLayout, read_layout
+from gbuffer.exr.layout import PIXEL_TYPES, FileLayout, PartLayout, read_layout
 from gbuffer.frame import Passthrough
 from gbuffer.limits import Limits
 
@@ -157,12 +157,31 @@ def _check_layout(layout: FileLayout, where: str) -> None:
                 )
             if xs < 1 or ys < 1:
                 raise FrameError(f"{where}: channel '{name}' has sampling {xs}x{ys}")
+            _check_sampling(part, name, xs, ys, where)
         for name, raw in part.attributes.items():
             if raw.type == "deepImageState":
                 raise FrameError(
                     f"{where}: attribute '{name}' of type deepImageState (deep data) cannot be "
                     "read by the OpenEXR binding; flatten the file first"
                 )
+
+
+def _check_sampling(part: PartLayout, name: str, xs: int, ys: int, where: str) -> None:
+    """FrameError for a subsampled channel OpenEXR refuses (the binding says only that it cannot
+    open the file): its data window's origin and size are multiples of the sampling, and a
+    tiled part has none."""
+    x0, y0 = part.data_window[:2]
+    for axis, step, origin, size in (("x", xs, x0, part.width), ("y", ys, y0, part.height)):
+        if step != 1 and part.storage.startswith("tiled"):
+            raise FrameError(
+                f"{where}: channel '{name}' is subsampled ({xs}x{ys}) in a tiled part, which "
+                "OpenEXR does not allow"
+            )
+        if origin % step or size % step:
+            raise FrameError(
+                f"{where}: channel '{name}' has {axis} sampling {step}, which the data window's "
+                f"{axis} origin {origin} and size {size} are not multiples of (OpenEXR refuses it)"
+            )
 
 
 def _decode(out: ExrPassthrough, where: str) -> None:
