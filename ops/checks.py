@@ -178,8 +178,9 @@ SCALES = Range(2, 12)
 LLA_BASE = Range(0.0, 1.0, lo_open=True)
 #: Spatial σ growth per scale.
 FACTOR = Range(1.0, 4.0)
-#: Depth gap (log-depth, in σ) above which the filtering does not mix surfaces.
-LLA_DEPTH_SIGMA = Range(0.0, 10.0, lo_open=True)
+#: Depth gap (log-depth, in σ) above which the filtering does not mix surfaces: from 1e-4, a
+#: relative depth step of 0.01 % (0.5 / σ² past float32 below 1e-19 made every pixel NaN).
+LLA_DEPTH_SIGMA = Range(1e-4, 10.0)
 
 # -- shading -------------------------------------------------------------------------------------
 #: Index of refraction.

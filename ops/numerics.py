@@ -44,6 +44,7 @@ __all__ = [
     "expf",
     "finite_quotient",
     "magnitude",
+    "new_values",
     "put_points",
     "sincos_upper",
 ]
@@ -268,53 +269,74 @@ def put_points(stack, ys, xs, vals, i0, i1, origin, width):
                 stack[ch, yy, xx + c] = vals[n, ch]
 
 
+def new_values(after: np.ndarray, before: np.ndarray) -> tuple[int, int]:
+    """How many values of ``after`` an operation made negative (below 0 where ``before``, the same
+    shape, holds another value), and how many it made NaN or ±inf (where ``before`` is finite):
+    one compiled read-only pass on row strips."""
+    a, b = _rows_alike(after, before)
+    if a.size == 0:
+        return 0, 0
+    rows = strip_rows(a.shape[1])
+    found = np.zeros((-(-a.shape[0] // rows), 2), np.int64)
+
+    def count(r0: int, r1: int) -> None:
+        _new_values_rows(a[r0:r1], b[r0:r1], found[r0 // rows])
+
+    run_strips(a.shape[0], count, rows)
+    negatives, not_finite = found.sum(axis=0)
+    return int(negatives), int(not_finite)
+
+
 def clip_new_negatives(
     after: np.ndarray, before: np.ndarray, *, in_place: bool = False
 ) -> np.ndarray:
     """``after`` with the values an operation made negative set to 0: those below 0 where
     ``before`` (the same shape) holds another value. What it left as it was, negative or not,
     stays bit for bit, and NaN is left alone. ``after`` itself where nothing is to be clipped
-    (one compiled read-only pass on row strips), else a new float32 array; with ``in_place``,
-    ``after`` itself clipped where it is a C-contiguous float32 array.
+    (:func:`new_values`' pass), else a new float32 array; with ``in_place``, ``after`` itself
+    clipped where it is a C-contiguous float32 array.
 
     A result rebuilt as Σ scaled lobes + (beauty − Σ lobes) goes below 0 where that rest is
     (a half-float beauty, a path tracer's noise) and the lobes are scaled towards 0."""
+    a = np.ascontiguousarray(after, np.float32)
+    if a.size == 0 or new_values(a, before)[0] == 0:
+        return a
+    out = a.copy() if a is after and not in_place else a
+    flat_o, flat_b = _rows_alike(out, before)
+    run_strips(
+        flat_o.shape[0],
+        lambda r0, r1: _clip_new_negatives_rows(flat_o[r0:r1], flat_b[r0:r1]),
+        strip_rows(flat_o.shape[1]),
+    )
+    return out
+
+
+def _rows_alike(after: np.ndarray, before: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both as C-contiguous float32 rows (H, N) of one shape, else ValueError."""
     a = np.ascontiguousarray(after, np.float32)
     b = np.ascontiguousarray(before, np.float32)
     if a.shape != b.shape:
         raise ValueError(f"after {a.shape} and before {b.shape} must have the same shape")
     if a.size == 0:
-        return a
-    flat_a, flat_b = a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
-    rows = strip_rows(flat_a.shape[1])
-    found = np.zeros(-(-flat_a.shape[0] // rows), np.int64)
-
-    def count(r0: int, r1: int) -> None:
-        found[r0 // rows] = _new_negatives_rows(flat_a[r0:r1], flat_b[r0:r1])
-
-    run_strips(flat_a.shape[0], count, rows)
-    if not found.any():
-        return a
-    out = a.copy() if a is after and not in_place else a
-    flat_o = out.reshape(flat_a.shape)
-
-    def clip(r0: int, r1: int) -> None:
-        _clip_new_negatives_rows(flat_o[r0:r1], flat_b[r0:r1])
-
-    run_strips(flat_o.shape[0], clip, rows)
-    return out
+        return a.reshape(0, 0), b.reshape(0, 0)
+    return a.reshape(a.shape[0], -1), b.reshape(b.shape[0], -1)
 
 
 @kernel
-def _new_negatives_rows(a, b):
-    """How many values of rows ``a`` are below 0 and unlike ``b``'s."""
+def _new_values_rows(a, b, out):
+    """out[0] += values of rows ``a`` below 0 and unlike ``b``'s; out[1] += values of ``a`` NaN
+    or ±inf where ``b``'s is finite."""
     zero = np.float32(0.0)
-    n = 0
+    big = np.float32(np.finfo(np.float32).max)
+    negatives, not_finite = 0, 0
     for i in range(a.shape[0]):
         ra, rb = a[i], b[i]
         for j in range(ra.shape[0]):
-            n += (ra[j] < zero) & (ra[j] != rb[j])
-    return n
+            x, y = ra[j], rb[j]
+            negatives += (x < zero) & (x != y)
+            not_finite += (not abs(x) <= big) & (abs(y) <= big)
+    out[0] += negatives
+    out[1] += not_finite
 
 
 @kernel

@@ -487,3 +487,51 @@ def test_a_huge_normal_is_no_numpy_warning(
         assert depict("enhance", src, "-o", tmp_path / "o.exr") == 0
     assert [str(w.message) for w in caught] == []
     assert "Warning" not in capfd.readouterr().err
+
+
+def test_parameters_that_overflow_float32_are_refused_not_written(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Values inside their ranges that take the result past float32: γ = 100 on radiance of 1e5
+    (Radiance Scaling), a white level of 1e-30 (unsharp masking). The result was written with
+    Inf in it, exit 0; now one line names the step, and nothing is written."""
+    with OpenEXR.File(str(frame), separate_channels=True) as f:
+        header = dict(f.header())
+        chans = {name: c.pixels.copy() for name, c in f.channels().items()}
+    for name in chans:
+        if name in "RGB" or name.split(".")[0] in ("ambient", "diffuse", "specular"):
+            if ".color." not in name:
+                chans[name] = chans[name] * np.float32(1e5)
+    bright = tmp_path / "bright.exr"
+    OpenEXR.File(header, chans).write(str(bright))
+    out = tmp_path / "o.exr"
+    capfd.readouterr()
+    for src, step in (
+        (bright, ("--op", "radiance_scaling", "--set", "gamma=100", "--set", "gain=1")),
+        (frame, ("--op", "unsharp_masking", "--set", "white=1e-30")),
+    ):
+        assert depict("enhance", src, "-o", out, *step) == 2
+        one_error(capfd, f"{step[1]}: the result is NaN or infinite at ")
+        assert not out.exists()
+
+
+def test_a_depth_sigma_float32_cannot_square_is_out_of_range(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "o.exr"
+    step = ("--op", "light_alignment", "--set", "depth_sigma=1e-30")
+    assert depict("enhance", frame, "-o", out, *step) == 2
+    one_error(capfd, "depth_sigma")
+    assert not out.exists()
+
+
+def test_a_gain_map_with_inf_is_one_line(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    step = ("--op", "unsharp_masking", "--set", "gain_map=depth.Z")  # (inf off the surface)
+    with warnings.catch_warnings(record=True) as caught:  # (what the process prints on stderr)
+        warnings.simplefilter("always")
+        assert depict("enhance", frame, "-o", tmp_path / "o.exr", *step) == 2
+    assert [str(w.message) for w in caught] == []
+    one_error(capfd, "unsharp_masking: gain_map 'depth.Z' must be finite everywhere")
+

@@ -16,6 +16,7 @@ from ops.numerics import (
     expf,
     finite_quotient,
     magnitude,
+    new_values,
     sincos_upper,
 )
 
@@ -187,6 +188,23 @@ def test_clip_new_negatives_is_the_where_of_numpy(shape: tuple[int, ...]) -> Non
     assert clip_new_negatives(clean, before) is clean  # nothing to clip: the same array
     assert clip_new_negatives(after, before, in_place=True) is after  # clipped where it is
     np.testing.assert_array_equal(after, want)
+
+
+@pytest.mark.parametrize("shape", [(37, 53, 3), (300, 700), (1, 1, 3), (0, 4)])
+def test_new_values_counts_as_numpy_does(shape: tuple[int, ...]) -> None:
+    """Values made negative (below 0, not what they were), and values made NaN or ±inf where
+    they were finite (NaN, inf or -inf left as they were do not count)."""
+    rng = np.random.default_rng(6)
+    before = rng.normal(size=shape).astype(np.float32)
+    before.flat[1::17] = np.inf
+    after = before + rng.normal(scale=0.5, size=shape).astype(np.float32)
+    after.flat[::7] = before.flat[::7]
+    after.flat[3::11] = np.nan
+    after.flat[5::13] = -np.inf
+    negatives = np.count_nonzero((after < 0) & (after != before))
+    not_finite = np.count_nonzero(~np.isfinite(after) & np.isfinite(before))
+    assert new_values(after, before) == (negatives, not_finite)
+    assert after.size < 100 or not_finite > 0
 
 
 def test_clip_new_negatives_refuses_arrays_that_do_not_match() -> None:

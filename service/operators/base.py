@@ -15,7 +15,7 @@ import numpy as np
 from pydantic import ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from gbuffer.frame import Frame
-from ops.numerics import clip_new_negatives
+from ops.numerics import clip_new_negatives, new_values
 from service.errors import PipelineError
 from service.masks import MASK_SYNTAX, blend_layers, matte
 from service.masks import parse as parse_mask
@@ -132,11 +132,22 @@ class Operator:
         Operators do not change arrays in place, so an array the step kept is the same object.
         A beauty the step made has the values it made negative set to 0
         (:func:`ops.numerics.clip_new_negatives`): radiance is never negative, and Σ scaled
-        lobes + (beauty − Σ lobes) goes below 0 where that rest does."""
+        lobes + (beauty − Σ lobes) goes below 0 where that rest does. One it made NaN or
+        infinite where the input was finite (parameters that take float32 past its range, as
+        γ = 100 on radiance of 1e5) is a :class:`PipelineError`: nothing is written."""
         before = frame.buffers.get("beauty")
         self._run_masked(frame, params, context)
         after = frame.buffers.get("beauty")
-        if after is not None and before is not None and after is not before:
+        if after is None or before is None or after is before:
+            return
+        negatives, not_finite = new_values(after, before)
+        if not_finite:
+            raise PipelineError(
+                f"{self.name}: the result is NaN or infinite at {not_finite} value"
+                f"{'s' * (not_finite != 1)} of the beauty where the input is finite (past "
+                "float32's range): lower the parameters that scale it"
+            )
+        if negatives:
             frame.buffers["beauty"] = clip_new_negatives(after, before)
 
     def _run_masked(self, frame: Frame, params: Params, context: Context) -> None:

@@ -167,7 +167,10 @@ def _relief(
 def _gain_map(frame: Frame, p: UnsharpParams, ctx: Context) -> np.ndarray | None:
     if p.gain_map is None:
         return None
-    return plane(frame, p.gain_map, "gain_map", ctx.files)  # a layer, unless a file exists
+    gain = plane(frame, p.gain_map, "gain_map", ctx.files)  # a layer, unless a file exists
+    if not np.isfinite(gain).all():  # (said before it is multiplied by anything)
+        raise PipelineError(f"unsharp_masking: gain_map {p.gain_map!r} must be finite everywhere")
+    return gain
 
 
 @register(
