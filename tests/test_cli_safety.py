@@ -535,3 +535,11 @@ def test_a_gain_map_with_inf_is_one_line(
     assert [str(w.message) for w in caught] == []
     one_error(capfd, "unsharp_masking: gain_map 'depth.Z' must be finite everywhere")
 
+
+def test_apparent_relief_takes_its_light_as_the_other_operators_do(
+    frame: Path, tmp_path: Path
+) -> None:
+    """``--set light=-1,1,1`` (its pieces) was refused as "Input should be a valid string"."""
+    for light in ("light=-1,1,1", "light=-0.4,0.6,0.7", 'light="-1,1,1"'):
+        step = ("--op", "apparent_relief", "--set", "style=counter", "--set", light)
+        assert depict("enhance", frame, "-o", tmp_path / "o.exr", *step) == 0

@@ -5,7 +5,7 @@ writes the beauty (× the frame's albedo, or a constant)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -16,25 +16,19 @@ from ops.baselines import ES_SCALES, exaggerated_shading, light_warping
 from ops.curvature import isotropic
 from ops.shading import parse_light
 from service.operators.base import Context, Params, register
-from service.operators.common import frame_albedo, joined_light, surface_normals
+from service.operators.common import LightText, frame_albedo, surface_normals
 from service.operators.curvature import CurvatureParams, frame_curvature
 
 
 class OneLightParams(Params):
     """One directional light and the albedo of a baseline shading."""
 
-    light: str = Field("-0.4,0.6,0.7", description="directional light, camera space (towards it)")
+    light: LightText = Field(
+        "-0.4,0.6,0.7", description="directional light, camera space (towards it)"
+    )
     albedo: float | None = Field(
         None, **checks.WEIGHT.bounds, description="constant albedo (default: the frame's, else 0.8)"
     )
-
-    @field_validator("light", mode="before")
-    @classmethod
-    def _joined(cls, value: Any) -> Any:
-        """The light as ``--set light=X,Y,Z`` makes of it (its comma-separated pieces, numbers
-        or not: ``-1,1,1`` was refused as 'not a valid string') joined back into its text."""
-        joined = joined_light(value)
-        return value if joined is None else joined
 
     @field_validator("light")
     @classmethod

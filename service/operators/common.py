@@ -8,7 +8,7 @@ from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
-from pydantic import Field, field_validator
+from pydantic import BeforeValidator, Field, field_validator
 
 from gbuffer.frame import NORMAL_COMPONENT_MAX, Frame, normal_faults
 from ops import checks
@@ -79,6 +79,19 @@ def joined_light(value: Any) -> str | None:
     if not all(isinstance(v, int | float | str) and not isinstance(v, bool) for v in value):
         return None
     return ",".join(str(v) for v in value)
+
+
+def _one_light_text(value: Any) -> Any:
+    """A light given as its text, or as what ``--set light=X,Y,Z`` makes of it (its
+    comma-separated pieces, numbers or not: ``-1,1,1`` was refused as 'not a valid string'),
+    joined back into its text."""
+    joined = joined_light(value)
+    return value if joined is None else joined
+
+
+#: A parameter holding one light's text (:func:`ops.shading.parse_light`), also given as a list
+#: of its pieces (``--set light=-1,1,1``, ``"light": [-1, 1, 1]`` over HTTP).
+LightText = Annotated[str, BeforeValidator(_one_light_text)]
 
 
 def _is_light(text: str) -> bool:

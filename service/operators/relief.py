@@ -31,7 +31,7 @@ from ops.shading import lambert, light_vectors, parse_light
 from service.errors import PipelineError
 from service.masks import layer_plane
 from service.operators.base import Context, get, register
-from service.operators.common import Auto, channels, user_image
+from service.operators.common import Auto, LightText, channels, user_image
 from service.operators.curvature import CurvatureParams, frame_curvature
 
 Style = Literal["cel", "counter", "xtoon", "mask", "descriptor"]
@@ -68,7 +68,7 @@ class ReliefParams(CurvatureParams):
         rl.DEFAULT_PERCENTILE, **checks.PERCENTILE.bounds, description="of auto"
     )
     style: Style = Field("cel", description="cel, counter, xtoon, mask or descriptor")
-    light: str = Field(
+    light: LightText = Field(
         "-0.4,0.6,0.7", description="counter / xtoon: the light giving n·ℓ (camera space)"
     )
     threshold: float = Field(0.5, **checks.FRACTION.bounds, description="counter shading threshold")
