@@ -372,3 +372,16 @@ def test_no_parameter_reads_true_or_false_as_a_number(value: Any) -> None:
             items = got if isinstance(got, list) else [got]  # taken: no number made of it
             assert not any(type(v) in (int, float) for v in items), (name, field, got)
     assert refused > (20 if isinstance(value, bool) else 5)
+
+
+def test_a_list_parameter_given_one_value_is_that_one_item() -> None:
+    """``--set lobes=transmission`` (one value, not split at commas) was refused as "Input
+    should be a valid list"."""
+    from service.registry import get
+
+    assert get("radiance_scaling").parse({"lobes": "diffuse"}).lobes == ["diffuse"]
+    la = get("light_alignment")
+    assert la.parse({"components": "specular"}).components == ["specular"]
+    assert la.parse({"sigmas": 0.5}).sigmas == [0.5]
+    with pytest.raises(PipelineError, match="lobes=True: Input should be a valid list"):
+        get("radiance_scaling").parse({"lobes": True})

@@ -7,6 +7,8 @@ reads (it imports the built-in operators first).
 
 from __future__ import annotations
 
+import functools
+import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -68,11 +70,32 @@ class Params(NumbersModel):
     @model_validator(mode="before")
     @classmethod
     def _fill_preset(cls, data: Any) -> Any:
-        if isinstance(data, dict) and isinstance(data.get("preset"), str):
+        if not isinstance(data, dict):
+            return data
+        data = {k: [v] if k in _list_fields(cls) and _scalar(v) else v for k, v in data.items()}
+        if isinstance(data.get("preset"), str):
             values = cls.PRESETS.get(data["preset"])
             if values is not None:  # an unknown name is refused by the field's own choices
                 return {**values, **data}
         return data
+
+
+@functools.cache
+def _list_fields(model: type[Params]) -> frozenset[str]:
+    """The parameters of ``model`` that hold lists: one value given alone (``--set
+    lobes=transmission``, ``"sigmas": 0.5``) is that one item."""
+    return frozenset(
+        name
+        for name, info in model.model_fields.items()
+        if any(
+            typing.get_origin(t) is list
+            for t in (info.annotation, *typing.get_args(info.annotation))
+        )
+    )
+
+
+def _scalar(value: Any) -> bool:
+    return isinstance(value, str | int | float) and not isinstance(value, bool)
 
 
 @dataclass
