@@ -69,6 +69,14 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         ["enhance", "{exr}", "-o", "{out}", "--op", "unsharp_masking", "--set", "white=1e-40"],
         "white=1e-40 is outside the allowed range [1e-30, 1e+18]",
     ),
+    "a JSON list that does not parse": (  # (split at its commas: "sigmas.0='[0.5'")
+        ["enhance", "{exr}", "-o", "{out}", "--op", "light_alignment", "--set", "sigmas=[0.5,nan]"],
+        "--set 'sigmas=[0.5,nan]': '[0.5,nan]' is not valid JSON (Expecting value",
+    ),
+    "a JSON list that does not parse (compare)": (
+        ["compare", "{exr}", "--set", "light_alignment.sigmas=[0.5,"],
+        "--set 'light_alignment.sigmas=[0.5,': '[0.5,' is not valid JSON",
+    ),
     "no lobe": (  # (it scaled every lobe)
         ["enhance", "{exr}", "-o", "{out}", "--op", "radiance_scaling", "--set", "lobes=[]"],
         "lobes=[]: List should have at least 1 item",

@@ -122,11 +122,13 @@ def bounded(kind: type, low: float, high: float) -> Any:
 
 def parse_value(text: str) -> Any:
     """A ``--set`` value: JSON when it parses (numbers, booleans, lists), a comma list of such
-    values (``1,0.5,0.25``), else the plain string."""
+    values (``1,0.5,0.25``), else the plain string; ValueError for a JSON list or object that
+    does not parse (split at its commas, ``[0.5,nan]`` was said to hold ``'[0.5'``)."""
     try:
         return json.loads(text)
-    except ValueError:  # not JSON, or a number with more digits than Python converts
-        pass
+    except ValueError as exc:  # not JSON, or a number with more digits than Python converts
+        if text.startswith(("[", "{")):
+            raise ValueError(f"{text!r} is not valid JSON ({exc})") from None
     if "," in text:
         return [parse_value(part) for part in text.split(",")]
     return text
@@ -140,7 +142,11 @@ def parse_sets(items: list[str]) -> dict[str, dict[str, Any]]:
         section, dot, key = lhs.partition(".")
         if not sep or not dot or not key:
             raise UsageError(f"--set {item!r}: expected SECTION.KEY=VALUE")
-        out.setdefault(section.strip(), {})[key.strip()] = parse_value(rhs.strip())
+        try:
+            value = parse_value(rhs.strip())
+        except ValueError as exc:
+            raise UsageError(f"--set {item!r}: {exc}") from None
+        out.setdefault(section.strip(), {})[key.strip()] = value
     return out
 
 
@@ -167,7 +173,10 @@ class _SetAction(argparse.Action):
         key, sep, raw = str(value).partition("=")
         if not sep or not key:
             parser.error(f"--set {value!r}: expected key=value")
-        steps[-1]["params"][key.strip()] = parse_value(raw.strip())
+        try:
+            steps[-1]["params"][key.strip()] = parse_value(raw.strip())
+        except ValueError as exc:
+            parser.error(f"--set {value!r}: {exc}")
 
 
 def add_pipeline_options(p: argparse.ArgumentParser, what: str = "a pipeline step") -> None:
