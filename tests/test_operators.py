@@ -385,3 +385,27 @@ def test_a_list_parameter_given_one_value_is_that_one_item() -> None:
     assert la.parse({"sigmas": 0.5}).sigmas == [0.5]
     with pytest.raises(PipelineError, match="lobes=True: Input should be a valid list"):
         get("radiance_scaling").parse({"lobes": True})
+
+
+def test_a_number_or_a_word_has_its_range_in_the_schema_and_one_message() -> None:
+    """``white``, ``sigma``, ``curvedness_norm``, ``roughness``: a number or a word (``auto``,
+    ``frame``). Their ranges were checked but not in ``/v1/operators``' schemas, and a value
+    refused was said once per member of the union (``white.constrained-float=…; white.literal
+    ['auto']=…``)."""
+    from service.registry import get
+
+    for op, name, bound in (
+        ("unsharp_masking", "white", "minimum"),
+        ("unsharp_masking", "sigma", "exclusiveMinimum"),
+        ("apparent_relief", "curvedness_norm", "minimum"),
+        ("light_alignment", "roughness", "maximum"),
+    ):
+        spec = get(op).params.model_json_schema()["properties"][name]
+        assert any(bound in part for part in spec["anyOf"]), spec
+    for value, words in (("abc", "a number or 'auto'"), (1e-40, "greater than or equal to 1e-30")):
+        with pytest.raises(PipelineError) as refused:
+            get("unsharp_masking").parse({"white": value})
+        assert str(refused.value) == (
+            f"unsharp_masking: white={value!r}: Input should be {words} (linear white level of "
+            "CIELAB (auto: 99th percentile; pin it))"
+        )

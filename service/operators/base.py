@@ -8,6 +8,7 @@ reads (it imports the built-in operators first).
 from __future__ import annotations
 
 import functools
+import re
 import typing
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -240,22 +241,62 @@ def get(name: str) -> Operator:
 
 
 def describe_validation(op: Operator, exc: ValidationError) -> str:
-    """One line per problem: ``op: param=value: what is wrong (valid parameters: ...)``."""
+    """One line per problem: ``op: param=value: what is wrong (valid parameters: ...)``. A value
+    a union refused (``1e-40`` or ``'abc'`` for a number or ``'auto'``) is one problem, said for
+    what it was meant as."""
     fields = op.params.model_fields
     problems = []
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"]) or "params"
-        if err["type"] == "extra_forbidden":
+    for loc, value, errs in _by_value(exc.errors()):
+        if errs[0]["type"] == "extra_forbidden":
             problems.append(
                 f"{op.name}: unknown parameter {loc!r}; valid parameters: {', '.join(fields)}"
             )
             continue
-        value = err.get("input")
-        desc = (
-            fields[str(err["loc"][0])].description if err["loc"] and err["loc"][0] in fields else ""
-        )
+        name = loc.split(".")[0]
+        desc = fields[name].description if name in fields else ""
         hint = f" ({desc})" if desc else ""
-        # a validator's own words, without pydantic's "Value error, " before them
-        msg = str(err["ctx"]["error"]) if err["type"] == "value_error" else err["msg"]
-        problems.append(f"{op.name}: {loc}={value!r}: {msg}{hint}")
+        problems.append(f"{op.name}: {loc}={value!r}: {_what_is_wrong(errs, value)}{hint}")
     return "; ".join(problems)
+
+
+#: The parts of an error's location that name a member of a union ("constrained-float",
+#: "literal['auto']", "float"), not a parameter or an index.
+_MEMBER = re.compile(
+    r"^(?:constrained-|literal\[|function-|list\[|dict\[|(?:float|int|str|bool|none)$)"
+)
+
+
+def _by_value(errors: list[Any]) -> list[tuple[str, Any, list[Any]]]:
+    """The errors grouped by the value they are about (a union's members each give one): its
+    location without the members' names, the value, and its errors."""
+    groups: dict[tuple[str, str], tuple[str, Any, list[Any]]] = {}
+    for err in errors:
+        parts = [p for p in err["loc"] if isinstance(p, int) or not _MEMBER.match(str(p))]
+        loc = ".".join(str(p) for p in parts) or "params"
+        value = err.get("input")
+        groups.setdefault((loc, repr(value)), (loc, value, []))[2].append(err)
+    return list(groups.values())
+
+
+_BOUNDS = {
+    "greater_than": ("gt", "greater than"),
+    "greater_than_equal": ("ge", "greater than or equal to"),
+    "less_than": ("lt", "less than"),
+    "less_than_equal": ("le", "less than or equal to"),
+}
+
+
+def _what_is_wrong(errs: list[Any], value: Any) -> str:
+    """The words for one value's errors: a number's (its bound written as 1e-30, not
+    0.000…001), else what the union takes ("a number or 'auto'"), else the validator's own."""
+    number = isinstance(value, int | float) and not isinstance(value, bool)
+    literals = [e["ctx"]["expected"] for e in errs if e["type"] == "literal_error"]
+    others = [e for e in errs if e["type"] != "literal_error"]
+    if len(errs) > 1 and literals and (not number or not others):
+        return f"Input should be {' or '.join((['a number'] if others else []) + literals)}"
+    err = (others or errs)[0]
+    if err["type"] in _BOUNDS:
+        key, words = _BOUNDS[err["type"]]
+        return f"Input should be {words} {err['ctx'][key]:g}"
+    # a validator's own words, without pydantic's "Value error, " before them
+    return str(err["ctx"]["error"]) if err["type"] == "value_error" else str(err["msg"])

@@ -143,7 +143,7 @@ class LightAlignmentParams(LightsParams):
     specular_color: float = Field(
         0.3, **checks.WEIGHT.bounds, description="k_s of Blinn-Phong (GGX: white, Fresnel gives f0)"
     )
-    roughness: float | Literal["frame"] = Field(
+    roughness: Annotated[float, Field(**checks.ROUGHNESS.bounds)] | Literal["frame"] = Field(
         0.4, description="GGX roughness in (0, 1], or 'frame' for the frame's roughness pass"
     )
     f0: float = Field(
@@ -189,8 +189,6 @@ class LightAlignmentParams(LightsParams):
                 continue
             if len(values) != len(self.sigmas):
                 raise ValueError(f"{name} must have {len(self.sigmas)} values, like sigmas")
-        if isinstance(self.roughness, float):
-            checks.ROUGHNESS.check(self.roughness, "roughness")
         return self
 
     def sigmas_of(self, component: str) -> list[float]:

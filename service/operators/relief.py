@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import cv2
 import numpy as np
@@ -59,7 +59,7 @@ class ReliefParams(CurvatureParams):
         description=f"Apparent Relief Map: a shipped one ({', '.join(rl.SHIPPED_ARMS)}), a "
         "layer of the file, or (command line) an image file",
     )
-    curvedness_norm: float | Auto = Field(
+    curvedness_norm: Annotated[float, Field(**checks.CURVEDNESS_NORM.bounds)] | Auto = Field(
         "auto",
         description="curvedness mapped to |S| = 1, per image height (auto: the `percentile` of "
         "the surface; pin it for sequences)",
@@ -91,8 +91,6 @@ class ReliefParams(CurvatureParams):
             raise ValueError(
                 'style \'mask\' needs `effect`: a step such as {"op": "radiance_scaling"}'
             )
-        if isinstance(self.curvedness_norm, float):
-            checks.CURVEDNESS_NORM.check(self.curvedness_norm, "curvedness_norm")
         return self
 
 

@@ -23,7 +23,7 @@ Signals:
 
 from __future__ import annotations
 
-from typing import Any, ClassVar, Literal
+from typing import Annotated, Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -70,7 +70,7 @@ class UnsharpParams(Params):
     amount: float = Field(
         1.0, **checks.UNSHARP_AMOUNT.bounds, description="λ (users preferred 1.7-2, §6)"
     )
-    sigma: float | Auto = Field(
+    sigma: Annotated[float, Field(**checks.POSITIVE.bounds)] | Auto = Field(
         "auto",
         description="σ of the smooth signal in scene units (> 0), or auto: `sigma_fraction` of "
         "the image height at the surface's median depth",
@@ -93,7 +93,7 @@ class UnsharpParams(Params):
     unlit: str | None = Field(
         None, description="signal 'shadows': layer of the file with the render without shadows"
     )
-    white: float | Auto = Field(
+    white: Annotated[float, Field(**checks.WHITE.bounds)] | Auto = Field(
         "auto", description="linear white level of CIELAB (auto: 99th percentile; pin it)"
     )
     depth_sigma: float = Field(
@@ -127,10 +127,6 @@ class UnsharpParams(Params):
 
     @model_validator(mode="after")
     def _check(self) -> UnsharpParams:
-        if isinstance(self.sigma, float):
-            checks.POSITIVE.check(self.sigma, "sigma")
-        if isinstance(self.white, float):
-            checks.WHITE.check(self.white, "white")
         if self.signal == "shadows" and not self.unlit:
             raise ValueError("signal 'shadows' needs `unlit`: the layer rendered without shadows")
         return self
@@ -262,7 +258,9 @@ class DepthUnsharpParams(Params):
     mode: Literal["darken", "both"] = Field(
         "darken", description="darken: L + λ·min(ΔD, 0) (MegaMol's default); both: L + λ·ΔD"
     )
-    white: float | Auto = Field("auto", description="linear white level of CIELAB")
+    white: Annotated[float, Field(**checks.WHITE.bounds)] | Auto = Field(
+        "auto", description="linear white level of CIELAB"
+    )
 
 
 @register(
