@@ -126,6 +126,22 @@ class Camera:
             return self.ortho_height is not None
         return self.fov_y_deg is not None
 
+    def missing_intrinsics(self) -> str:
+        """What it lacks to tell a pixel's size, in words ("" when nothing): "no field of view",
+        or "no height" for an orthographic camera, with where a file header gives it."""
+        if self.has_intrinsics:
+            return ""
+        if self.projection == "orthographic":
+            return "no height (orthographic: ortho_height)"
+        if "worldToCamera" in self.source:
+            return (
+                "no field of view (a file's worldToCamera needs worldToNDC or depict/fovYDeg "
+                "beside it)"
+            )
+        if "V-Ray" in self.source:
+            return "no field of view (V-Ray's cameraFov and displayWindow give it)"
+        return "no field of view"
+
     def focal_px(self, display_height: int) -> float:
         """Focal length in pixels for a display window ``display_height`` pixels high."""
         if self.projection != "perspective" or self.fov_y_deg is None:

@@ -240,10 +240,8 @@ class Frame:
                 "from"
             )
         elif not self.camera.has_intrinsics:
-            lacks = (
-                f"the camera ({self.camera.source or 'given'}) has no field of view (a file's "
-                "worldToCamera needs worldToNDC or depict/fovYDeg beside it)"
-            )
+            source = self.camera.source or "given"
+            lacks = f"the camera ({source}) has {self.camera.missing_intrinsics()}"
         else:
             return self.camera
         raise MissingCameraError(

@@ -288,18 +288,19 @@ def new_values(after: np.ndarray, before: np.ndarray) -> tuple[int, int]:
 
 
 def clip_new_negatives(
-    after: np.ndarray, before: np.ndarray, *, in_place: bool = False
+    after: np.ndarray, before: np.ndarray, *, in_place: bool = False, counted: bool = False
 ) -> np.ndarray:
     """``after`` with the values an operation made negative set to 0: those below 0 where
     ``before`` (the same shape) holds another value. What it left as it was, negative or not,
     stays bit for bit, and NaN is left alone. ``after`` itself where nothing is to be clipped
     (:func:`new_values`' pass), else a new float32 array; with ``in_place``, ``after`` itself
-    clipped where it is a C-contiguous float32 array.
+    clipped where it is a C-contiguous float32 array. ``counted``: :func:`new_values` has
+    found some already (its pass is not made again).
 
     A result rebuilt as Σ scaled lobes + (beauty − Σ lobes) goes below 0 where that rest is
     (a half-float beauty, a path tracer's noise) and the lobes are scaled towards 0."""
     a = np.ascontiguousarray(after, np.float32)
-    if a.size == 0 or new_values(a, before)[0] == 0:
+    if a.size == 0 or (not counted and new_values(a, before)[0] == 0):
         return a
     out = a.copy() if a is after and not in_place else a
     flat_o, flat_b = _rows_alike(out, before)

@@ -114,9 +114,10 @@ def run_strips(n: int, fn: Callable[[int, int], None], rows: int) -> None:
         try:  # (stopped: not past the deadline, a strip still running then may never end)
             wait(futures, None if deadline is None else max(0.0, deadline - time.monotonic()))
             break
-        except BaseException as exc:
+        except BaseException as exc:  # (a stop: raised before a strip's error, once cut short)
             failed.set()
-            stop = stop or exc
+            if stop is None or (isinstance(stop, Exception) and not isinstance(exc, Exception)):
+                stop = exc
             if deadline is None and not isinstance(exc, Exception):
                 deadline = _stop_deadline()
     if stop is not None:

@@ -61,7 +61,7 @@ def runnable(info: dict[str, Any]) -> dict[str, Any]:
     for op in operators().values():
         lacks = [b for b in op.needs if b not in have]
         if op.needs_camera and not _tells_pixel_sizes(info["camera"]):
-            lacks.append("camera" if info["camera"] is None else "a camera field of view")
+            lacks.append("camera" if info["camera"] is None else "the camera's intrinsics")
         if lacks:
             blocked[op.name] = lacks
     return {"runnable": [n for n in operators() if n not in blocked], "not_runnable": blocked}

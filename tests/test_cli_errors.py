@@ -237,3 +237,15 @@ def test_a_preview_of_a_file_without_a_beauty_names_its_layers(
     assert err.endswith("no buffer mapped; the file's layers: Y, right (--layer NAME)"), err
     assert depict("preview", path, "-o", tmp_path / "p.png", "--layer", "Y") == 0
     assert (tmp_path / "p.png").stat().st_size > 0
+
+
+def test_a_set_value_is_json_a_comma_list_or_text() -> None:
+    """Only a whole value that opens a JSON list or object must parse as one: a piece of a
+    comma list may open with ``[`` (a mask's cryptomatte names are wildcards, ``[ab]*``)."""
+    from service.cli.args import parse_value
+
+    assert parse_value("[0.5,0.3]") == [0.5, 0.3] and parse_value("0.5,0.3") == [0.5, 0.3]
+    assert parse_value("cryptomatte:rock,[ab]*") == ["cryptomatte:rock", "[ab]*"]
+    assert parse_value("point:0,2,1") == ["point:0", 2, 1]
+    with pytest.raises(ValueError, match=r"'\[0\.5,nan\]' is not valid JSON"):
+        parse_value("[0.5,nan]")

@@ -409,3 +409,11 @@ def test_a_number_or_a_word_has_its_range_in_the_schema_and_one_message() -> Non
             f"unsharp_masking: white={value!r}: Input should be {words} (linear white level of "
             "CIELAB (auto: 99th percentile; pin it))"
         )
+
+
+def test_a_parameter_named_as_a_type_is_named_in_its_error() -> None:
+    """Only a union's member right after its parameter is left out of where an error is."""
+    from service.registry import get
+
+    with pytest.raises(PipelineError, match="unknown parameter 'float'"):
+        get("radiance_scaling").parse({"float": 3})

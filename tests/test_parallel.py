@@ -130,3 +130,33 @@ def test_a_stop_does_not_wait_for_ever_for_a_strip_that_cannot_end(
         freed.cancel()
         if held.locked():
             held.release()  # (the pool thread's strip ends)
+
+
+@needs_two
+def test_a_stop_after_a_strip_failed_is_the_stop_raised(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The calling thread's strip raised, then Ctrl-C came while a pool strip ran on: the wait
+    is cut short, so the stop is what is raised (the strip's error let a caller that catches
+    Exception carry on while that strip still wrote)."""
+    monkeypatch.setattr(ops.parallel, "STOP_WAIT_S", 0.5)
+    main = threading.get_ident()
+    pool_started, release = threading.Event(), threading.Event()
+
+    def strip(a: int, b: int) -> None:
+        if threading.get_ident() == main:
+            pool_started.wait(5.0)
+            raise ValueError("strip failed")
+        pool_started.set()
+        release.wait(10.0)
+
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        with pytest.raises(KeyboardInterrupt):
+            run_strips(40, strip, 1)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
+        release.set()

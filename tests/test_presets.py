@@ -587,3 +587,18 @@ def test_a_channel_two_buffers_read_counts_its_holes_once(tmp_path: Path) -> Non
     OpenEXR.File(header, chans).write(str(path))
     warnings = describe(read(path))["warnings"]
     assert any("(ViewLayer.DiffCol.G: 2) treated as holes" in w for w in warnings), warnings
+
+
+def test_an_alpha_of_minus_inf_is_background_and_plus_inf_is_refused(
+    tmp_path: Path, scene: F.Scene
+) -> None:
+    chans = F.canonical_channels(scene)
+    alpha = chans["A"].copy()
+    alpha[0, 0] = -np.inf  # (alpha <= 0: background, as it was before Inf was refused)
+    chans["A"] = alpha
+    frame = read(F.write_exr(tmp_path / "minus.exr", {}, chans))
+    assert frame.mask[0, 0] == 0.0
+    ys, xs = np.nonzero(inner(scene))
+    alpha[ys[0], xs[0]] = np.inf
+    with pytest.raises(FrameError, match=r"channel 'A' has 1 NaN/Inf value\(s\)"):
+        read(F.write_exr(tmp_path / "plus.exr", {}, chans))

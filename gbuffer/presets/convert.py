@@ -261,7 +261,7 @@ class _Build:
         if "alpha" in self.found:
             names = self.found["alpha"]
             self.alpha = reader.stack(names, "alpha")
-            check_finite(reader, names, self.alpha, None)
+            check_finite(reader, names, self.alpha, self.alpha <= 0.0)  # (-inf: background)
             background |= self.alpha <= 0.0
             self.buffers["alpha"] = self.alpha
             self.sources["alpha"] = names[0]

@@ -144,8 +144,7 @@ def file_camera(header: dict[str, Any], warnings: list[str]) -> Camera | None:
         return None
     if camera is not None and not camera.has_intrinsics:
         warnings.append(
-            f"the camera in the file ({camera.source}) has no field of view (no worldToNDC or "
-            "depict/fovYDeg beside worldToCamera): its pose is used, and sizes in scene units "
-            "need a camera JSON with one (--camera CAM.json)"
+            f"the camera in the file ({camera.source}) has {camera.missing_intrinsics()}: its "
+            "pose is used, and sizes in scene units need a camera JSON (--camera CAM.json)"
         )
     return camera

@@ -120,17 +120,18 @@ def bounded(kind: type, low: float, high: float) -> Any:
     return parse
 
 
-def parse_value(text: str) -> Any:
+def parse_value(text: str, *, whole: bool = True) -> Any:
     """A ``--set`` value: JSON when it parses (numbers, booleans, lists), a comma list of such
-    values (``1,0.5,0.25``), else the plain string; ValueError for a JSON list or object that
-    does not parse (split at its commas, ``[0.5,nan]`` was said to hold ``'[0.5'``)."""
+    values (``1,0.5,0.25``), else the plain string; ValueError for a whole value that opens a
+    JSON list or object and does not parse (split at its commas, ``[0.5,nan]`` was said to hold
+    ``'[0.5'``). A piece of a comma list may open with ``[`` (a mask's ``[ab]*``)."""
     try:
         return json.loads(text)
     except ValueError as exc:  # not JSON, or a number with more digits than Python converts
-        if text.startswith(("[", "{")):
+        if whole and text.startswith(("[", "{")):
             raise ValueError(f"{text!r} is not valid JSON ({exc})") from None
     if "," in text:
-        return [parse_value(part) for part in text.split(",")]
+        return [parse_value(part, whole=False) for part in text.split(",")]
     return text
 
 

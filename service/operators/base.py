@@ -158,7 +158,8 @@ class Operator:
         (:func:`ops.numerics.clip_new_negatives`): radiance is never negative, and Σ scaled
         lobes + (beauty − Σ lobes) goes below 0 where that rest does. One it made NaN or
         infinite where the input was finite (parameters that take float32 past its range, as
-        γ = 100 on radiance of 1e5) is a :class:`PipelineError`: nothing is written."""
+        γ = 100 on radiance of 1e5) is a :class:`PipelineError`: the run stops there, and no file
+        is written."""
         before = frame.buffers.get("beauty")
         self._run_masked(frame, params, context)
         after = frame.buffers.get("beauty")
@@ -172,7 +173,7 @@ class Operator:
                 "float32's range): lower the parameters that scale it"
             )
         if negatives:
-            frame.buffers["beauty"] = clip_new_negatives(after, before)
+            frame.buffers["beauty"] = clip_new_negatives(after, before, counted=True)
 
     def _run_masked(self, frame: Frame, params: Params, context: Context) -> None:
         if params.mask is None:
@@ -271,7 +272,11 @@ def _by_value(errors: list[Any]) -> list[tuple[str, Any, list[Any]]]:
     location without the members' names, the value, and its errors."""
     groups: dict[tuple[str, str], tuple[str, Any, list[Any]]] = {}
     for err in errors:
-        parts = [p for p in err["loc"] if isinstance(p, int) or not _MEMBER.match(str(p))]
+        parts = [  # (a union's member is named right after its parameter)
+            p
+            for i, p in enumerate(err["loc"])
+            if i != 1 or isinstance(p, int) or not _MEMBER.match(str(p))
+        ]
         loc = ".".join(str(p) for p in parts) or "params"
         value = err.get("input")
         groups.setdefault((loc, repr(value)), (loc, value, []))[2].append(err)
