@@ -367,7 +367,7 @@ def _write_fresh(frame: Frame, path: str | Path, buffers: bool = True) -> list[s
         header.update({k: primary[k] for k in ("dataWindow", *SHARED_ATTRIBUTES) if k in primary})
     cam = frame.camera
     if cam is not None:
-        if cam.fov_y_deg is not None or cam.ortho_height is not None:
+        if cam.has_intrinsics:
             header.update(cam.to_header(frame.display_size))
         else:
             warnings.append("camera without field of view or ortho height: not written")

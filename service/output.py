@@ -167,7 +167,7 @@ def camera_attributes(frame: Frame) -> dict[str, Any]:
     cam = frame.camera
     if cam is None or cam.world_to_camera is None or cam.source.startswith("file header"):
         return {}
-    if cam.fov_y_deg is None and cam.ortho_height is None:
+    if not cam.has_intrinsics:
         return {}
     assert frame.display_size is not None
     return cam.to_header(frame.display_size)

@@ -318,7 +318,7 @@ class _Build:
         depth[self.background] = np.inf
         if (self.opts.depth or self.preset.depth_kind) == "distance":
             camera = self.camera
-            if camera is not None and (camera.fov_y_deg is not None or camera.ortho_height):
+            if camera is not None and camera.has_intrinsics:
                 vz = camera.view_vectors(self.reader.shape, self.display_size, self.origin)
                 depth *= vz[..., 2]
                 src += " (distance along the ray -> planar)"

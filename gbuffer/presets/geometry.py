@@ -84,7 +84,7 @@ def camera_from_positions(
     with its reprojection error against them (a wrong field of view shows up in pixels)."""
     src = describe(found["position"])
     if camera is not None and camera.world_to_camera is not None:
-        if camera.fov_y_deg is None and camera.ortho_height is None:
+        if not camera.has_intrinsics:
             return camera
         fit = reprojection_fit(camera, points, usable_pixels(points, covered), display_size, origin)
         if fit.rms_px > CAMERA_DISAGREES_PX:
