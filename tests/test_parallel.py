@@ -3,9 +3,11 @@ thread working too, a failing strip stopping the rest, nested calls sequential."
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
 import time
+from collections.abc import Iterator
 
 import pytest
 
@@ -13,6 +15,23 @@ import ops.parallel
 from ops.parallel import run_strips, workers
 
 needs_two = pytest.mark.skipif(workers() < 2, reason="one worker: strips run sequentially")
+
+
+@contextlib.contextmanager
+def _ctrl_c_after(seconds: float) -> Iterator[None]:
+    """KeyboardInterrupt raised in the calling (main) thread ``seconds`` from now, as Ctrl-C
+    is, wherever it is then."""
+
+    def interrupt(*_: object) -> None:
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGALRM, interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, seconds)
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, old)
 
 
 @needs_two
@@ -74,20 +93,11 @@ def test_an_interrupt_while_the_call_waits_is_raised_once_no_strip_runs() -> Non
             time.sleep(0.5)
         done.append(a)
 
-    def interrupt(*_: object) -> None:
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGALRM, interrupt)
-    try:
-        signal.setitimer(signal.ITIMER_REAL, 0.2)
-        with pytest.raises(KeyboardInterrupt):
-            run_strips(40, strip, 1)
-        count = len(done)
-        time.sleep(0.6)
-        assert len(done) == count == 40
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
+    with _ctrl_c_after(0.2), pytest.raises(KeyboardInterrupt):
+        run_strips(40, strip, 1)
+    count = len(done)
+    time.sleep(0.6)
+    assert len(done) == count == 40
 
 
 @needs_two
@@ -113,20 +123,13 @@ def test_a_stop_does_not_wait_for_ever_for_a_strip_that_cannot_end(
         with held:
             pass
 
-    def interrupt(*_: object) -> None:
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGALRM, interrupt)
     freed.start()
     try:
-        signal.setitimer(signal.ITIMER_REAL, 0.2)
         t0 = time.monotonic()
-        with pytest.raises(KeyboardInterrupt):
+        with _ctrl_c_after(0.2), pytest.raises(KeyboardInterrupt):
             run_strips(40, strip, 1)
         assert time.monotonic() - t0 < 3.0
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
         freed.cancel()
         if held.locked():
             held.release()  # (the pool thread's strip ends)
@@ -148,15 +151,8 @@ def test_a_stop_after_a_strip_failed_is_the_stop_raised(monkeypatch: pytest.Monk
         pool_started.set()
         release.wait(10.0)
 
-    def interrupt(*_: object) -> None:
-        raise KeyboardInterrupt
-
-    old = signal.signal(signal.SIGALRM, interrupt)
     try:
-        signal.setitimer(signal.ITIMER_REAL, 0.3)
-        with pytest.raises(KeyboardInterrupt):
+        with _ctrl_c_after(0.3), pytest.raises(KeyboardInterrupt):
             run_strips(40, strip, 1)
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
         release.set()
