@@ -97,12 +97,10 @@ def check_outputs(
     """:class:`OutputError` when an output names an input (or another output), or a file that
     cannot be replaced (see :func:`output_target`). ``None`` entries are skipped."""
     ins = [Path(p) for p in inputs if p]
-    for given in outputs:
-        if given:
-            _not_a_folder_name(given)
     seen: list[Path] = []
-    for out in (Path(p) for p in outputs if p):
-        output_target(out)
+    for given in (p for p in outputs if p):
+        output_target(given)  # (as given: a name ending in / is refused before Path drops it)
+        out = Path(given)
         for other in ins:
             if same_file(out, other):
                 raise OutputError(
