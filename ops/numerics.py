@@ -274,8 +274,6 @@ def new_values(after: np.ndarray, before: np.ndarray) -> tuple[int, int]:
     shape, holds another value), and how many it made NaN or ±inf (where ``before`` is finite):
     one compiled read-only pass on row strips."""
     a, b = _rows_alike(after, before)
-    if a.size == 0:
-        return 0, 0
     rows = strip_rows(a.shape[1])
     found = np.zeros((-(-a.shape[0] // rows), 2), np.int64)
 
@@ -300,7 +298,7 @@ def clip_new_negatives(
     A result rebuilt as Σ scaled lobes + (beauty − Σ lobes) goes below 0 where that rest is
     (a half-float beauty, a path tracer's noise) and the lobes are scaled towards 0."""
     a = np.ascontiguousarray(after, np.float32)
-    if a.size == 0 or (not counted and new_values(a, before)[0] == 0):
+    if not counted and new_values(a, before)[0] == 0:
         return a
     out = a.copy() if a is after and not in_place else a
     flat_o, flat_b = _rows_alike(out, before)
