@@ -27,6 +27,8 @@ Alpha = Annotated[float, Field(**checks.ALPHA.bounds)]
 Gamma = Annotated[float, Field(**checks.GAMMA.bounds)]
 #: ``"auto"`` (measured on the frame, pinnable for a sequence) or a number.
 Auto = Literal["auto"]
+#: A linear white level, or ``auto`` (measured on the frame, pinned along a sequence).
+WhiteLevel = Annotated[float, Field(**checks.WHITE.bounds)] | Auto
 
 #: A key light from the upper left and a dim fill from the right (camera space).
 DEFAULT_LIGHTS = ["-0.4,0.6,0.7", "0.6,0.2,0.5*0.35"]

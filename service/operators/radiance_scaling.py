@@ -3,7 +3,7 @@ of §5, on the renderer's lobes or by deferred shading of the G-buffer."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import Field, field_validator
@@ -23,6 +23,7 @@ from service.operators.common import (
     Alpha,
     Gamma,
     LightsParams,
+    WhiteLevel,
     frame_albedo,
     holds_light,
     kept_lighting_gain,
@@ -84,7 +85,7 @@ class RadianceScalingParams(LightsParams, CurvatureParams):
         **checks.ANISOTROPY.bounds,
         description="λ ∈ [−1, 1] of the anisotropic mapping κ(ℓ) (§4)",
     )
-    white: Annotated[float, Field(**checks.WHITE.bounds)] | Literal["auto"] = Field(
+    white: WhiteLevel = Field(
         "auto",
         description="white level of δ̄ (lobes, beauty): a number pins it for sequences; auto = "
         "the `white_percentile` of the covered pixels",

@@ -38,6 +38,7 @@ from service.masks import plane
 from service.operators.base import Context, Params, register
 from service.operators.common import (
     Auto,
+    WhiteLevel,
     kept_lighting_gain,
     pixel_sizes,
     relative_pixel_sizes,
@@ -93,7 +94,7 @@ class UnsharpParams(Params):
     unlit: str | None = Field(
         None, description="signal 'shadows': layer of the file with the render without shadows"
     )
-    white: Annotated[float, Field(**checks.WHITE.bounds)] | Auto = Field(
+    white: WhiteLevel = Field(
         "auto", description="linear white level of CIELAB (auto: 99th percentile; pin it)"
     )
     depth_sigma: float = Field(
@@ -258,9 +259,7 @@ class DepthUnsharpParams(Params):
     mode: Literal["darken", "both"] = Field(
         "darken", description="darken: L + λ·min(ΔD, 0) (MegaMol's default); both: L + λ·ΔD"
     )
-    white: Annotated[float, Field(**checks.WHITE.bounds)] | Auto = Field(
-        "auto", description="linear white level of CIELAB"
-    )
+    white: WhiteLevel = Field("auto", description="linear white level of CIELAB")
 
 
 @register(
