@@ -151,6 +151,59 @@ def test_arnold_camera_from_header_and_distance_depth(tmp_path: Path, scene: F.S
     close(frame.buffers["diffuse.light"], scene.diffuse_light, inner(scene), 2e-2)
 
 
+def _pose_only_arnold(tmp_path: Path, scene: F.Scene, turn_deg: float = 0.0) -> Path:
+    """The Arnold file with ``worldToCamera`` alone (no ``worldToNDC``), its pose turned by
+    ``turn_deg`` about the camera's vertical axis."""
+    with OpenEXR.File(str(F.write_arnold(tmp_path / "a.exr", scene)), True) as f:
+        header = dict(f.header())
+        chans = {k: c.pixels.copy() for k, c in f.channels().items()}
+    del header["worldToNDC"]
+    t = np.radians(turn_deg)
+    turn = np.array([[np.cos(t), 0, np.sin(t), 0], [0, 1, 0, 0], [-np.sin(t), 0, np.cos(t), 0]])
+    header["worldToCamera"] = (np.vstack([turn, [0, 0, 0, 1]]) @ header["worldToCamera"]).astype(
+        np.float32
+    )
+    return F.write_exr(tmp_path / f"pose{turn_deg:g}.exr", header, chans)
+
+
+def test_a_pose_without_field_of_view_is_completed_from_world_positions(
+    tmp_path: Path, scene: F.Scene
+) -> None:
+    """A header's ``worldToCamera`` without ``worldToNDC``, beside a world-space position pass:
+    the field of view is solved from the positions, so the distance depth is made planar and
+    sizes in scene units work, as with the whole camera in the file."""
+    whole = read(F.write_arnold(tmp_path / "whole.exr", scene))
+    frame = read(_pose_only_arnold(tmp_path, scene))
+    assert frame.camera is not None and frame.camera.has_intrinsics
+    assert (
+        frame.camera.source == "file header (worldToCamera), its field of view solved from P.X,Y,Z"
+    )
+    assert frame.camera.fov_y_deg == pytest.approx(40.0, abs=1e-3)
+    assert frame.camera.fit is not None and frame.camera.fit["rms_px"] < 1e-3
+    np.testing.assert_array_equal(frame.camera.world_to_camera, whole.camera.world_to_camera)
+    assert describe(frame)["warnings"] == []
+    assert frame.sources["depth"] == "Z (distance along the ray -> planar)"
+    covered = scene.covered
+    close(frame.buffers["depth"], whole.buffers["depth"], covered, 1e-5)
+
+
+def test_a_pose_the_positions_do_not_fit_is_not_completed(tmp_path: Path, scene: F.Scene) -> None:
+    """The same with the pose turned by 10°: no field of view makes the points land on their
+    pixels with it, so the camera stays a pose, and both warnings say why."""
+    frame = read(_pose_only_arnold(tmp_path, scene, turn_deg=10.0))
+    assert frame.camera is not None and not frame.camera.has_intrinsics
+    warnings = describe(frame)["warnings"]
+    assert any(
+        w.startswith(
+            "the field of view of the camera in the file (file header (worldToCamera)) is not "
+            "solved from P.X,Y,Z: with the file's pose, the solved one puts the points "
+        )
+        for w in warnings
+    ), warnings
+    assert any("has no field of view" in w and "camera JSON" in w for w in warnings), warnings
+    assert "distance along the ray" in " ".join(warnings)
+
+
 def test_vray_camera_from_camera_transform(tmp_path: Path, scene: F.Scene) -> None:
     frame = read(F.write_vray(tmp_path / "v.exr", scene))
     assert frame.preset == "vray"

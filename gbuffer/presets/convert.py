@@ -37,6 +37,7 @@ from gbuffer.presets.geometry import (
     check_facing,
     file_camera,
     length_trust,
+    pose_only_warning,
     to_camera_normals,
     to_camera_points,
 )
@@ -131,6 +132,7 @@ class _Build:
     buffers: dict[str, np.ndarray] = field(default_factory=dict)
     sources: dict[str, str] = field(default_factory=dict)
     camera: Camera | None = None
+    camera_in_file: bool = False  # the camera is the file's (not one given)
     display_size: tuple[int, int] = (0, 0)
     origin: tuple[int, int] = (0, 0)
     background: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), bool))
@@ -250,6 +252,7 @@ class _Build:
             self.camera = next(
                 (cam for h in headers if (cam := file_camera(h, self.warnings)) is not None), None
             )
+            self.camera_in_file = self.camera is not None
         else:
             self.camera = camera if camera.source else dataclasses.replace(camera, source="given")
         self.background = np.zeros(self.reader.shape, bool)
@@ -292,12 +295,11 @@ class _Build:
         return arr
 
     def fit_camera(self) -> None:
-        """Step 4, camera: world-space positions solve it when none is known, or measure how
-        well the known one fits them."""
-        if "position" not in self.found:
-            return
-        self.position = self.load("position", self.found["position"])
-        if self.spaces["position"] == "world":
+        """Step 4, camera: world-space positions solve it when none is known, complete a pose
+        without a field of view, or measure how well the known one fits them."""
+        if "position" in self.found:
+            self.position = self.load("position", self.found["position"])
+        if self.position is not None and self.spaces["position"] == "world":
             self.camera = camera_from_positions(
                 self.camera,
                 self.position,
@@ -308,6 +310,8 @@ class _Build:
                 self.found,
                 self.warnings,
             )
+        if self.camera_in_file and (lacks := pose_only_warning(self.camera)) is not None:
+            self.warnings.append(lacks)
 
     def planar_depth(self) -> None:
         """Step 5, depth: +inf on background, a distance along the ray made planar."""

@@ -80,12 +80,16 @@ def camera_from_positions(
     found: Mapping[str, list[str]],
     warnings: list[str],
 ) -> Camera | None:
-    """The camera solved from world-space positions when none is known; else the known one
+    """The camera solved from world-space positions when none is known; a known pose without
+    a field of view given the one solved from them (:func:`_complete`); else the known camera
     with its reprojection error against them (a wrong field of view shows up in pixels)."""
     src = describe(found["position"])
+    finite_depth = None if depth is None else np.where(covered, depth, np.inf)
     if camera is not None and camera.world_to_camera is not None:
         if not camera.has_intrinsics:
-            return camera
+            return _complete(
+                camera, points, covered, display_size, origin, finite_depth, src, warnings
+            )
         fit = reprojection_fit(camera, points, usable_pixels(points, covered), display_size, origin)
         if fit.rms_px > CAMERA_DISAGREES_PX:
             warnings.append(
@@ -97,7 +101,6 @@ def camera_from_positions(
         return dataclasses.replace(camera, fit=fit.as_dict())
     if camera is not None:  # intrinsics only: camera-space buffers, nothing to solve
         return camera
-    finite_depth = None if depth is None else np.where(covered, depth, np.inf)
     try:
         solved, fit = solve_camera(points, covered, display_size, origin, finite_depth)
     except FrameError as exc:
@@ -106,6 +109,44 @@ def camera_from_positions(
     return dataclasses.replace(
         solved, source=f"solved from {src} (world positions)", fit=fit.as_dict()
     )
+
+
+def _complete(
+    camera: Camera,
+    points: np.ndarray,
+    covered: np.ndarray,
+    display_size: tuple[int, int],
+    origin: tuple[int, int],
+    depth: np.ndarray | None,
+    src: str,
+    warnings: list[str],
+) -> Camera:
+    """``camera`` (a pose without a field of view: a file's ``worldToCamera`` alone) with the
+    projection and field of view (or orthographic height) of the camera the positions solve,
+    where its own pose with them puts the points on their pixels (within
+    :data:`CAMERA_DISAGREES_PX`); else ``camera`` as it is (:func:`pose_only_warning` says
+    what it lacks)."""
+    why = f"the field of view of the camera in the file ({camera.source}) is not solved from {src}"
+    try:
+        solved, _ = solve_camera(points, covered, display_size, origin, depth)
+    except FrameError as exc:
+        warnings.append(f"{why}: {exc}")
+        return camera
+    completed = dataclasses.replace(
+        camera,
+        projection=solved.projection,
+        fov_y_deg=solved.fov_y_deg,
+        ortho_height=solved.ortho_height,
+        source=f"{camera.source}, its field of view solved from {src}",
+    )
+    fit = reprojection_fit(completed, points, usable_pixels(points, covered), display_size, origin)
+    if not fit.rms_px <= CAMERA_DISAGREES_PX:
+        warnings.append(
+            f"{why}: with the file's pose, the solved one puts the points {fit.rms_px:.3g} px "
+            "(RMS) away from their pixels (the pose does not match the position pass)"
+        )
+        return camera
+    return dataclasses.replace(completed, fit=fit.as_dict())
 
 
 def check_facing(
@@ -136,15 +177,21 @@ def check_facing(
 
 def file_camera(header: dict[str, Any], warnings: list[str]) -> Camera | None:
     """The camera of a part's header (:meth:`Camera.from_header`); one that cannot be read is
-    ignored, one without a field of view kept for its pose, each with a warning."""
+    ignored with a warning; one without a field of view is kept for its pose (a world-space
+    position pass may complete it: :func:`camera_from_positions`)."""
     try:
-        camera = Camera.from_header(header)
+        return Camera.from_header(header)
     except Exception as exc:
         warnings.append(f"camera in the file ignored ({exc})")
         return None
-    if camera is not None and not camera.has_intrinsics:
-        warnings.append(
-            f"the camera in the file ({camera.source}) has {camera.missing_intrinsics()}: its "
-            "pose is used, and sizes in scene units need a camera JSON (--camera CAM.json)"
-        )
-    return camera
+
+
+def pose_only_warning(camera: Camera | None) -> str | None:
+    """What a file's camera that still lacks its field of view means for the user (None: it
+    has one, or there is no camera)."""
+    if camera is None or camera.has_intrinsics:
+        return None
+    return (
+        f"the camera in the file ({camera.source}) has {camera.missing_intrinsics()}: its pose "
+        "is used, and sizes in scene units need a camera JSON (--camera CAM.json)"
+    )
