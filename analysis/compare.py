@@ -74,6 +74,7 @@ def compare(
     keep_images: bool | Iterable[int] = True,
     label: str = "",
     shading_norm: str | float = "reference",
+    files: bool = True,
 ) -> ComparisonResult:
     """Shade ``frame`` with each method under each light direction and score it (LLA §7).
 
@@ -95,6 +96,8 @@ def compare(
     label : a name for the input, carried into tables and plots.
     shading_norm : ``"reference"`` (default: every rendering on the scale of the frame's
         Lambert rendering under #1), ``"per_image"``, or a number (see the module docstring).
+    files : whether ``params`` may name image files on this machine (a matcap, an environment,
+        a mask): not for a client of the HTTP service.
     """
     ms = _check_methods(methods)
     numbers = _direction_numbers(directions)
@@ -108,7 +111,7 @@ def compare(
     weights = frame.colorspace.weights
 
     def render(method: str, light: F32) -> F32:
-        img = shade(method, geometry, light, resolved[method])
+        img = shade(method, geometry, light, resolved[method], files)
         img = np.where(mask, np.clip(img, 0.0, 1.0), np.float32(0.0)).astype(np.float32)
         return img if albedo_rgb is None else np.asarray(albedo_rgb * img[..., None], np.float32)
 

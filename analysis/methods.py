@@ -39,7 +39,7 @@ from analysis.score import CONGRUENCE
 from gbuffer.frame import Frame
 from ops.baselines import lambert_image
 from service import pipeline
-from service.registry import get
+from service.registry import Context, get
 
 F32 = NDArray[np.float32]
 
@@ -158,12 +158,16 @@ def light_text(direction: NDArray[np.floating]) -> str:
     return ",".join(repr(float(c)) for c in direction)
 
 
-def shade(name: str, geometry: Frame, direction: F32, params: Mapping[str, Any]) -> F32:
+def shade(
+    name: str, geometry: Frame, direction: F32, params: Mapping[str, Any], files: bool = True
+) -> F32:
     """Method ``name`` under the white directional light ``direction`` on ``geometry`` (a frame
-    with normal, depth, coverage and a white albedo): the (H, W) shading, not clipped."""
+    with normal, depth, coverage and a white albedo): the (H, W) shading, not clipped.
+    ``files``: whether ``params`` may name image files on this machine (a matcap, an
+    environment, a mask; not over HTTP: :attr:`service.registry.Context.files`)."""
     method = METHOD_TABLE[name]
     if method.op is None:
         return lambert_image(geometry.buffers["normal"], geometry.mask, direction)
     step = {method.light: _light_value(method, light_text(direction)), **params}
-    out = pipeline.run(geometry, [{"op": method.op, "params": step}])
+    out = pipeline.run(geometry, [{"op": method.op, "params": step}], context=Context(files=files))
     return np.ascontiguousarray(out.buffers["beauty"][..., 0])

@@ -68,6 +68,7 @@ def compare_job(
     options: dict[str, Any],
     sheet: bool = False,
     limits: Limits | None = None,
+    files: bool = False,
 ) -> dict[str, Any]:
     """``depict compare``: the comparison bench (LLA §7) on an EXR frame (``read`` given) or a
     mesh (``read`` None: rendered at ``options["width"]`` × ``options["height"]``, within
@@ -76,7 +77,8 @@ def compare_job(
     ``options``: ``methods``, ``directions``, ``params``, ``albedo``, ``shading_norm``
     (:func:`analysis.compare.compare`), and for meshes ``width``, ``height``, ``azimuth``,
     ``elevation``. Returns :meth:`ComparisonResult.to_dict`, with ``sheet``, plus
-    ``sheet_png``: the contact sheet as a base64 PNG.
+    ``sheet_png``: the contact sheet as a base64 PNG. ``files``: whether the methods' parameters
+    may name image files on this machine (the command line; never for a client of the service).
     """
     opts = dict(options)
     if read is None:
@@ -100,6 +102,7 @@ def compare_job(
         keep_images=SHEET_DIRECTIONS if sheet else False,
         label=opts.get("label", ""),
         shading_norm=opts.get("shading_norm", "reference"),
+        files=files,
     )
     out = result.to_dict()
     if sheet:

@@ -117,7 +117,7 @@ MESH_FRAMING: dict[str, Any] = {"width": 512, "height": 512, "azimuth": 30.0, "e
 def cmd_compare(args: argparse.Namespace) -> int:
     is_mesh, options = compare_options(args)
     read = None if is_mesh else read_request(args)
-    data = compare_job(args.input, read, options, bool(args.sheet))
+    data = compare_job(args.input, read, options, bool(args.sheet), files=True)
     png = data.pop("sheet_png", None)  # as the client does: the sheet goes to its file
     if args.sheet and png:
         with atomic_path(args.sheet) as tmp:

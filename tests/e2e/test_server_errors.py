@@ -9,7 +9,9 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import cv2
 import httpx
+import numpy as np
 import pytest
 
 from tests import exr_factory
@@ -30,6 +32,28 @@ def test_file_paths_in_parameters_are_refused_over_http(
         data = {"pipeline": json.dumps([{"op": op, "params": params}])}
         response = post_enhance(server, files["canonical"].read_bytes(), data=data)
         assert_problem(response, 422, "cannot be named here" if op != "unsharp_masking" else "")
+
+
+def test_file_paths_in_compare_parameters_are_refused(
+    server: Server, files: dict[str, Path], tmp_path: Path
+) -> None:
+    """``/v1/compare`` runs the methods with the client's parameters: an image on the server
+    named there (a matcap, a mask) is refused as on ``/v1/enhance``, not read and scored."""
+    image = tmp_path / "on_the_server.png"
+    cv2.imwrite(str(image), np.full((8, 8, 3), 200, np.uint8))
+    for method, params, words in (
+        ("radiance_scaling", {"scenario": "lit_sphere", "matcap": str(image)}, "cannot be named"),
+        ("light_alignment", {"mask": str(image)}, "no layer"),  # (a layer's name, not a file)
+    ):
+        options = {"directions": 1, "methods": [method], "params": {method: params}}
+        response = httpx.post(
+            f"{server.url}/v1/compare",
+            files={"file": ("a.exr", files["canonical"].read_bytes())},
+            data={"options": json.dumps(options)},
+            headers=AUTH,
+            timeout=120,
+        )
+        assert_problem(response, 422, words)
 
 
 # -- every error status from a real bad request --------------------------------------------------
