@@ -11,7 +11,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import OpenEXR
 import pytest
+from OpenImageIO import ImageBuf
 from PIL import Image
 
 from analysis.score import score_frame
@@ -160,6 +162,36 @@ def test_an_uploads_inspection_makes_the_first_previews_copy(
     assert not list(stored.glob("small_*"))
     with pytest.raises(FrameError, match=r"N\.X"):
         work._small(stored, 2, ReadRequest())
+
+
+def test_a_tiled_file_is_kept_for_its_previews(stored: Path) -> None:
+    """A tiled (or mip-mapped) file's header holds what the binding cannot pickle (its
+    ``TileDescription``): the upload's inspection keeps its copies all the same, and a preview
+    that reads a layer of the file (a mask) finds it."""
+    src = ImageBuf(str(stored / "in.exr"))
+    src.set_write_tiles(32, 32)
+    assert src.write(str(stored / "tiled.exr")), src.geterror()
+    (stored / "tiled.exr").replace(stored / "in.exr")
+    with OpenEXR.File(str(stored / "in.exr")) as f:
+        assert "tiles" in f.header()
+    work.inspect_job(str(stored / "in.exr"), ReadRequest(), 48)
+    layers = work._file_layers(stored, 2, work._small(stored, 2, ReadRequest())[0])
+    assert "tiles" not in layers.passthrough.parts[0][0]
+    steps = pipeline.compile([{"op": "radiance_scaling", "params": {"mask": "depth"}}])
+    out, _ = pipeline.run_timed(layers, steps, Context(files=False))
+    assert out.shape == (48, 64)
+
+
+def test_a_frame_too_small_to_score_lists_no_score_map(tmp_path: Path) -> None:
+    """Under 3 pixels on a side no score is made: the layers the page offers leave out the
+    score map, and asking for it says why."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    exr_factory.write_canonical(folder / "in.exr", exr_factory.make_scene(h=2, w=2))
+    info = work.inspect_job(str(folder / "in.exr"), ReadRequest(), 2)["info"]
+    assert "depth" in info["layers"] and work.SCORE_MAP not in info["layers"]
+    with pytest.raises(FrameError, match="has no depth, or this copy of it is under 3 pixels"):
+        work.layer_job(str(folder), 1, work.SCORE_MAP, ReadRequest(), str(folder / "s.png"))
 
 
 def test_a_previews_score_is_the_scores_own(stored: Path, monkeypatch: pytest.MonkeyPatch) -> None:

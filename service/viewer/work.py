@@ -146,7 +146,7 @@ def inspect_job(source: str, read: ReadRequest, height: int) -> dict[str, Any]:
         _shrink(Path(source).parent, shrink_factor(info["size"], height), frame)
     info["operators"] = runnable(info)
     info["colour_space"] = colour_space(source)
-    scored = "depth" in info["buffers"]
+    scored = "depth" in info["buffers"] and min(info["size"]) >= 3  # (_score)
     info["layers"] = [*info["buffers"], *([SCORE_MAP] if scored else [])]
     return {"info": info}
 
@@ -282,7 +282,9 @@ def _arrays(value: Any) -> list[np.ndarray]:
 def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
     """The channels of the frame's file on its pixel grid, shrunk by ``factor`` as the geometry
     is (one source pixel a block: Cryptomatte ids and index passes stay exact), with the headers
-    as read (manifests, names); other channels are left out."""
+    as read (manifests, names) but for what the binding cannot pickle (a tiled file's
+    ``TileDescription``, its compression and line order: nothing a layer is found by); other
+    channels are left out."""
     parts = []
     for header, channels in frame.passthrough.parts:
         small = {}
@@ -290,8 +292,17 @@ def shrink_passthrough(frame: Frame, factor: int) -> Passthrough:
             pixels = np.asarray(getattr(value, "pixels", value))
             if pixels.shape[:2] == frame.shape:
                 small[name] = np.ascontiguousarray(_centres(pixels, factor))
-        parts.append((dict(header), small))
+        parts.append(({k: v for k, v in header.items() if _pickles(v)}, small))
     return Passthrough(parts, frame.passthrough.primary)
+
+
+def _pickles(value: object) -> bool:
+    """Whether ``value`` (a header attribute) can be kept in a worker's file."""
+    try:
+        pickle.dumps(value, protocol=pickle.HIGHEST_PROTOCOL)
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return False
+    return True
 
 
 def _score(frame: Frame) -> dict[str, Any] | None:
@@ -329,12 +340,18 @@ def _score_picture(frame: Frame, score: dict[str, Any]) -> np.ndarray:
     return picture(shown, "congruence")
 
 
+#: Why a copy of a frame has no score map (:func:`_score` made none).
+_NO_SCORE_MAP = (
+    "no score map: the frame has no depth, or this copy of it is under 3 pixels on a side"
+)
+
+
 def layer_job(folder: str, factor: int, layer: str, read: ReadRequest, out: str) -> dict[str, Any]:
     """A picture of ``layer`` of the frame shrunk by ``factor``, written to ``out`` (PNG)."""
     small, before = _small(Path(folder), factor, read)
     if layer == SCORE_MAP:
         if before is None:
-            raise FrameError("the frame has no depth: no score map")
+            raise FrameError(_NO_SCORE_MAP)
         score = score_frame(small, maps=True, flow=before.get("flow"))
         write_png(_score_picture(small, score), out, quick=True)
     else:
