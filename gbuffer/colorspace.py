@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from gbuffer.atomic import regular_file
 from gbuffer.errors import OptionError
 from ops.colorspace import (
     ACES_AP0,
@@ -78,10 +79,16 @@ def _ocio() -> Any:
 
 @functools.cache
 def _load(name: str) -> Any:
+    """The config ``name``: a built-in one (``ocio://…``), or a regular file (a FIFO is refused
+    before OpenColorIO opens it and waits for a writer)."""
     ocio = _ocio()
     try:
+        if not name.startswith("ocio://"):
+            regular_file(name)
         return ocio.Config.CreateFromFile(name)
-    except ocio.Exception as exc:
+    except OSError as exc:
+        raise OptionError(f"cannot load the OCIO config {name!r}: {exc.strerror or exc}") from None
+    except Exception as exc:  # (ocio.Exception, and ExceptionMissingFile, which is not one)
         raise OptionError(f"cannot load the OCIO config {name!r}: {exc}") from None
 
 

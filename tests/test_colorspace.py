@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 from contextlib import redirect_stdout
 from pathlib import Path
 
@@ -154,6 +155,31 @@ def test_the_config_in_ocio_is_used(monkeypatch: pytest.MonkeyPatch, tmp_path: P
         named("lin_rec709")
     with pytest.raises(FrameError, match="not a scene-referred colour space"):
         named("raw")
+
+
+@pytest.mark.parametrize("kind", ["missing", "fifo", "folder", "garbage"])
+def test_an_unusable_ocio_config_is_one_line_and_exit_2(
+    kind: str,
+    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """$OCIO naming no file (OpenColorIO's ExceptionMissingFile is no ocio.Exception), a FIFO
+    (OpenColorIO would wait for a writer for ever), a folder or a file that is no config."""
+    path = tmp_path / f"{kind}.ocio"
+    if kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "folder":
+        path.mkdir()
+    elif kind == "garbage":
+        path.write_text("ocio_profile_version: [\n")
+    monkeypatch.setenv("OCIO", str(path))
+    code, _ = _cli("preview", str(FIXTURE), "-o", str(tmp_path / "p.png"))
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.startswith(f"depict: error: cannot load the OCIO config {str(path)!r}: "), err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "p.png").exists()
 
 
 # -- a colour chart -----------------------------------------------------------------------------
