@@ -508,6 +508,17 @@ def _checked_frames(
     return frame_list
 
 
+def _remove_partials(cluster: object | None, out_pattern: str, frames: Sequence[int]) -> None:
+    """The temporary files of ``frames``' outputs removed, once the batch's own workers
+    (``cluster``) are closed: each is what a worker was writing when it stopped (a Ctrl-C, or a
+    worker killed mid-write, whose frame another worker wrote again). The workers of a cluster
+    given by its address may still be writing: theirs are left."""
+    if cluster is None:
+        return
+    for partial in partial_files(expand(out_pattern, f) for f in frames):
+        partial.unlink(missing_ok=True)
+
+
 def run_batch(
     in_pattern: str,
     out_pattern: str,
@@ -560,11 +571,10 @@ def run_batch(
                 with contextlib.suppress(Exception):  # (the stop, not this, is what to report)
                     _close(client, cluster)
             finally:
-                if cluster is not None:  # (our workers are gone: what they wrote is partial)
-                    for partial in partial_files(expand(out_pattern, f) for f in todo):
-                        partial.unlink(missing_ok=True)
+                _remove_partials(cluster, out_pattern, todo)
             raise
         _close(client, cluster)
+        _remove_partials(cluster, out_pattern, todo)  # (a worker lost while it wrote a frame)
     summary.done.sort()
     summary.failed = dict(sorted(summary.failed.items()))
     summary.pinned = pinned or {}

@@ -12,6 +12,7 @@ import sys
 import time
 from pathlib import Path
 
+import psutil
 import pytest
 import trimesh
 
@@ -115,6 +116,46 @@ def test_a_batch_stopped_by_a_signal_leaves_no_partial_frame(
     assert done.returncode == 128 + signum, done.stderr
     assert [p.name for p in outs.iterdir() if ".tmp" in p.name] == []
     assert done.stderr == ""  # (no traceback, no "leaked semaphore objects" warning)
+
+
+def test_a_batch_worker_killed_while_it_writes_leaves_no_partial_frame(
+    frame: Path, tmp_path: Path
+) -> None:
+    """SIGKILL to the batch's worker process the moment a frame's temporary file appears: the
+    worker is replaced and the frame written again, the batch ends with exit 0 and every
+    output, and the killed worker's half-written file is not left beside them."""
+    shots = tmp_path / "shots"
+    shots.mkdir()
+    for i in range(1, 4):
+        (shots / f"shot.{i:04d}.exr").symlink_to(frame)
+    outs = tmp_path / "out"
+    argv = ["batch", str(shots / "shot.####.exr"), "-o", str(outs / "o.####.exr")]
+    env = dict(os.environ, PYOPENGL_PLATFORM="osmesa")
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "service.cli", *argv, "--workers", "1", "--no-progress"],
+        env=env,
+        start_new_session=True,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        deadline = time.monotonic() + 300
+        while not (outs.is_dir() and any(outs.glob(".*.tmp.exr"))):
+            assert proc.poll() is None, f"ended before writing: {proc.stderr.read()}"  # type: ignore[union-attr]
+            assert time.monotonic() < deadline, "no temporary file appeared"
+            time.sleep(0.001)
+        killed = [
+            child.kill()
+            for child in psutil.Process(proc.pid).children(recursive=True)
+            if "spawn_main" in " ".join(child.cmdline())
+        ]
+        assert killed, "no worker process found"
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 0, err
+    assert sorted(p.name for p in outs.iterdir()) == [f"o.{i:04d}.exr" for i in range(1, 4)]
 
 
 def test_partial_files_are_exactly_the_temporary_outputs(tmp_path: Path) -> None:
