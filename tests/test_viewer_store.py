@@ -78,8 +78,58 @@ def test_unknown_and_malformed_ids_are_not_found(tmp_path: Path) -> None:
     assert frame.id not in store and not frame.folder.exists()
 
 
+def test_what_a_job_writes_is_counted_and_a_killed_jobs_temporary_files_go(
+    tmp_path: Path,
+) -> None:
+    """When a frame's last running job ends, the copies it wrote count in the frame's bytes
+    (older frames go past the cap), and a temporary file that a worker killed mid-write left
+    beside them is removed."""
+    store = FrameStore(tmp_path, ttl_s=60, max_bytes=300, max_frames=10)
+    a, b = put(store, 100), put(store, 100)
+    with store.job(b), store.job(b):  # (two at once: counted when the second ends)
+        (b.folder / "small_2.pkl").write_bytes(b"y" * 150)
+        (b.folder / ".small_1.0a1b2c3d.tmp.pkl").write_bytes(b"half")
+    assert sorted(p.name for p in b.folder.iterdir()) == ["in.exr", "small_2.pkl"]
+    assert b.size_bytes == 250 and store.used_bytes == 250
+    assert a.id not in store and not a.folder.exists()
+
+
+def test_a_frame_forgotten_while_its_job_runs_leaves_no_folder(tmp_path: Path) -> None:
+    """Deleted (or expired, or evicted) while a worker makes its copy: the worker's write makes
+    the folder anew, and the job's end removes it again."""
+    store = FrameStore(tmp_path, ttl_s=60, max_bytes=1000, max_frames=10)
+    frame = put(store, 10)
+    with store.job(frame):
+        store.remove(frame.id)
+        frame.folder.mkdir()  # (as the worker's atomic write does)
+        (frame.folder / "small_1.pkl").write_bytes(b"z" * 100)
+    assert not frame.folder.exists() and not list(tmp_path.iterdir())
+    again = put(store, 10)
+    with pytest.raises(Problem) as err, store.job(again):
+        store.remove(again.id)
+        raise OSError("cannot write small_1.layers.pkl: No such file or directory")
+    assert err.value.kind == "not-found" and "forgotten while this job ran" in err.value.detail
+
+
+def test_live_server_counts_the_copies_of_its_frames_in_its_cap(tmp_path: Path) -> None:
+    """``DEPICT_VIEWER_MAX_MB`` holds the frames on disk, their preview copies included
+    (eight times the upload, for this small file): the frames' folders stay under it."""
+    env = {"DEPICT_WORKERS": "1", "DEPICT_VIEWER_MAX_MB": "20", "TMPDIR": str(tmp_path)}
+    with live_server(env) as server, httpx.Client(base_url=server.url, timeout=60) as api:
+        ids = []
+        for _ in range(3):
+            with open(BLENDER, "rb") as f:
+                r = api.post("/v1/frames", files={"file": (BLENDER.name, f)})
+            assert r.status_code == 200, r.text
+            ids.append(r.json()["id"])
+        kept = [api.get(f"/v1/frames/{i}").status_code for i in ids]
+        assert kept == [404, 200, 200]
+        on_disk = sum(p.stat().st_size for p in tmp_path.glob("depict-*/**/*") if p.is_file())
+        assert on_disk <= 20 * 2**20
+
+
 def test_live_server_keeps_at_most_its_frames_and_forgets_on_request() -> None:
-    env = {"DEPICT_WORKERS": "1", "DEPICT_VIEWER_MAX_FRAMES": "2", "DEPICT_VIEWER_MAX_MB": "2"}
+    env = {"DEPICT_WORKERS": "1", "DEPICT_VIEWER_MAX_FRAMES": "2", "DEPICT_VIEWER_MAX_MB": "64"}
     with live_server(env) as server, httpx.Client(base_url=server.url, timeout=60) as api:
 
         def upload() -> str:

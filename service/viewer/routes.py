@@ -19,6 +19,8 @@ or its client went away, it is dropped (409 ``superseded``) before reaching a wo
 from __future__ import annotations
 
 import asyncio
+import contextlib
+from collections.abc import Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Annotated, Any
@@ -109,6 +111,14 @@ def _naming(frame: StoredFrame) -> AbstractContextManager[None]:
     return scrubbed(frame.folder, {frame.source: frame.name})
 
 
+@contextlib.contextmanager
+def _on_kept(server: Server, frame: StoredFrame) -> Iterator[None]:
+    """A job on a kept frame's folder: its errors name the upload (:func:`_naming`), and what
+    it leaves there is accounted for (:meth:`FrameStore.job`)."""
+    with store(server).job(frame), _naming(frame):
+        yield
+
+
 def _answer(frame: StoredFrame, server: Server) -> dict[str, Any]:
     return {
         "id": frame.id,
@@ -125,7 +135,6 @@ async def _keep(server: Server, frame: StoredFrame, height: int) -> dict[str, An
         out = await server.run("inspect", jobs.inspect_job, str(frame.source), frame.read, height)
     frame.info = out["info"]
     frame.info["file"] = frame.name
-    frame.size_bytes = frame.source.stat().st_size
     store(server).admit(frame)
     return _answer(frame, server)
 
@@ -229,7 +238,7 @@ async def layer_png(
         raise Problem("not-found", f"the frame has no layer {layer!r}; layers: {have}")
     out = work.path / "layer.png"
     factor = jobs.shrink_factor(frame.info["size"], height)
-    with _naming(frame):
+    with _on_kept(server, frame):
         await server.run(
             "layer", jobs.layer_job, str(frame.folder), factor, layer, frame.read, str(out)
         )
@@ -266,7 +275,7 @@ async def preview(
     lock = await _latest(request, frame)
     try:
         args = (str(frame.folder), factor, steps, frame.read, body.exposure, body.score_map)
-        with _naming(frame):
+        with _on_kept(server, frame):
             return await server.run("preview", jobs.preview_job, *args)
     finally:
         lock.release()
@@ -290,7 +299,7 @@ async def enhanced(
     steps = await forms.pipeline_field(pipeline) or pipelines.DEFAULT
     out = work.path / "out.exr"
     write = WriteRequest(input_name=frame.name)
-    with _naming(frame):
+    with _on_kept(server, frame):
         await server.run(
             "enhance", worker.enhance_job, str(frame.source), str(out), steps, frame.read, write
         )

@@ -3,8 +3,9 @@ user tunes operators on one frame without sending it again for every preview.
 
 Each frame is a folder ``<root>/<id>/`` holding the upload (``in.exr``) and what the previews
 cache beside it (the downscaled copies, :mod:`service.viewer.work`). A frame lives
-``ttl_s`` seconds after its last use; the store holds at most ``max_bytes`` of uploads and
-``max_frames`` frames, the least recently used going first when a new one would pass either
+``ttl_s`` seconds after its last use; the store holds at most ``max_bytes`` of frames on disk
+(uploads and their copies, counted again as each frame's jobs end: :meth:`FrameStore.job`) and
+``max_frames`` frames, the least recently used going first when a frame would pass either
 limit. Expired frames are removed on every store operation, so no background task is needed.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import re
 import secrets
 import shutil
@@ -32,9 +34,10 @@ _ID = re.compile(ID_PATTERN)
 
 @dataclass
 class StoredFrame:
-    """One uploaded frame: its folder, the client's file name, how to read it, what ``inspect``
-    found, the number of the latest preview asked for (older ones are dropped) and the lock that
-    lets one preview of it run at a time."""
+    """One uploaded frame: its folder, the client's file name, how to read it, its bytes on
+    disk, what ``inspect`` found, the number of the latest preview asked for (older ones are
+    dropped), the lock that lets one preview of it run at a time and how many jobs on its folder
+    are running."""
 
     id: str
     folder: Path
@@ -45,6 +48,7 @@ class StoredFrame:
     last_used: float = field(default_factory=time.monotonic)
     latest_preview: int = 0
     previewing: asyncio.Lock = field(default_factory=asyncio.Lock)
+    jobs: int = 0
 
     @property
     def source(self) -> Path:
@@ -76,23 +80,59 @@ class FrameStore:
             raise
 
     def admit(self, frame: StoredFrame) -> None:
-        """Keep ``frame`` (its folder holds the checked upload): 413 when it alone is over the
-        size cap, else older frames are evicted until it fits."""
+        """Keep ``frame`` (its folder holds the checked upload and the copies its inspection
+        made; ``size_bytes`` is set from them): 413 when it alone is over the size cap, else
+        older frames are evicted until it fits."""
         self.expire()
+        frame.size_bytes = folder_bytes(frame.folder)
         if frame.size_bytes > self.max_bytes:
             self.discard(frame.folder)
             raise Problem(
                 "limit",
-                f"the frame is {frame.size_bytes / 2**20:.1f} MiB; the viewer keeps at most "
-                f"{self.max_bytes / 2**20:.0f} MiB of frames (DEPICT_VIEWER_MAX_MB)",
+                f"the frame and its preview copy are {frame.size_bytes / 2**20:.1f} MiB; the "
+                f"viewer keeps at most {self.max_bytes / 2**20:.0f} MiB of frames "
+                "(DEPICT_VIEWER_MAX_MB)",
             )
-        while self._frames and (
-            len(self._frames) >= self.max_frames
-            or self.used_bytes + frame.size_bytes > self.max_bytes
-        ):
-            _, oldest = self._frames.popitem(last=False)
-            self.discard(oldest.folder)
         self._frames[frame.id] = frame
+        self._evict(frame)
+
+    def _evict(self, kept: StoredFrame) -> None:
+        """The least recently used frames but ``kept`` removed while the store is over a cap."""
+        while len(self._frames) > self.max_frames or self.used_bytes > self.max_bytes:
+            oldest = next((f for f in self._frames.values() if f is not kept), None)
+            if oldest is None:
+                return
+            del self._frames[oldest.id]
+            self.discard(oldest.folder)
+
+    @contextlib.contextmanager
+    def job(self, frame: StoredFrame) -> Iterator[None]:
+        """A job that writes into ``frame``'s folder (the copies previews run on). When the last
+        of the frame's running jobs ends: the temporary files a worker killed while it wrote left
+        there are removed, and the frame's bytes are counted again (older frames evicted past the
+        cap); a frame forgotten meanwhile (deleted, expired, evicted) has its folder removed
+        again, since the job may have made it anew, and a job that failed then is answered 404
+        (what it lacked was the frame, not anything the client sent)."""
+        frame.jobs += 1
+        try:
+            yield
+        except Exception:
+            if self._frames.get(frame.id) is frame:
+                raise
+            raise Problem(
+                "not-found",
+                f"the frame {frame.id!r} was forgotten while this job ran on it (deleted, or "
+                "gone past the viewer's limits); upload it again with POST /v1/frames",
+            ) from None
+        finally:
+            frame.jobs -= 1
+            if frame.jobs == 0 and self._frames.get(frame.id) is not frame:
+                self.discard(frame.folder)
+            elif frame.jobs == 0:
+                for partial in frame.folder.glob(".*.tmp.*"):
+                    partial.unlink(missing_ok=True)
+                frame.size_bytes = folder_bytes(frame.folder)
+                self._evict(frame)
 
     def get(self, frame_id: str) -> StoredFrame:
         """The frame ``frame_id``, now the most recently used; 404 when unknown or expired."""
@@ -133,3 +173,14 @@ class FrameStore:
     @staticmethod
     def discard(folder: Path) -> None:
         shutil.rmtree(folder, ignore_errors=True)
+
+
+def folder_bytes(folder: Path) -> int:
+    """The bytes of the files in a frame's ``folder`` (0 when it is gone)."""
+    total = 0
+    with contextlib.suppress(FileNotFoundError), os.scandir(folder) as entries:
+        for entry in entries:
+            with contextlib.suppress(FileNotFoundError):
+                if entry.is_file(follow_symlinks=False):
+                    total += entry.stat(follow_symlinks=False).st_size
+    return total
