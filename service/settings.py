@@ -28,8 +28,9 @@ variable                       default        meaning
                                               (503 after)
 ``DEPICT_VIEWER_TTL_S``        ``3600``       how long the web viewer keeps an uploaded frame after
                                               its last use, seconds
-``DEPICT_VIEWER_MAX_MB``       ``2048``       the viewer's frames on disk, all together, MiB (the
-                                              least recently used go first)
+``DEPICT_VIEWER_MAX_MB``       ``2048``       the viewer's frames on disk, their preview copies
+                                              included, all together, MiB (the least recently
+                                              used go first)
 ``DEPICT_VIEWER_MAX_FRAMES``   ``32``         most frames the viewer keeps
 ``DEPICT_LOG_LEVEL``           ``info``       ``debug``, ``info``, ``warning`` or ``error``
 ``DEPICT_EXR_THREADS``         cores          OpenEXR's (de)compression threads (gbuffer.exr)

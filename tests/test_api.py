@@ -248,6 +248,24 @@ def test_unknown_fields_and_odd_queries_422(
     assert_problem(r, 422, words)
 
 
+def test_a_form_field_given_twice_422(client: Any) -> None:
+    """The last of two ``pipeline`` fields (or files) was taken, the first dropped unsaid."""
+    steps = ['[{"op": "curvature"}]', '[{"op": "unsharp_masking"}]']
+    r = client.post(
+        "/v1/enhance",
+        headers=AUTH,
+        files={"file": ("a.exr", exr_bytes())},
+        data={"pipeline": steps},
+    )
+    assert_problem(r, 422, "form field 'pipeline' given more than once")
+    two = [("file", ("a.exr", exr_bytes())), ("file", ("b.exr", exr_bytes()))]
+    assert_problem(
+        client.post("/v1/enhance", headers=AUTH, files=two), 422, "'file' given more than once"
+    )
+    r = client.post("/v1/enhance?preview=png&preview=png", headers=AUTH, files=two[:1])
+    assert_problem(r, 422, "query parameter 'preview' given more than once")
+
+
 @pytest.mark.parametrize(
     ("query", "words"),
     [("view=nope", "view 'nope' is not a view of display"), ("display=nope", "display 'nope'")],

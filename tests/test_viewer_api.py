@@ -247,3 +247,33 @@ def test_a_frame_too_small_to_score_shows_its_layers(api: httpx.Client, tmp_path
 
 #: Two rows and two columns on the test sphere.
 TINY = (slice(23, 25), slice(31, 33))
+
+
+def test_the_viewers_routes_refuse_what_they_do_not_take(
+    frame: dict[str, Any], api: httpx.Client
+) -> None:
+    """A misspelt ``?pipline=`` of the full-resolution result ran the default pipeline (200),
+    and ``POST /v1/frames`` took any field."""
+    with open(BLENDER, "rb") as f:
+        r = api.post("/v1/frames", files={"file": (BLENDER.name, f)}, data={"pipline": "[]"})
+    assert_problem(r, 422, "unknown form field 'pipline'; /v1/frames takes: ")
+    frame_id = frame["id"]
+    for url in (
+        f"/v1/frames/{frame_id}/enhanced.exr?pipline=%5B%5D",
+        f"/v1/frames/{frame_id}?bogus=1",
+        f"/v1/frames/{frame_id}/layers/beauty.png?hieght=100",
+        "/v1/frames/example?bogus=1",
+    ):
+        method = api.post if url.endswith("example?bogus=1") else api.get
+        assert_problem(method(url), 422, "unknown query parameter")
+    assert api.get("/ui?from=bookmark").status_code in (200, 307)  # (the page's address)
+
+
+def test_the_viewer_reads_a_frame_in_the_colour_space_given(api: httpx.Client) -> None:
+    """``POST /v1/frames`` takes ``colorspace`` as ``/v1/enhance`` does (it took no such field,
+    and an ACEScg frame was read as linear Rec.709)."""
+    with open(BLENDER, "rb") as f:
+        r = api.post("/v1/frames", files={"file": (BLENDER.name, f)}, data={"colorspace": "ACEScg"})
+    assert r.status_code == 200, r.text
+    assert r.json()["info"]["colorspace"]["name"] == "ACEScg"
+    assert api.delete(f"/v1/frames/{r.json()['id']}").status_code == 204

@@ -15,6 +15,7 @@ from typing import Annotated, Any
 import anyio
 from fastapi import Form, Query, Request
 from pydantic import ValidationError
+from starlette.datastructures import FormData
 
 from gbuffer.camera import Camera
 from gbuffer.colorspace import View
@@ -184,7 +185,7 @@ async def known_fields(request: Request) -> None:
     if dependant is None:
         return
     form, query = _declared(dependant)
-    sent = await request.form() if form else {}
+    sent = await request.form() if form else FormData()
     for kind, given, known in (
         ("form field", sent, form),
         ("query parameter", request.query_params, query),
@@ -196,4 +197,12 @@ async def known_fields(request: Request) -> None:
                 "invalid-request",
                 f"unknown {kind}{'s' * (len(unknown) > 1)} {', '.join(map(repr, unknown))}; "
                 f"{request.url.path} takes: {takes}",
+            )
+        names = [name for name, _ in given.multi_items()]
+        twice = sorted({name for name in names if names.count(name) > 1})
+        if twice:  # (the last one was taken, the others dropped without a word)
+            raise Problem(
+                "invalid-request",
+                f"{kind}{'s' * (len(twice) > 1)} {', '.join(map(repr, twice))} given more than "
+                "once; give each once",
             )

@@ -2,8 +2,8 @@
 their layers, previews and the full-resolution result; and the page itself at ``/ui/``.
 
 * ``POST /v1/frames``: multipart ``file`` (EXR) + ``preset``, ``camera``, ``map``,
-  ``normal_space`` -> ``{"id", "name", "info", "expires_s"}``; ``POST /v1/frames/example``: the
-  bundled example (a render of ``examples/spot.obj``);
+  ``normal_space``, ``colorspace`` -> ``{"id", "name", "info", "expires_s"}``;
+  ``POST /v1/frames/example``: the bundled example (a render of ``examples/spot.obj``);
 * ``GET /v1/frames/{id}``: what ``inspect`` found; ``DELETE /v1/frames/{id}``: forget it now;
 * ``GET /v1/frames/{id}/layers/{layer}.png?height=``: a layer as a picture;
 * ``POST /v1/frames/{id}/preview``: JSON ``{"pipeline", "height", "exposure", "score_map"}``
@@ -26,7 +26,7 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import anyio
-from fastapi import APIRouter, File, Query, Request, UploadFile
+from fastapi import APIRouter, Depends, File, Query, Request, UploadFile
 from fastapi import Path as PathParam
 from fastapi.staticfiles import StaticFiles
 from pydantic import BaseModel, ConfigDict, Field
@@ -47,7 +47,7 @@ from service.scene import RenderRequest
 from service.viewer import work as jobs
 from service.viewer.store import ID_PATTERN, FrameStore, StoredFrame
 
-router = APIRouter(tags=["viewer"])
+router = APIRouter(tags=["viewer"], dependencies=[Depends(forms.known_fields)])
 
 STATIC = Path(__file__).resolve().parent / "static"
 #: The example frame: Keenan Crane's cow, rendered by Depict's renderer when asked for.
@@ -161,9 +161,10 @@ async def upload(
     camera: CameraField = None,
     map: MapField = None,
     normal_space: NormalSpace = None,
+    colorspace: forms.ColorspaceField = None,
     height: PreviewHeight = 540,
 ) -> dict[str, Any]:
-    fields = await forms.read_fields(preset, camera, map, normal_space)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
     limits = server.settings.limits
     name = Path(file.filename or "frame.exr").name or "frame.exr"
     with store(server).new_folder() as (frame_id, folder):
@@ -307,11 +308,12 @@ async def enhanced(
     return FileResponse(out, media_type=EXR_MEDIA_TYPE, filename=f"{stem}_depict.exr")
 
 
-@router.get("/ui", include_in_schema=False)
 async def ui_root() -> RedirectResponse:
     return RedirectResponse("/ui/")
 
 
 def mount_static(app: Any) -> None:
-    """Serve the viewer's page and its scripts at ``/ui/`` (public: the API calls carry the key)."""
+    """Serve the viewer's page and its scripts at ``/ui/`` (public: the API calls carry the key;
+    a query string, which the page's address may carry, is not checked there)."""
+    app.add_api_route("/ui", ui_root, methods=["GET"], include_in_schema=False)
     app.mount("/ui", StaticFiles(directory=STATIC, html=True), name="ui")
