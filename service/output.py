@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from gbuffer.errors import FrameError
+from gbuffer.errors import FrameError, OptionError
 from gbuffer.frame import Frame
 from gbuffer.io import DEFAULT_LAYOUT, header_json
 from gbuffer.presets import RESULT_ATTRIBUTE
@@ -84,8 +84,8 @@ def result_layer(frame: Frame, output_layer: str | None) -> str:
         return frame.result_layer or ""
     check_layer_name(output_layer)
     taken = sorted(c for c in _channels(frame) if c.startswith(f"{output_layer}."))
-    if taken and output_layer != earlier:
-        raise FrameError(
+    if taken and output_layer != earlier:  # (the request's name, not the file, is wrong)
+        raise OptionError(
             f"output layer {output_layer!r} would overwrite the input's channels "
             f"{', '.join(taken[:4])}{', ...' if len(taken) > 4 else ''}; choose a name the file "
             "does not use"

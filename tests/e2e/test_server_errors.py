@@ -56,6 +56,14 @@ def test_file_paths_in_compare_parameters_are_refused(
         assert_problem(response, 422, words)
 
 
+def test_an_output_layer_the_file_uses_is_422(server: Server, files: dict[str, Path]) -> None:
+    """The name the client chose is wrong, not the file (it was a 400 "Bad Input File")."""
+    data = {"output_layer": "N"}
+    response = post_enhance(server, files["canonical"].read_bytes(), data=data)
+    body = assert_problem(response, 422, "output layer 'N' would overwrite the input's channels")
+    assert body["type"] == "urn:depict:problem:invalid-request"
+
+
 # -- every error status from a real bad request --------------------------------------------------
 
 
