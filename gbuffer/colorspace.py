@@ -183,6 +183,21 @@ def resolve(
     return LINEAR_REC709
 
 
+def resolve_leniently(
+    header: Mapping[str, Any], preset: str, default: str | None, warnings: list[str]
+) -> ColorSpace:
+    """:func:`resolve` with no explicit space, for a file being described (``depict
+    inspect``): a header whose colour attribute cannot be used (``chromaticities`` of no
+    gamut, an unknown or non-linear ``colorInteropID``) is said in ``warnings``, and the
+    preset's space used, rather than refused."""
+    try:
+        return resolve(None, header, preset, default)
+    except OptionError as exc:
+        fallback = resolve(None, None, preset, default)
+        warnings.append(f"{exc}; described as {fallback.name}, the preset's working space")
+        return fallback
+
+
 #: ``--view raw``: Depict's own exposure and hard clip (sRGB curve), no view transform.
 RAW_VIEW = "raw"
 

@@ -50,6 +50,7 @@ import OpenEXR
 from gbuffer import cryptomatte, exr
 from gbuffer.camera import Camera
 from gbuffer.colorspace import resolve as resolve_colorspace
+from gbuffer.colorspace import resolve_leniently
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.presets import (
@@ -411,10 +412,12 @@ def inspect(
         name = preset if preset != "auto" else detect(passthrough)[0]
         size = (x1 - x0 + 1, y1 - y0 + 1)
         frame = Frame(buffers={}, display_size=size, preset=name, passthrough=passthrough)
-        frame.colorspace = resolve_colorspace(
-            opts.colorspace, header, name, find_preset(name).colorspace
-        )
         problems = [str(exc)]
+        default = find_preset(name).colorspace
+        if opts.colorspace is not None:
+            frame.colorspace = resolve_colorspace(opts.colorspace, header, name, default)
+        else:
+            frame.colorspace = resolve_leniently(header, name, default, problems)
     info = describe(frame)
     info["problems"] = problems
     return info

@@ -182,6 +182,41 @@ def test_an_unusable_ocio_config_is_one_line_and_exit_2(
     assert not (tmp_path / "p.png").exists()
 
 
+@pytest.mark.parametrize(
+    ("attribute", "value", "words"),
+    [
+        ("chromaticities", (0.0,) * 8, "the file's chromaticities attribute is unusable"),
+        ("colorInteropID", "nope_scene", "colour space 'nope_scene' is not in the OCIO config"),
+        ("colorInteropID", "srgb_rec709_scene", "is not linear"),
+    ],
+)
+def test_inspect_describes_a_file_whose_colour_attribute_is_unusable(
+    attribute: str,
+    value: object,
+    words: str,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """``depict inspect`` never refuses a file whose header reads: the colour attribute it
+    cannot use is a warning, the file described in the preset's space; enhancing it is
+    refused in one line (it would be enhanced in a space the file does not say)."""
+    with OpenEXR.File(str(FIXTURE), separate_channels=True) as f:
+        header = dict(f.header())
+        chans = {name: c.pixels.copy() for name, c in f.channels().items()}
+    header.pop("chromaticities", None)
+    header[attribute] = value
+    path = tmp_path / "odd.exr"
+    OpenEXR.File(header, chans).write(str(path))
+    code, out = _cli("inspect", str(path))
+    assert code == 0, capsys.readouterr().err
+    assert words in out and "the preset's working space" in out
+    assert "beauty" in out  # (its buffers described, not only its header)
+    code, _ = _cli("enhance", str(path), "-o", str(tmp_path / "o.exr"))
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o.exr").exists()
+
+
 # -- a colour chart -----------------------------------------------------------------------------
 
 #: sRGB 8-bit colours and their CIELAB (D65, white = 1), as published for sRGB (Lindbloom).

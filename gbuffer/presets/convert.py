@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from gbuffer.camera import Camera
+from gbuffer.colorspace import ColorSpace, resolve_leniently
 from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.errors import FrameError
 from gbuffer.exr import ExrPassthrough, release_pixels, window
@@ -313,6 +314,16 @@ class _Build:
         if self.camera_in_file and (lacks := pose_only_warning(self.camera)) is not None:
             self.warnings.append(lacks)
 
+    def colorspace(self) -> ColorSpace:
+        """The working space (:func:`gbuffer.colorspace.resolve`); for an inspection (not
+        ``strict``), a colour attribute of the header that cannot be used is a warning."""
+        header = self.pt.parts[self.pt.primary][0]
+        if self.opts.strict or self.opts.colorspace is not None:
+            return resolve_colorspace(
+                self.opts.colorspace, header, self.preset.name, self.preset.colorspace
+            )
+        return resolve_leniently(header, self.preset.name, self.preset.colorspace, self.warnings)
+
     def planar_depth(self) -> None:
         """Step 5, depth: +inf on background, a distance along the ray made planar."""
         depth = self.depth
@@ -485,12 +496,7 @@ class _Build:
             sources=self.sources,
             passthrough=self.pt,
             result_layer=self.result_layer,
-            colorspace=resolve_colorspace(
-                self.opts.colorspace,
-                self.pt.parts[self.pt.primary][0],
-                self.preset.name,
-                self.preset.colorspace,
-            ),
+            colorspace=self.colorspace(),
         )
         reader = self.reader
         if reader.holes is not None:
