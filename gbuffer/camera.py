@@ -217,22 +217,24 @@ class Camera:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Camera:
         """Build a camera from the camera JSON form (see the module docstring)."""
-        known = {"world_to_camera", "fov_y_deg", "focal_px", "projection", "ortho_height"}
-        unknown = sorted(set(data) - known - {"height"})
+        known = {"world_to_camera", "fov_y_deg", "focal_px", "height", "projection"}
+        known.add("ortho_height")
+        unknown = sorted(set(data) - known)
         if unknown:
             raise FrameError(f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}")
         for key in ("world_to_camera", "fov_y_deg", "focal_px", "height", "ortho_height"):
             if holds_truth_value(data.get(key)):  # (JSON's true is a Python 1)
                 raise FrameError(f"camera JSON {key}: expected numbers, not true or false")
         projection = data.get("projection", "perspective")
-        fov = data.get("fov_y_deg")
+        fov = _json_number(data, "fov_y_deg")
         if "focal_px" in data:
             if "height" not in data:
                 raise FrameError(
                     "camera JSON with focal_px also needs 'height' (the display height in "
                     "pixels it refers to), or give fov_y_deg instead"
                 )
-            fov = math.degrees(2.0 * math.atan(0.5 * float(data["height"]) / data["focal_px"]))
+            focal, height = (_positive_number(data, k) for k in ("focal_px", "height"))
+            fov = math.degrees(2.0 * math.atan(0.5 * height / focal))
         if projection == "perspective" and fov is None:
             raise FrameError("perspective camera JSON needs fov_y_deg or focal_px (+ height)")
         if projection == "orthographic" and data.get("ortho_height") is None:
@@ -243,7 +245,7 @@ class Camera:
                 world_to_camera=None if w2c is None else np.array(w2c, dtype=np.float64),
                 projection=projection,
                 fov_y_deg=None if fov is None else float(fov),
-                ortho_height=data.get("ortho_height"),
+                ortho_height=_json_number(data, "ortho_height"),
             )
         except (TypeError, ValueError) as exc:
             if isinstance(exc, FrameError):
@@ -370,3 +372,23 @@ class Camera:
                 source="file header (V-Ray cameraTransform)",
             )
         return None
+
+
+def _json_number(data: dict[str, Any], key: str) -> float | None:
+    """``data[key]`` of a camera JSON as a number (None when absent): a string ("40") or any
+    other kind is refused."""
+    value = data.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise FrameError(f"camera JSON {key}: expected a number, got {value!r}")
+    return float(value)
+
+
+def _positive_number(data: dict[str, Any], key: str) -> float:
+    """:func:`_json_number`, which must be there, finite and above 0 (a focal length of 0 was
+    a division by zero)."""
+    value = _json_number(data, key)
+    if value is None or not (math.isfinite(value) and value > 0):
+        raise FrameError(f"camera JSON {key} must be a finite number above 0, got {value!r}")
+    return value

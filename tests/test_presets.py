@@ -584,6 +584,11 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
         ({**cam_dict(scene), **ortho, "ortho_height": 1e300}, r"ortho_height=1e\+300 is outside"),
         ({**cam_dict(scene), **ortho, "ortho_height": 1e-300}, "ortho_height=1e-300 is outside"),
         ({**cam_dict(scene), "fov_y_deg": 1e-297}, r"fov_y_deg=1e-297 is outside \[1e-06, 180\)"),
+        # (a division by zero; a string taken as a number; an unknown key's list of valid ones)
+        ({"focal_px": 0, "height": 480}, "focal_px must be a finite number above 0, got 0"),
+        ({"focal_px": 500, "height": float("inf")}, "height must be a finite number above 0"),
+        ({"fov_y_deg": "40"}, "camera JSON fov_y_deg: expected a number, got '40'"),
+        ({"fov_y_deg": 40, "hieght": 2}, r"unknown keys \['hieght'\]; valid keys: .*'height'"),
     ]:
         with pytest.raises(FrameError, match=words):
             read(path, camera=cam)
