@@ -11,7 +11,7 @@ from __future__ import annotations
 import typing
 from typing import Any
 
-from pydantic import BaseModel, ValidationInfo, field_validator
+from pydantic import BaseModel, ConfigDict, ValidationInfo, field_validator
 
 from ops.checks import holds_truth_value
 
@@ -19,7 +19,10 @@ __all__ = ["NumbersModel"]
 
 
 class NumbersModel(BaseModel):
-    """A model whose int and float fields (and lists of them) refuse true and false."""
+    """A model whose int and float fields (and lists of them) refuse true and false, and NaN
+    and infinities ("Input should be a finite number", not the bound a NaN fails)."""
+
+    model_config = ConfigDict(allow_inf_nan=False)
 
     @field_validator("*", mode="before")
     @classmethod

@@ -239,6 +239,7 @@ def test_invalid_request_422(client: Any, data: dict[str, str], words: str) -> N
         ("/v1/score", {"mask": "AO.X", "light": "1,1,1"}, "unknown form fields 'light', 'mask'"),
         ("/v1/relief/pick", {"x": "1", "y": "1", "scale": "2"}, "unknown form field 'scale'"),
         ("/v1/enhance?preview=png&exposure=nan", {}, "finite number"),  # (it said "<= 20")
+        ("/v1/score", {"gradient_scale": "nan"}, "finite number"),  # (it said "<= 0.1")
     ],
 )
 def test_unknown_fields_and_odd_queries_422(

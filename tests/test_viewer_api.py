@@ -277,3 +277,13 @@ def test_the_viewer_reads_a_frame_in_the_colour_space_given(api: httpx.Client) -
     assert r.status_code == 200, r.text
     assert r.json()["info"]["colorspace"]["name"] == "ACEScg"
     assert api.delete(f"/v1/frames/{r.json()['id']}").status_code == 204
+
+
+def test_a_preview_of_nan_exposure_says_it_is_no_finite_number(
+    frame: dict[str, Any], api: httpx.Client
+) -> None:
+    """(It said "less than or equal to 20", the bound a NaN fails.)"""
+    url = f"/v1/frames/{frame['id']}/preview"
+    headers = {"content-type": "application/json"}
+    r = api.post(url, content='{"exposure": NaN, "height": 64}', headers=headers)
+    assert_problem(r, 422, "finite number")

@@ -147,20 +147,32 @@ async def score(
     colorspace: forms.ColorspaceField = None,
     gradient_scale: Annotated[
         float | None,
-        Form(gt=0, le=0.1, description="gradient sigma, relative to the image height"),
+        Form(
+            allow_inf_nan=False,
+            gt=0,
+            le=0.1,
+            description="gradient sigma, relative to the image height",
+        ),
     ] = None,
     integration_scale: Annotated[
         float | None,
-        Form(gt=0, le=0.25, description="integration sigma, relative to the image height"),
+        Form(
+            allow_inf_nan=False,
+            gt=0,
+            le=0.25,
+            description="integration sigma, relative to the image height",
+        ),
     ] = None,
     percentile: Annotated[
-        float | None, Form(gt=0, le=100, description="strength normalisation percentile")
+        float | None,
+        Form(allow_inf_nan=False, gt=0, le=100, description="strength normalisation percentile"),
     ] = None,
     depth_jump: Annotated[
-        float | None, Form(gt=0, le=100, description="largest log-depth step of a surface")
+        float | None,
+        Form(allow_inf_nan=False, gt=0, le=100, description="largest log-depth step of a surface"),
     ] = None,
     shading_norm: Annotated[
-        float | None, Form(gt=0, description="pinned shading strength scale")
+        float | None, Form(allow_inf_nan=False, gt=0, description="pinned shading strength scale")
     ] = None,
     shape: Annotated[
         Literal["normals", "depth"] | None,
