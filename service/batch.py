@@ -156,8 +156,10 @@ def check_sequence_outputs(
 ) -> None:
     """BatchError when an output frame (or the pinned statistics file) would replace an input
     frame of the sequence (same path after resolving links, or the same inode), or a special
-    file; compared as files, whatever the patterns' spelling."""
-    inputs = [expand(in_pattern, f) for f in frames]
+    file; compared as files, whatever the patterns' spelling. Every frame of the sequence on
+    disk counts, not only those of this run: a farm's chunk must not write over the input of
+    another chunk (through a link left in the output folder)."""
+    inputs = [expand(in_pattern, f) for f in sorted(set(frames) | set(find_frames(in_pattern)))]
     names = {os.path.realpath(p) for p in inputs}
     inodes = set()
     for path in inputs:

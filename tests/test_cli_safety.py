@@ -101,6 +101,25 @@ def test_batch_refuses_an_output_pattern_that_names_the_inputs(
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
 
 
+def test_a_batch_chunk_refuses_to_write_over_another_chunks_input(
+    frame: Path, tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """A link in the output folder to an input frame that this run (--frames 1-2) does not
+    read: a farm's chunk would have written over the input of a later chunk."""
+    shots, outs = tmp_path / "in", tmp_path / "out"
+    shots.mkdir()
+    outs.mkdir()
+    for f in range(1, 5):
+        (shots / f"s.{f:04d}.exr").write_bytes(frame.read_bytes())
+    (outs / "s.0002.exr").symlink_to(shots / "s.0004.exr")
+    before = (shots / "s.0004.exr").read_bytes()
+    argv = ["batch", shots / "s.####.exr", "-o", outs / "s.####.exr", "--frames", "1-2"]
+    assert depict(*argv, "--no-progress") == 2
+    one_error(capfd, "frame 2's output")
+    assert (shots / "s.0004.exr").read_bytes() == before
+    assert not (outs / "s.0001.exr").exists()
+
+
 def test_batch_frame_ranges_are_bounded(copy: Path, capfd: pytest.CaptureFixture[str]) -> None:
     args = ("batch", copy.parent / "s.####.exr", "-o", copy.parent / "o.####.exr")
     assert depict(*args, "--frames", "1-1000000000") == 2
