@@ -194,6 +194,24 @@ def test_a_frame_too_small_to_score_lists_no_score_map(tmp_path: Path) -> None:
         work.layer_job(str(folder), 1, work.SCORE_MAP, ReadRequest(), str(folder / "s.png"))
 
 
+def test_a_file_with_no_buffer_is_described_and_its_previews_say_why_there_are_none(
+    tmp_path: Path,
+) -> None:
+    """A luminance-only image (one Y channel): the upload is described (it failed on the
+    shape of a frame with no buffers), and a preview says there is nothing to preview."""
+    folder = tmp_path / "y"
+    folder.mkdir()
+    plane = np.linspace(0, 1, 40 * 60, dtype=np.float32).reshape(40, 60)
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION}, {"Y": plane}).write(
+        str(folder / "in.exr")
+    )
+    info = work.inspect_job(str(folder / "in.exr"), ReadRequest(), 40)["info"]
+    assert info["size"] == [60, 40] and info["layers"] == []
+    steps = pipeline.compile([{"op": "radiance_scaling"}])
+    with pytest.raises(FrameError, match="no buffer Depict reads"):
+        work.preview_job(str(folder), 1, steps, ReadRequest(), 0.0, False)
+
+
 def test_a_previews_score_is_the_scores_own(stored: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A preview scores its result on the shape's side the copy was scored with (made once per
     copy, not again at each preview): the same numbers as scoring the result from scratch."""

@@ -143,7 +143,8 @@ def inspect_job(source: str, read: ReadRequest, height: int) -> dict[str, Any]:
         info = inspect(source, read.preset, read.camera, read.options)
     else:
         info = {**describe(frame), "problems": []}
-        _shrink(Path(source).parent, shrink_factor(info["size"], height), frame)
+        if frame.buffers:  # (a luminance-only image has none: it is described, not shrunk)
+            _shrink(Path(source).parent, shrink_factor(info["size"], height), frame)
     info["operators"] = runnable(info)
     info["colour_space"] = colour_space(source)
     scored = "depth" in info["buffers"] and min(info["size"]) >= 3  # (_score)
@@ -164,6 +165,11 @@ def _small(folder: Path, factor: int, read: ReadRequest) -> tuple[Frame, dict[st
 
 def _shrink(folder: Path, factor: int, frame: Frame) -> tuple[Frame, dict[str, Any] | None]:
     """:func:`_small` of the frame read from the folder's file: made, written and kept."""
+    if not frame.buffers:
+        raise FrameError(
+            "the file holds no buffer Depict reads (no beauty, normals, depth or lobes): there "
+            "is nothing to preview; `inspect` lists its channels"
+        )
     small = downscale(frame, factor)
     score = _score(small)
     cache = _copy_path(folder, factor)
