@@ -245,7 +245,7 @@ def enhance_frame(
         "op_s": op_s,
         "size": [w, h],
         "measured": dict(context.measured),
-        "warnings": uncovered + warnings,
+        "warnings": uncovered + context.warnings + warnings,
         "read_warnings": list(getattr(frame.passthrough, "warnings", [])),
     }
 

@@ -16,6 +16,7 @@ statistics (automatic white levels, the congruence score) are measured where m >
 
 from __future__ import annotations
 
+import fnmatch
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -116,12 +117,18 @@ def plane(frame: Frame, name: str, what: str, files: bool) -> np.ndarray:
     return np.asarray(cv2.resize(img, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
 
 
-def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool) -> np.ndarray:
+def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool, warnings: list[str]) -> np.ndarray:
     if spec.kind == "cryptomatte":
         try:
             layer, chosen = cryptomatte.find_layer(frame, spec.layer, list(spec.names), files)
         except FrameError as exc:
             raise PipelineError(f"mask {text!r}: {exc}") from None
+        unmatched = [p for p in spec.names if not any(fnmatch.fnmatchcase(n, p) for n in chosen)]
+        if unmatched:  # (a misspelt name among others that match)
+            warnings.append(
+                f"mask {text!r}: no name of {layer.name} matches "
+                f"{', '.join(map(repr, unmatched))}; the others are used"
+            )
         return cryptomatte.matte(frame, layer, list(chosen.values()))
     values = plane(frame, spec.layer or "", f"mask {text!r}", files and spec.kind == "layer")
     if spec.kind == "index":
@@ -133,16 +140,23 @@ def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool) -> np.ndarray:
 
 
 def matte(
-    frame: Frame, text: str, feather: float = 0.0, amount: float = 1.0, files: bool = True
+    frame: Frame,
+    text: str,
+    feather: float = 0.0,
+    amount: float = 1.0,
+    files: bool = True,
+    warnings: list[str] | None = None,
 ) -> np.ndarray:
     """(H, W) float32 in [0, 1]: the mask ``text`` on ``frame``, inverted when it says so,
     blurred by a Gaussian of σ = ``feather`` × the image height, times ``amount``. ``files``:
-    whether a Cryptomatte sidecar manifest beside the file may be read (not over HTTP)."""
+    whether a Cryptomatte sidecar manifest beside the file may be read (not over HTTP).
+    ``warnings``: where to say what the user may not have meant (Cryptomatte names that match
+    nothing while others do)."""
     try:
         spec = parse(text)
     except ValueError as exc:
         raise PipelineError(str(exc)) from None
-    m = np.ascontiguousarray(_raw(frame, spec, text, files), np.float32)
+    m = np.ascontiguousarray(_raw(frame, spec, text, files, [] if warnings is None else warnings))
     if spec.invert:
         m = np.float32(1.0) - m
     if feather > 0.0:

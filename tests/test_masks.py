@@ -211,3 +211,32 @@ def test_cli_unknown_name_exits_2_with_one_line(
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "no Cryptomatte name matches 'Nope'" in err
     assert "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        (
+            "cryptomatte:Suzanne,Suzane",
+            "radiance_scaling: mask 'cryptomatte:Suzanne,Suzane': no name of "
+            "ViewLayer.CryptoObject matches 'Suzane'; the others are used",
+        ),
+        (
+            "index:ViewLayer.IndexOB.X=99",
+            "radiance_scaling: mask 'index:ViewLayer.IndexOB.X=99' selects no pixel: the step "
+            "changed nothing",
+        ),
+    ],
+)
+def test_a_mask_that_misses_is_said(
+    frame: Frame, spec: str, words: str, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A misspelt name among others that match, or an index no pixel holds, ran without a word
+    (a whole misspelt mask is refused: test_unknown_names_are_one_clear_error)."""
+    context = Context()
+    pipeline.run(frame, [{"op": "radiance_scaling", "params": {"mask": spec}}], context=context)
+    assert context.warnings == [words]
+    out = tmp_path / "out.exr"
+    args = ["enhance", str(FIXTURE), "-o", str(out), "--op", "radiance_scaling"]
+    assert cli([*args, "--set", f"mask={spec}"]) == 0
+    assert f"depict: warning: {words}\n" in capsys.readouterr().err

@@ -14,6 +14,7 @@ import pytest
 
 import gbuffer
 from service.cli import main as cli
+from service.headers import WARNING, warning_text
 from service.masks import matte
 from tests.live_server import Server, live_server
 
@@ -74,3 +75,15 @@ def test_bad_masks_are_422_problems(server: Server, mask: str, words: str) -> No
     assert response.status_code == 422, response.text
     assert response.headers["content-type"].startswith("application/problem+json")
     assert words in response.json()["detail"]
+
+
+def test_a_mask_that_selects_nothing_is_said_in_a_warning_header(server: Server) -> None:
+    response = post(
+        server, [{"op": "radiance_scaling", "params": {"mask": "cryptomatte:Suz*,Nope"}}]
+    )
+    assert response.status_code == 200, response.text
+    said = [warning_text(v) for v in response.headers.get_list(WARNING)]
+    assert (
+        "radiance_scaling: mask 'cryptomatte:Suz*,Nope': no name of ViewLayer.CryptoObject "
+        "matches 'Nope'; the others are used"
+    ) in said

@@ -112,6 +112,8 @@ class Context:
     ``region``: where a step with ``mask_stats`` measures its statistics (:mod:`service.masks`).
     ``memo``: results computed from the frame's arrays, kept for the next run on the same
     arrays (:mod:`service.memo`: the viewer's previews); by default one that keeps nothing.
+    ``warnings``: what the steps tell the user besides their result (a mask that selects no
+    pixel), said as the reader's warnings are.
     """
 
     debug_layers: bool = False
@@ -120,6 +122,7 @@ class Context:
     measured: dict[str, float] = field(default_factory=dict)
     region: np.ndarray | None = None
     memo: Memo = field(default_factory=lambda: Memo(0))
+    warnings: list[str] = field(default_factory=list)
 
     def counted(self, covered: np.ndarray) -> np.ndarray:
         """``covered`` (H, W) bool, within the step's mask when it restricts statistics."""
@@ -179,7 +182,11 @@ class Operator:
         if params.mask is None:
             self.apply(frame, params, context)
             return
-        m = matte(frame, params.mask, params.mask_feather, params.mask_amount, context.files)
+        said: list[str] = []
+        m = matte(frame, params.mask, params.mask_feather, params.mask_amount, context.files, said)
+        if not m.any():  # (an index no pixel holds, a name of nothing in view)
+            said.append(f"mask {params.mask!r} selects no pixel: the step changed nothing")
+        context.warnings += [f"{self.name}: {line}" for line in said]
         buffers, outputs = dict(frame.buffers), dict(frame.outputs)
         region = context.region
         if params.mask_stats:
