@@ -94,6 +94,22 @@ def test_what_a_job_writes_is_counted_and_a_killed_jobs_temporary_files_go(
     assert a.id not in store and not a.folder.exists()
 
 
+def test_a_frame_a_job_runs_on_is_not_evicted(tmp_path: Path) -> None:
+    """Another frame's copy passing the cap while a job runs on the older frame: the busy frame
+    stays (its job would have lost its folder) until its job ends; the newest stays even when
+    it alone is over the cap."""
+    store = FrameStore(tmp_path, ttl_s=60, max_bytes=300, max_frames=10)
+    a, b = put(store, 100), put(store, 100)
+    with store.job(a):
+        with store.job(b):
+            (b.folder / "small_2.pkl").write_bytes(b"y" * 150)
+        assert a.id in store and a.folder.exists() and store.used_bytes == 350
+    assert a.id not in store and not a.folder.exists() and b.id in store
+    with store.job(b):
+        (b.folder / "small_1.pkl").write_bytes(b"y" * 400)
+    assert b.id in store and store.used_bytes == 650
+
+
 def test_a_frame_forgotten_while_its_job_runs_leaves_no_folder(tmp_path: Path) -> None:
     """Deleted (or expired, or evicted) while a worker makes its copy: the worker's write makes
     the folder anew, and the job's end removes it again."""

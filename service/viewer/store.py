@@ -94,12 +94,16 @@ class FrameStore:
                 "(DEPICT_VIEWER_MAX_MB)",
             )
         self._frames[frame.id] = frame
-        self._evict(frame)
+        self._evict()
 
-    def _evict(self, kept: StoredFrame) -> None:
-        """The least recently used frames but ``kept`` removed while the store is over a cap."""
+    def _evict(self) -> None:
+        """The least recently used frames removed while the store is over a cap; never the most
+        recently used one (the frame just kept, or the one the user works on), nor one a job is
+        running on (it goes when its jobs end, if the store is still over then)."""
         while len(self._frames) > self.max_frames or self.used_bytes > self.max_bytes:
-            oldest = next((f for f in self._frames.values() if f is not kept), None)
+            newest = next(reversed(self._frames.values()))
+            idle = (f for f in self._frames.values() if f is not newest and f.jobs == 0)
+            oldest = next(idle, None)
             if oldest is None:
                 return
             del self._frames[oldest.id]
@@ -132,7 +136,7 @@ class FrameStore:
                 for partial in frame.folder.glob(".*.tmp.*"):
                     partial.unlink(missing_ok=True)
                 frame.size_bytes = folder_bytes(frame.folder)
-                self._evict(frame)
+                self._evict()
 
     def get(self, frame_id: str) -> StoredFrame:
         """The frame ``frame_id``, now the most recently used; 404 when unknown or expired."""
