@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -240,6 +241,12 @@ class Camera:
         if projection == "orthographic" and data.get("ortho_height") is None:
             raise FrameError("orthographic camera JSON needs ortho_height (scene units)")
         w2c = data.get("world_to_camera")
+        if (
+            w2c is not None
+            and np.asarray(w2c, dtype=object).size
+            and not all(isinstance(v, numbers.Real) for v in np.asarray(w2c, dtype=object).ravel())
+        ):
+            raise FrameError("camera JSON world_to_camera: expected rows of numbers")
         try:
             return cls(
                 world_to_camera=None if w2c is None else np.array(w2c, dtype=np.float64),
@@ -380,7 +387,7 @@ def _json_number(data: dict[str, Any], key: str) -> float | None:
     value = data.get(key)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, int | float):
+    if isinstance(value, bool | np.bool_) or not isinstance(value, numbers.Real):
         raise FrameError(f"camera JSON {key}: expected a number, got {value!r}")
     return float(value)
 

@@ -562,6 +562,8 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
     for cam in (cam_file, str(cam_file), cam_dict(scene), Camera.from_dict(cam_dict(scene))):
         frame = read(path, camera=cam)
         close(frame.buffers["normal"], scene.normal, inner(scene), 2.5e-2)
+    for number in (np.float32(40.0), np.int64(40)):  # (NumPy's numbers, from Python)
+        assert Camera.from_dict({**cam_dict(scene), "fov_y_deg": number}).fov_y_deg == 40.0
     with pytest.raises(FrameError, match="camera must be a Camera, a dict or a path"):
         read(path, camera=42)  # type: ignore[arg-type]
     # a matrix of zeros was taken, and every normal turned into camera space became 0
@@ -589,6 +591,7 @@ def test_camera_argument_forms(tmp_path: Path, scene: F.Scene) -> None:
         ({"focal_px": 500, "height": float("inf")}, "height must be a finite number above 0"),
         ({"fov_y_deg": "40"}, "camera JSON fov_y_deg: expected a number, got '40'"),
         ({"fov_y_deg": 40, "hieght": 2}, r"unknown keys \['hieght'\]; valid keys: .*'height'"),
+        ({"fov_y_deg": 40, "world_to_camera": [["1", "0", "0", "0"]] * 4}, "rows of numbers"),
     ]:
         with pytest.raises(FrameError, match=words):
             read(path, camera=cam)
