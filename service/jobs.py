@@ -40,8 +40,9 @@ def score_job(
     (:func:`analysis.score.score_frame`), after the pipeline ``steps`` when given."""
     frame = read.read(in_path)
     op_s: list[tuple[str, float]] = []
+    context = Context(files=files)
     if steps is not None:
-        frame, op_s = pipeline.run_timed(frame, steps, Context(files=files))
+        frame, op_s = pipeline.run_timed(frame, steps, context)
     out = score_frame(frame, maps=False, **options)
     scored = bool(frame.covered().any())  # (0.0 and nothing said, for an all-NaN beauty)
     return {
@@ -51,7 +52,7 @@ def score_job(
         "image_shape": [int(v) for v in out["image_shape"]],
         "params": {k: v if isinstance(v, str) else float(v) for k, v in out["params"].items()},
         "op_s": op_s,
-        "warnings": [] if scored else [NOTHING_SCORED],
+        "warnings": context.warnings + ([] if scored else [NOTHING_SCORED]),
     }
 
 

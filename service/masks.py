@@ -85,6 +85,18 @@ def parse(text: str) -> MaskSpec:
     return MaskSpec("layer", body, invert=invert)
 
 
+#: Characters of a mask's text a warning shows (a mask may be 4096 long, and warnings go out
+#: as HTTP headers).
+_SHOWN = 120
+
+
+def shown(text: str, quoted: bool = True) -> str:
+    """``text`` for a warning: its ``repr`` (with ``quoted``), cut to :data:`_SHOWN`
+    characters with "…" where it is longer."""
+    out = repr(text) if quoted else text
+    return out if len(out) <= _SHOWN else out[: _SHOWN - 1] + "…"
+
+
 def layer_plane(frame: Frame, name: str, what: str) -> np.ndarray:
     """One channel by name: a one-channel buffer (``ao``), a layer of the frame (its only
     channel, or X/Y/R/A) or ``layer.X``; PipelineError naming ``what`` when there is none."""
@@ -126,8 +138,8 @@ def _raw(frame: Frame, spec: MaskSpec, text: str, files: bool, warnings: list[st
         unmatched = [p for p in spec.names if not any(fnmatch.fnmatchcase(n, p) for n in chosen)]
         if unmatched:  # (a misspelt name among others that match)
             warnings.append(
-                f"mask {text!r}: no name of {layer.name} matches "
-                f"{', '.join(map(repr, unmatched))}; the others are used"
+                f"mask {shown(text)}: no name of {layer.name} matches "
+                f"{shown(', '.join(map(repr, unmatched)), quoted=False)}; the others are used"
             )
         return cryptomatte.matte(frame, layer, list(chosen.values()))
     values = plane(frame, spec.layer or "", f"mask {text!r}", files and spec.kind == "layer")

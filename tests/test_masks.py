@@ -240,3 +240,5 @@ def test_a_mask_that_misses_is_said(
     args = ["enhance", str(FIXTURE), "-o", str(out), "--op", "radiance_scaling"]
     assert cli([*args, "--set", f"mask={spec}"]) == 0
     assert f"depict: warning: {words}\n" in capsys.readouterr().err
+    assert cli(["score", str(FIXTURE), "--op", "radiance_scaling", "--set", f"mask={spec}"]) == 0
+    assert f"depict: warning: {words}\n" in capsys.readouterr().err

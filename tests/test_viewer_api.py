@@ -287,3 +287,18 @@ def test_a_preview_of_nan_exposure_says_it_is_no_finite_number(
     headers = {"content-type": "application/json"}
     r = api.post(url, content='{"exposure": NaN, "height": 64}', headers=headers)
     assert_problem(r, 422, "finite number")
+
+
+def test_a_preview_says_a_mask_that_selects_nothing(api: httpx.Client) -> None:
+    """The viewer is where masks are tuned: a preview answers its steps' warnings."""
+    with open(CRYPTO, "rb") as f:
+        r = api.post("/v1/frames", files={"file": (CRYPTO.name, f)}, params={"height": 120})
+    assert r.status_code == 200, r.text
+    steps = [{"op": "radiance_scaling", "params": {"mask": "index:ViewLayer.IndexOB.X=99"}}]
+    body = {"pipeline": {"steps": steps}, "height": 120}
+    answer = api.post(f"/v1/frames/{r.json()['id']}/preview", json=body)
+    assert answer.status_code == 200, answer.text
+    assert answer.json()["warnings"] == [
+        "radiance_scaling: mask 'index:ViewLayer.IndexOB.X=99' selects no pixel: the step "
+        "changed nothing"
+    ]

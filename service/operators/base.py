@@ -20,7 +20,7 @@ from pydantic import ConfigDict, Field, ValidationError, field_validator, model_
 from gbuffer.frame import Frame
 from ops.numerics import clip_new_negatives, new_values
 from service.errors import PipelineError
-from service.masks import MASK_SYNTAX, blend_layers, matte
+from service.masks import MASK_SYNTAX, blend_layers, matte, shown
 from service.masks import parse as parse_mask
 from service.memo import Memo
 from service.numbers import NumbersModel
@@ -185,7 +185,7 @@ class Operator:
         said: list[str] = []
         m = matte(frame, params.mask, params.mask_feather, params.mask_amount, context.files, said)
         if not m.any():  # (an index no pixel holds, a name of nothing in view)
-            said.append(f"mask {params.mask!r} selects no pixel: the step changed nothing")
+            said.append(f"mask {shown(params.mask)} selects no pixel: the step changed nothing")
         context.warnings += [f"{self.name}: {line}" for line in said]
         buffers, outputs = dict(frame.buffers), dict(frame.outputs)
         region = context.region

@@ -91,6 +91,9 @@ class Preview(BaseModel):
     image: str = Field(description="the result, base64 PNG")
     size: list[int] = Field(description="(width, height) of the preview")
     op_s: list[tuple[str, float]] = Field(description="seconds of each step")
+    warnings: list[str] = Field(
+        description="what the steps say besides their result (a mask that selects no pixel)"
+    )
     score: dict[str, float] | None = Field(
         description="congruence score of the input and the result (on the input's scale); "
         "null without depth"

@@ -373,19 +373,22 @@ def preview_job(
     exposure: float,
     score_map: bool,
 ) -> dict[str, Any]:
-    """``steps`` on the frame shrunk by ``factor``: the result as a base64 PNG, the congruence
-    score of the input and of the result (on the input's scale) and, with ``score_map``, the
-    result's per-pixel score as a base64 PNG."""
+    """``steps`` on the frame shrunk by ``factor``: the result as a base64 PNG, the steps'
+    warnings (a mask that selects no pixel), the congruence score of the input and of the
+    result (on the input's scale) and, with ``score_map``, the result's per-pixel score as a
+    base64 PNG."""
     small, before = _small(Path(folder), factor, read)
     if reads_file_layers(steps):
         small = _file_layers(Path(folder), factor, small)
     memo = _memo(_copy_path(Path(folder), factor))
-    out, op_s = pipeline.run_timed(small, steps, Context(files=False, memo=memo))
+    context = Context(files=False, memo=memo)
+    out, op_s = pipeline.run_timed(small, steps, context)
     _within_bounds()  # (with what the run kept)
     answer: dict[str, Any] = {
         "image": _png(picture(out, "beauty", exposure)),
         "size": list(out.shape[::-1]),
         "op_s": op_s,
+        "warnings": context.warnings,
         "score": None,
         "score_map": None,
         "pipeline": json.loads(steps.spec.model_dump_json()),

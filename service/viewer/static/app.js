@@ -181,7 +181,8 @@ async function preview() {
     showAfter();
     const score = answer.score;
     $("scores").textContent = score ? `congruence ${score.before.toFixed(3)} → ${score.after.toFixed(3)}` : "no score (no depth)";
-    setStatus(`preview ${answer.size[0]}×${answer.size[1]} in ${Math.round(state.previewMs)} ms`);
+    const said = answer.warnings.length ? ` (${answer.warnings.join("; ")})` : "";
+    setStatus(`preview ${answer.size[0]}×${answer.size[1]} in ${Math.round(state.previewMs)} ms${said}`, said ? "warning" : "");
     document.body.dataset.previews = String(Number(document.body.dataset.previews || 0) + 1);
   } catch (error) {
     if (error.status === 409) return;  // (another client's newer preview of this frame)
