@@ -215,6 +215,7 @@ class Client:
         colorspace: str | None = None,
         display: str | None = None,
         view: str | None = None,
+        view_layer: str | None = None,
     ) -> Path:
         """``POST /v1/enhance``: write the enhanced EXR (or a PNG with ``preview``, through the
         OCIO ``display`` and ``view``, default the server config's) to ``output``.
@@ -223,8 +224,9 @@ class Client:
         default, Radiance Scaling). ``camera``: a dict, a Camera or a camera JSON path.
         ``colorspace``: the working space (a name of the server's OCIO config).
         ``layout``: where new layers go (same, part, sidecar; default: the server's).
+        ``view_layer``: the view layer read, of a render with several.
         """
-        data = self._read_fields(preset, camera, mapping, normal_space, colorspace)
+        data = self._read_fields(preset, camera, mapping, normal_space, colorspace, view_layer)
         data["debug_layers"] = "true" if debug_layers else "false"
         optional = {
             "pipeline": _pipeline_json(pipeline),
@@ -276,6 +278,7 @@ class Client:
         mapping: Mapping[str, str] | None = None,
         normal_space: str | None = None,
         colorspace: str | None = None,
+        view_layer: str | None = None,
     ) -> dict[str, str]:
         """The form fields that say how the server reads the uploaded frame."""
         fields = {
@@ -284,6 +287,7 @@ class Client:
             "map": json.dumps(dict(mapping)) if mapping else None,
             "normal_space": normal_space,
             "colorspace": colorspace,
+            "view_layer": view_layer,
         }
         return {k: v for k, v in fields.items() if v is not None}
 
@@ -301,6 +305,7 @@ class Client:
         mapping: Mapping[str, str] | None = None,
         normal_space: str | None = None,
         colorspace: str | None = None,
+        view_layer: str | None = None,
         **options: float | str,
     ) -> dict[str, Any]:
         """``POST /v1/score``: the congruence score of a frame's beauty (after ``pipeline``).
@@ -308,7 +313,7 @@ class Client:
         ``options``: ``gradient_scale``, ``integration_scale``, ``percentile``, ``depth_jump``,
         ``shading_norm``, ``shape``.
         """
-        data = self._read_fields(preset, camera, mapping, normal_space, colorspace)
+        data = self._read_fields(preset, camera, mapping, normal_space, colorspace, view_layer)
         data.update({k: str(v) for k, v in options.items()})
         spec = _pipeline_json(pipeline)
         if spec is not None:

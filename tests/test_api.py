@@ -11,8 +11,10 @@ import json
 import logging
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
+import OpenEXR
 import pytest
 from pydantic import ValidationError
 
@@ -27,6 +29,7 @@ from service.registry import PipelineError, operators
 from service.settings import Settings
 from tests.exr_factory import cropped, make_scene, write_canonical
 from tests.problem_json import assert_problem
+from tests.test_output_layout import two_view_layers
 
 pytestmark = pytest.mark.filterwarnings("ignore:Using `httpx` with `starlette.testclient`")
 
@@ -416,3 +419,25 @@ def test_an_upload_is_saved_whole_from_memory_or_disk(
         target = tmp_path / f"saved{n}.exr"
         got = anyio.run(save, UploadFile(source), target)  # type: ignore[arg-type]
         assert got == size and target.read_bytes() == data
+
+
+def test_the_view_layer_form_field_chooses_the_layer(client: Any, tmp_path: Path) -> None:
+    """``view_layer`` reads that view layer of a render with several, as ``--view-layer``."""
+    data = two_view_layers(tmp_path).read_bytes()
+    for layer in ("Back", "ViewLayer"):
+        r = client.post(
+            "/v1/enhance",
+            headers=AUTH,
+            files={"file": ("two.exr", data)},
+            data={"view_layer": layer},
+        )
+        assert r.status_code == 200, r.text
+        out = tmp_path / f"{layer}.exr"
+        out.write_bytes(r.content)
+        with OpenEXR.File(str(out), separate_channels=True) as f:
+            names = {n for part in f.parts for n in part.channels}
+        assert f"{layer}.Depict.R" in names and len([n for n in names if ".Depict." in n]) == 4
+    r = client.post(
+        "/v1/enhance", headers=AUTH, files={"file": ("two.exr", data)}, data={"view_layer": "No"}
+    )
+    assert_problem(r, 422, "view layer 'No' not in the file; layers: Back, ViewLayer")

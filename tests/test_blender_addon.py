@@ -35,9 +35,14 @@ pytestmark = pytest.mark.skipif(BLENDER is None, reason="Debian's blender is not
 
 
 def drive(
-    tmp: Path, path: str, server: str | None = None, pipeline: str = PIPELINE
+    tmp: Path,
+    path: str,
+    server: str | None = None,
+    pipeline: str = PIPELINE,
+    scene: str = "one-layer",
 ) -> dict[str, Any]:
-    """Run the driver with ``PATH`` = ``path``; its report (and the files it left in ``tmp``)."""
+    """Run the driver with ``PATH`` = ``path``; its report (and the files it left in ``tmp``).
+    ``scene``: ``two-layers`` adds a view layer with more passes beside the active one."""
     assert BLENDER is not None
     env = {k: v for k, v in os.environ.items() if not k.startswith("DEPICT_")}
     env.update(PATH=path, BLENDER_USER_SCRIPTS=str(tmp / "scripts"), TMPDIR=str(tmp))
@@ -45,7 +50,11 @@ def drive(
         env["DEPICT_SERVER"] = server
     cmd = [BLENDER, "-b", "--factory-startup", "--python", str(DRIVER), "--"]
     run = subprocess.run(
-        [*cmd, str(ADDON), str(tmp), pipeline], env=env, capture_output=True, text=True, timeout=600
+        [*cmd, str(ADDON), str(tmp), pipeline, scene],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     report_file = tmp / "report.json"
     assert report_file.is_file(), run.stdout[-3000:] + run.stderr[-3000:]
@@ -105,9 +114,19 @@ def test_addon_mask_switches_cryptomatte_on_and_changes_only_suzanne(tmp_path: P
     assert changed.sum() > 50 and not changed[m == 0].any()
 
 
+def test_addon_enhances_the_active_view_layer_of_several(tmp_path: Path) -> None:
+    """Beside the active view layer, one with more passes: Depict read that one (and the add-on
+    then found no Depict pass in the active layer), having no way to be told which."""
+    venv_bin = str(Path(sys.executable).parent)
+    out = check_result(tmp_path, drive(tmp_path, f"{venv_bin}:/usr/bin:/bin", scene="two-layers"))
+    with OpenEXR.File(str(out), separate_channels=True) as f:
+        names = {n for p in f.parts for n in p.channels}
+    assert "Another.AO.R" in names and not any(n.startswith("Another.Depict") for n in names)
+
+
 def test_addon_with_a_depict_server(tmp_path: Path) -> None:
     with live_server({"DEPICT_WORKERS": "1"}) as server:
-        report = drive(tmp_path, "/usr/bin:/bin", server=server.url)
+        report = drive(tmp_path, "/usr/bin:/bin", server=server.url, scene="two-layers")
         logs = server.logs()
     out = check_result(tmp_path, report)
     assert '"path": "/v1/enhance"' in logs and '"status": 200' in logs

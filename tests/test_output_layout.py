@@ -318,3 +318,47 @@ def test_lossy_compression_is_kept_and_its_cost_said_on_stderr(
     if codec in ("DWAA", "DWAB"):
         assert "curvature.dir.Y" in err  # a data layer DWA quantises
     assert curvature.shape == frame.shape
+
+
+def two_view_layers(tmp_path: Path) -> Path:
+    """The Blender fixture with a second view layer, ``Back``, of every pass (its beauty and
+    lobes dimmed): the two tie on passes."""
+    header, channels = read_file(BLENDER_EXR)
+    back = {
+        name.replace("ViewLayer.", "Back.", 1): (
+            pixels * np.float32(0.25) if name.endswith((".R", ".G", ".B")) else pixels
+        )
+        for name, pixels in channels.items()
+        if name.startswith("ViewLayer.")
+    }
+    path = tmp_path / "two.exr"
+    OpenEXR.File(dict(header), {**channels, **back}).write(str(path))
+    return path
+
+
+def test_the_view_layer_read_is_the_one_asked_for(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A render with two view layers: the warning says how to choose, and ``--view-layer``
+    chooses it (it could not be chosen: the warning's ``layer=...`` was no option); the result
+    is a pass of that layer, made from that layer's passes."""
+    src = two_view_layers(tmp_path)
+    assert depict("inspect", src) == 0
+    assert "(choose with --view-layer NAME, the view_layer form field over HTTP)" in (
+        capsys.readouterr().out
+    )
+    results = {}
+    for layer in ("ViewLayer", "Back"):
+        out = tmp_path / f"{layer}.exr"
+        assert depict("enhance", src, "-o", out, "--view-layer", layer) == 0
+        _, channels = read_file(out)
+        assert not [n for n in channels if n.endswith(".Depict.R") and not n.startswith(layer)]
+        results[layer] = channels[f"{layer}.Depict.R"]
+    _, channels = read_file(src)
+    for layer, result in results.items():  # (each near its own beauty, the other 4x off)
+        beauty = channels[f"{layer}.Combined.R"]
+        assert abs(float(result.mean()) / float(beauty.mean()) - 1.0) < 0.2
+    capsys.readouterr()
+    assert depict("enhance", src, "-o", tmp_path / "x.exr", "--view-layer", "Front") == 2
+    err = capsys.readouterr().err
+    assert err == "depict: error: view layer 'Front' not in the file; layers: Back, ViewLayer\n"

@@ -17,7 +17,7 @@ import numpy as np
 from gbuffer.camera import Camera
 from gbuffer.colorspace import ColorSpace, resolve_leniently
 from gbuffer.colorspace import resolve as resolve_colorspace
-from gbuffer.errors import FrameError
+from gbuffer.errors import FrameError, OptionError
 from gbuffer.exr import ExrPassthrough, release_pixels, window
 from gbuffer.frame import LOBES, Frame, Passthrough
 from gbuffer.holes import hole_warnings, mark_holes
@@ -521,8 +521,8 @@ def _view_layer(
         if layer is not None and layer not in prefixes:
             prefixes.append(layer)
     if opts.layer is not None:
-        if opts.layer not in prefixes and prefixes:
-            raise FrameError(
+        if opts.layer not in prefixes and prefixes:  # (the request, not the file, is wrong)
+            raise OptionError(
                 f"view layer '{opts.layer}' not in the file; layers: {', '.join(prefixes)}"
             )
         return opts.layer
@@ -536,7 +536,8 @@ def _view_layer(
     chosen = max(prefixes, key=lambda p: (counts[p], f"{p}.{beauty}.R" in flat))
     if len(prefixes) > 1:
         warnings.append(
-            f"view layers {', '.join(prefixes)}: using '{chosen}' (choose with layer=...)"
+            f"view layers {', '.join(prefixes)}: using '{chosen}' (choose with --view-layer "
+            "NAME, the view_layer form field over HTTP)"
         )
     return chosen
 

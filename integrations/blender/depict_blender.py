@@ -244,8 +244,9 @@ def find_executable(prefs):
     return found
 
 
-def run_local(executable, src, out, camera, pipeline):
+def run_local(executable, src, out, camera, pipeline, view_layer):
     cmd = [executable, "enhance", src, "-o", out, "--camera", camera, "--pipeline", pipeline]
+    cmd += ["--view-layer", view_layer]
     env = {k: v for k, v in os.environ.items() if k != "DEPICT_SERVER"}
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3600)
     if done.returncode != 0:
@@ -271,11 +272,11 @@ def _multipart(fields, files):
     return bytes(body), f"multipart/form-data; boundary={boundary}"
 
 
-def run_server(url, src, out, camera, pipeline, name):
+def run_server(url, src, out, camera, pipeline, name, view_layer):
     """POST /v1/enhance to a Depict server (Python's standard library only)."""
     with open(src, "rb") as fh, open(camera) as cam, open(pipeline) as pipe:
         files = {"file": (name, fh.read())}
-        fields = {"camera": cam.read(), "pipeline": pipe.read()}
+        fields = {"camera": cam.read(), "pipeline": pipe.read(), "view_layer": view_layer}
     body, ctype = _multipart(fields, files)
     request = urllib.request.Request(url.rstrip("/") + "/v1/enhance", data=body, method="POST")
     request.add_header("Content-Type", ctype)
@@ -366,14 +367,15 @@ def enhance(context, pipeline_text, render, compositor):
     prefs = context.preferences.addons.get(__name__)
     prefs = prefs.preferences if prefs else None
     server = (prefs.server if prefs else "") or os.environ.get("DEPICT_SERVER", "")
+    layer = context.view_layer.name  # (the one the user works on, of a render with several)
     if server:
         name = (bpy.path.basename(bpy.data.filepath) or "render").rsplit(".", 1)[0] + ".exr"
-        warnings = run_server(server, src, out, camera, pipe, name)
+        warnings = run_server(server, src, out, camera, pipe, name, layer)
     else:
-        warnings = run_local(find_executable(prefs), src, out, camera, pipe)
+        warnings = run_local(find_executable(prefs), src, out, camera, pipe, layer)
     image = load_result(out)
     if compositor:
-        use_in_compositor(scene, image, context.view_layer.name)
+        use_in_compositor(scene, image, layer)
     return out, warnings
 
 

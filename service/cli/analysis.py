@@ -106,6 +106,7 @@ def _read_flags(args: argparse.Namespace) -> dict[str, bool]:
         "--camera": args.camera is not None,
         "--map": bool(args.map),
         "--normal-space": args.normal_space is not None,
+        "--view-layer": args.view_layer is not None,
         "--colorspace": args.colorspace is not None,
     }
 

@@ -229,6 +229,12 @@ def add_read_options(p: argparse.ArgumentParser) -> None:
         "--normal-space", choices=["world", "camera"], help="override the normals' space"
     )
     p.add_argument(
+        "--view-layer",
+        metavar="NAME",
+        help="the view layer whose passes are read, of a render with several (Blender's; "
+        "default: the one with the most passes)",
+    )
+    p.add_argument(
         "--colorspace",
         metavar="NAME",
         help="working space of the radiance, a linear colour space of the OpenColorIO config "

@@ -46,12 +46,14 @@ def steps(args: argparse.Namespace) -> pipeline.Pipeline | None:
 
 
 def read_request(args: argparse.Namespace) -> ReadRequest:
-    """How ``--preset``, ``--map``, ``--normal-space``, ``--colorspace`` and ``--camera`` say
-    to read a frame (an unknown preset is refused here, before any file is read)."""
+    """How ``--preset``, ``--map``, ``--normal-space``, ``--view-layer``, ``--colorspace`` and
+    ``--camera`` say to read a frame (an unknown preset is refused here, before any file is
+    read)."""
     check_preset(args)
     options = ReadOptions(
         mapping=dict(mapping(args)),
         normal_space=args.normal_space,
+        layer=getattr(args, "view_layer", None),
         colorspace=getattr(args, "colorspace", None),
     )
     camera = Camera.from_json_file(args.camera) if args.camera else None

@@ -70,6 +70,7 @@ def enhance(args: argparse.Namespace) -> int:
                 mapping=buffers,
                 normal_space=args.normal_space,
                 colorspace=args.colorspace,
+                view_layer=args.view_layer,
                 debug_layers=args.debug_layers,
                 output_layer=args.output_layer,
                 layout=args.layout,
@@ -91,6 +92,7 @@ def score(args: argparse.Namespace) -> int:
             mapping=mapping(args),
             normal_space=args.normal_space,
             colorspace=args.colorspace,
+            view_layer=args.view_layer,
             **options,
         )
     return print_score(args, data)

@@ -82,12 +82,14 @@ class ReadFields:
     mapping: dict[str, str]
     normal_space: str | None
     colorspace: str | None = None
+    view_layer: str | None = None
 
     def request(self, limits: Limits) -> ReadRequest:
         """The read request (the mapping's buffer names checked here, after the upload)."""
         options = ReadOptions(
             mapping=dict[str, str | list[str]](self.mapping),
             normal_space=self.normal_space,
+            layer=self.view_layer,
             colorspace=self.colorspace,
         )
         return ReadRequest(self.preset, self.camera, options, limits)
@@ -99,6 +101,7 @@ def _read_fields(
     map_text: str | None,
     normal_space: str | None,
     colorspace: str | None,
+    view_layer: str | None,
 ) -> ReadFields:
     if preset != "auto" and preset not in PRESETS:
         raise Problem(
@@ -114,7 +117,7 @@ def _read_fields(
             named_colorspace(colorspace)
         except OptionError as exc:
             raise Problem("invalid-request", f"colorspace: {exc}") from None
-    return ReadFields(preset, cam, mapping, normal_space, colorspace or None)
+    return ReadFields(preset, cam, mapping, normal_space, colorspace or None, view_layer or None)
 
 
 async def read_fields(
@@ -123,11 +126,23 @@ async def read_fields(
     map_text: str | None = None,
     normal_space: str | None = None,
     colorspace: str | None = None,
+    view_layer: str | None = None,
 ) -> ReadFields:
     """The read fields checked off the event loop (422 naming the bad one)."""
     return await anyio.to_thread.run_sync(
-        _read_fields, preset, camera_text, map_text, normal_space, colorspace
+        _read_fields, preset, camera_text, map_text, normal_space, colorspace, view_layer
     )
+
+
+#: The ``view_layer`` form field: which view layer of a render with several is read.
+ViewLayerField = Annotated[
+    str | None,
+    Form(
+        max_length=200,
+        description="the view layer whose passes are read, of a render with several (Blender's; "
+        "default: the one with the most passes)",
+    ),
+]
 
 
 #: The ``colorspace`` form field: the working space of the radiance.

@@ -2,7 +2,7 @@
 their layers, previews and the full-resolution result; and the page itself at ``/ui/``.
 
 * ``POST /v1/frames``: multipart ``file`` (EXR) + ``preset``, ``camera``, ``map``,
-  ``normal_space``, ``colorspace`` -> ``{"id", "name", "info", "expires_s"}``;
+  ``normal_space``, ``colorspace``, ``view_layer`` -> ``{"id", "name", "info", "expires_s"}``;
   ``POST /v1/frames/example``: the bundled example (a render of ``examples/spot.obj``);
 * ``GET /v1/frames/{id}``: what ``inspect`` found; ``DELETE /v1/frames/{id}``: forget it now;
 * ``GET /v1/frames/{id}/layers/{layer}.png?height=``: a layer as a picture;
@@ -165,9 +165,10 @@ async def upload(
     map: MapField = None,
     normal_space: NormalSpace = None,
     colorspace: forms.ColorspaceField = None,
+    view_layer: forms.ViewLayerField = None,
     height: PreviewHeight = 540,
 ) -> dict[str, Any]:
-    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace, view_layer)
     limits = server.settings.limits
     name = Path(file.filename or "frame.exr").name or "frame.exr"
     with store(server).new_folder() as (frame_id, folder):

@@ -34,7 +34,9 @@ LOBE_PASSES = (
 )
 
 
-def scene_setup() -> None:
+def scene_setup(second_layer: bool = False) -> None:
+    """The scene; with ``second_layer``, a view layer "Another" beside the active one, with
+    more passes (AO too): Depict would read it, were it not told the active one."""
     camera_frame.build("PERSP", "AUTO", 35.0)
     scene = bpy.context.scene
     scene.render.engine = "CYCLES"
@@ -44,6 +46,13 @@ def scene_setup() -> None:
     scene.render.resolution_percentage = 100
     for name in LOBE_PASSES:
         setattr(bpy.context.view_layer, name, True)
+    if second_layer:
+        other = scene.view_layers.new("Another")
+        extra = ("ambient_occlusion", "normal", "z", "position", "mist", "emit", "uv")
+        more = (*extra, "environment", "object_index", "material_index", "shadow")
+        for name in (*LOBE_PASSES, *(f"use_pass_{p}" for p in more)):
+            if hasattr(other, name):
+                setattr(other, name, True)
 
 
 def render_compositor(path: str, socket_name: str) -> None:
@@ -75,6 +84,7 @@ def main() -> None:
     argv = sys.argv[sys.argv.index("--") + 1 :]
     addon, outdir = argv[0], argv[1]
     pipeline = argv[2] if len(argv) > 2 else ""
+    second_layer = len(argv) > 3 and argv[3] == "two-layers"
     report: dict = {}
     try:
         bpy.ops.preferences.addon_install(filepath=addon, overwrite=True)
@@ -86,7 +96,7 @@ def main() -> None:
             c for c in ("DEPICT_PT_render", "DEPICT_PT_image") if hasattr(bpy.types, c)
         ]
         report["settings"] = settings_listing()
-        scene_setup()
+        scene_setup(second_layer)
         result = bpy.ops.depict.enhance(pipeline=pipeline, compositor=True)
         report["result"] = sorted(result)
         image = bpy.data.images.get("Depict Result")

@@ -145,6 +145,7 @@ async def score(
     map: MapField = None,
     normal_space: NormalSpace = None,
     colorspace: forms.ColorspaceField = None,
+    view_layer: forms.ViewLayerField = None,
     gradient_scale: Annotated[
         float | None,
         Form(
@@ -189,7 +190,7 @@ async def score(
         "shape": shape,
     }
     options = {k: v for k, v in given.items() if v is not None}
-    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace, view_layer)
     out = await run_on_upload(
         server,
         work,

@@ -102,6 +102,7 @@ async def enhance(
         Literal["world", "camera"] | None, Form(description="override the normals' space")
     ] = None,
     colorspace: forms.ColorspaceField = None,
+    view_layer: forms.ViewLayerField = None,
     debug_layers: Annotated[bool, Form(description="also write intermediate layers")] = False,
     output_layer: Annotated[
         str | None,
@@ -131,7 +132,7 @@ async def enhance(
     view: forms.ViewQuery = None,
 ) -> Response:
     steps = await forms.pipeline_field(pipeline) or pipelines.DEFAULT
-    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace)
+    fields = await forms.read_fields(preset, camera, map, normal_space, colorspace, view_layer)
     shown = forms.preview_view(display, view)
     name = file.filename or "upload.exr"
     src = work.path / "in.exr"
