@@ -27,11 +27,11 @@ import time
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import httpx
 
-from gbuffer.atomic import atomic_path, read_text
+from gbuffer.atomic import atomic_path, read_text, regular_file
 from service.errors import DepictError
 from service.headers import WARNING, warning_text
 
@@ -63,6 +63,17 @@ def _camera_json(camera: Any) -> str | None:
         raise DepictError(f"cannot read camera file {camera}: {exc.strerror}") from None
 
 
+def _opened(path: Path) -> BinaryIO:
+    """``path`` open to upload: a regular file (a FIFO would block the upload for ever, a
+    device never end), else :class:`DepictError` naming it."""
+    try:
+        return open(regular_file(path), "rb")
+    except FileNotFoundError:
+        raise DepictError(f"no such file: {path}") from None
+    except OSError as exc:
+        raise DepictError(f"cannot read {path}: {exc.strerror or exc}") from None
+
+
 class Client:
     """A connection to a Depict server.
 
@@ -90,13 +101,21 @@ class Client:
         if not url.startswith(("http://", "https://")):
             raise DepictError(f"server URL {url!r} must start with http:// or https://")
         key = api_key if api_key is not None else os.environ.get("DEPICT_API_KEY") or None
+        if key and not (key.isascii() and key.isprintable()):
+            raise DepictError(
+                "the API key (DEPICT_API_KEY) must be printable ASCII: an HTTP header holds "
+                "nothing else"
+            )
         headers = {"Authorization": f"Bearer {key}"} if key else {}
         self.url = url.rstrip("/")
         self.retries = retries
         self.warnings: list[str] = []
-        self._http = httpx.Client(
-            base_url=self.url, headers=headers, timeout=timeout, transport=transport
-        )
+        try:
+            self._http = httpx.Client(
+                base_url=self.url, headers=headers, timeout=timeout, transport=transport
+            )
+        except httpx.InvalidURL as exc:
+            raise DepictError(f"server URL {url!r} is not valid: {exc}") from None
 
     @classmethod
     def from_env(cls, url: str | None = None, **kwargs: Any) -> Client:
@@ -145,7 +164,7 @@ class Client:
         while True:
             with ExitStack() as stack:
                 upload = {
-                    name: (p.name, stack.enter_context(open(p, "rb")))
+                    name: (p.name, stack.enter_context(_opened(p)))
                     for name, p in (files or {}).items()
                 }
                 try:
@@ -160,8 +179,6 @@ class Client:
                     )
                 except httpx.TransportError as exc:
                     raise DepictError(f"cannot reach {self.url}: {exc}") from None
-                except FileNotFoundError as exc:
-                    raise DepictError(f"no such file: {exc.filename}") from None
                 if response.status_code == 429 and attempt < self.retries:
                     attempt += 1
                     delay = response.headers.get("retry-after", "1")
@@ -169,7 +186,10 @@ class Client:
                     continue
                 if response.status_code >= 400:
                     raise self._error(response)
-                yield response
+                try:
+                    yield response
+                except httpx.TransportError as exc:  # (the server went away while it answered)
+                    raise DepictError(f"the answer of {self.url} was cut short: {exc}") from None
                 return
 
     def _json(self, path: str) -> Any:

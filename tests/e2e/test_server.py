@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import shutil
 import signal
+import socket
 import threading
 import time
 from pathlib import Path
@@ -280,6 +282,64 @@ def test_unreachable_server_is_one_line(
     assert cli(["score", str(frame), "--server", url]) == 2
     err = capsys.readouterr().err
     assert err.startswith("depict: error: cannot reach") and err.count("\n") == 1
+
+
+#: A frame to send (the Blender fixture).
+FRAME = BLENDER / "cycles_multilayer.exr"
+
+
+def test_what_the_client_cannot_send_is_one_line(
+    tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A FIFO input (the upload waited for a writer for ever), a device (it never ended), a
+    malformed server URL and an API key no HTTP header can hold: each a traceback or a hang
+    before, now one line and exit 2, with nothing sent."""
+    fifo = tmp_path / "fifo.exr"
+    os.mkfifo(fifo)
+    url = f"http://127.0.0.1:{free_port()}"
+    for args, words in (
+        (["score", str(fifo), "--server", url], "it is a FIFO (named pipe), not a regular file"),
+        (["score", "/dev/zero", "--server", url], "it is a character device, not a regular"),
+        (["score", str(FRAME), "--server", "http://host:port"], "is not valid: Invalid port"),
+    ):
+        assert cli(args) == 2
+        err = capsys.readouterr().err
+        assert words in err and err.count("\n") == 1, err
+    with pytest.raises(DepictError, match=r"API key .* must be printable ASCII"):
+        Client(url, api_key="clé")
+
+
+def test_an_answer_cut_short_is_one_line_and_leaves_the_output(
+    tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A server that goes away while it sends the result (killed, a proxy's timeout): one line
+    and exit 2 (it was httpx's RemoteProtocolError, exit 1); the output kept as it was."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    port = listener.getsockname()[1]
+
+    def answer_part() -> None:
+        conn, _ = listener.accept()
+        with conn:
+            conn.settimeout(10)
+            data = b""
+            while b"--\r\n" not in data[-64:]:  # (the multipart body's end)
+                data += conn.recv(1 << 16)
+            conn.sendall(b"HTTP/1.1 200 OK\r\nContent-Length: 100000\r\n\r\n" + b"x" * 1000)
+
+    thread = threading.Thread(target=answer_part)
+    thread.start()
+    out = tmp_path / "out.exr"
+    out.write_bytes(b"the output before this run")
+    args = ["enhance", str(FRAME), "-o", str(out), "--server", f"http://127.0.0.1:{port}"]
+    try:
+        assert cli(args) == 2
+    finally:
+        thread.join(timeout=30)
+        listener.close()
+    err = capsys.readouterr().err
+    assert "was cut short" in err and err.count("\n") == 1, err
+    assert out.read_bytes() == b"the output before this run"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out.exr"]
 
 
 def _cli_json(args: list[str], capsys: pytest.CaptureFixture[str]) -> dict:
