@@ -118,7 +118,10 @@ def cli_section() -> str:
         "",
         "`depict COMMAND --help` lists every flag. Commands that process frames (`enhance`, "
         "`render`, `score`, `compare`, `relief-pick`) run locally, or on a Depict server with "
-        "`--server URL` (or `DEPICT_SERVER`) with the same flags and the same output.",
+        "`--server URL` (or `DEPICT_SERVER`) with the same flags and the same output; a flag "
+        "the server's route does not take is refused rather than dropped (`render --shading`; "
+        "`--map`, `--normal-space`, `--view-layer` and `--colorspace` of `compare` and "
+        "`relief-pick`).",
         "",
         "| command | what it does |",
         "|---|---|",

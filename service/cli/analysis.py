@@ -87,7 +87,7 @@ def compare_options(args: argparse.Namespace) -> tuple[bool, dict[str, Any]]:
     if not options["methods"]:  # (an empty list ran every method)
         raise UsageError(f"--methods {args.methods!r}: name at least one method")
     framing = {k: getattr(args, k) for k in MESH_FRAMING if getattr(args, k) is not None}
-    reading = [flag for flag, given in _read_flags(args).items() if given]
+    reading = [flag for flag, given in read_flags(args).items() if given]
     if is_mesh:
         options.update({**MESH_FRAMING, **framing})
         if min(options["width"], options["height"]) < 3:  # (the score's "depth must be 3x3")
@@ -99,7 +99,7 @@ def compare_options(args: argparse.Namespace) -> tuple[bool, dict[str, Any]]:
     return is_mesh, options
 
 
-def _read_flags(args: argparse.Namespace) -> dict[str, bool]:
+def read_flags(args: argparse.Namespace) -> dict[str, bool]:
     """Whether each flag of reading a frame was given."""
     return {
         "--preset": args.preset != "auto",

@@ -13,6 +13,7 @@ from service.cli.analysis import (
     print_comparison,
     print_pick,
     print_score,
+    read_flags,
     score_options,
 )
 from service.cli.args import UsageError, mapping
@@ -98,8 +99,25 @@ def score(args: argparse.Namespace) -> int:
     return print_score(args, data)
 
 
+#: The flags of reading a frame that ``compare`` and ``relief-pick`` send to a server.
+SENT_READ_FLAGS = ("--preset", "--camera")
+
+
+def _unsent_read_flags(args: argparse.Namespace, command: str) -> None:
+    """A UsageError for the flags of reading a frame that ``command``'s route does not take:
+    they were dropped without a word (a different score than the same command here)."""
+    unsent = [f for f, given in read_flags(args).items() if given and f not in SENT_READ_FLAGS]
+    if unsent:
+        raise UsageError(
+            f"{', '.join(unsent)}: not sent to a server by {command} (its route reads the file "
+            "with --preset and --camera only); run it here, without --server"
+        )
+
+
 def compare(args: argparse.Namespace) -> int:
     is_mesh, options = compare_options(args)
+    if not is_mesh:
+        _unsent_read_flags(args, "compare")
     with Client.from_env(args.server) as client:
         data = client.compare(
             args.input,
@@ -113,6 +131,7 @@ def compare(args: argparse.Namespace) -> int:
 
 
 def relief_pick(args: argparse.Namespace) -> int:
+    _unsent_read_flags(args, "relief-pick")
     with Client.from_env(args.server) as client:
         data = client.relief_pick(
             args.file, args.x, args.y, pick_params(args), preset=args.preset, camera=args.camera

@@ -292,8 +292,9 @@ def test_what_the_client_cannot_send_is_one_line(
     tmp_path: Path, remote_env: None, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """A FIFO input (the upload waited for a writer for ever), a device (it never ended), a
-    malformed server URL and an API key no HTTP header can hold: each a traceback or a hang
-    before, now one line and exit 2, with nothing sent."""
+    malformed server URL, an API key no HTTP header can hold, and read flags a route does not
+    take: each a traceback, a hang or a flag dropped before, now one line and exit 2, with
+    nothing sent."""
     fifo = tmp_path / "fifo.exr"
     os.mkfifo(fifo)
     url = f"http://127.0.0.1:{free_port()}"
@@ -301,6 +302,15 @@ def test_what_the_client_cannot_send_is_one_line(
         (["score", str(fifo), "--server", url], "it is a FIFO (named pipe), not a regular file"),
         (["score", "/dev/zero", "--server", url], "it is a character device, not a regular"),
         (["score", str(FRAME), "--server", "http://host:port"], "is not valid: Invalid port"),
+        # (dropped without a word: a score unlike the same command here)
+        (
+            ["relief-pick", str(FRAME), "9", "9", "--map", "normal=N", "--server", url],
+            "--map: not sent to a server by relief-pick",
+        ),
+        (
+            ["compare", str(FRAME), "--normal-space", "world", "--server", url],
+            "--normal-space: not sent to a server by compare",
+        ),
     ):
         assert cli(args) == 2
         err = capsys.readouterr().err
