@@ -121,6 +121,11 @@ def pick_job(
     frame = read.read(in_path)
     h, w = frame.shape
     if 0 <= x < w and 0 <= y < h and not frame.covered()[y, x]:  # (else rl.pick says which)
+        if frame.holes is not None and frame.holes[y, x]:  # (its depth may be fine)
+            raise PipelineError(
+                f"pixel ({x}, {y}) is a NaN or Inf pixel of the beauty (a hole the operators "
+                "leave out): pick a pixel beside it"
+            )
         raise PipelineError(
             f"pixel ({x}, {y}) shows no surface (no finite, positive depth there): pick a pixel "
             "on an object"

@@ -13,7 +13,7 @@ import OpenEXR
 import pytest
 
 from service.scene import NOTHING_SEEN
-from tests.exr_factory import TORN_MESH
+from tests.exr_factory import TORN_MESH, render_with_nan
 from tests.test_cli import SPOT, H, W, depict, render_spot
 
 
@@ -249,3 +249,18 @@ def test_a_set_value_is_json_a_comma_list_or_text() -> None:
     assert parse_value("point:0,2,1") == ["point:0", 2, 1]
     with pytest.raises(ValueError, match=r"'\[0\.5,nan\]' is not valid JSON"):
         parse_value("[0.5,nan]")
+
+
+def test_a_pick_on_a_hole_of_the_beauty_says_so(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A pixel whose beauty is NaN (a firefly) and depth finite: it is a hole, and the
+    refusal said it had no finite depth there."""
+    path = render_with_nan(tmp_path / "nan.exr", (64, 48), {"beauty": [(24, 32, 0, np.nan)]})
+    capsys.readouterr()
+    assert depict("relief-pick", path, "32", "24") == 2
+    err = capsys.readouterr().err
+    assert err == (
+        "depict: error: pixel (32, 24) is a NaN or Inf pixel of the beauty (a hole the "
+        "operators leave out): pick a pixel beside it\n"
+    )
