@@ -56,6 +56,12 @@ def score_job(
     }
 
 
+#: Why a comparison's scores are all 0 when no pixel could be scored (a mesh out of view).
+NOTHING_COMPARED = (
+    "no pixel was scored: none is covered (a finite, positive depth on a surface); the scores "
+    "0 say nothing of the methods"
+)
+
 #: Why a score is 0 when no pixel could be scored.
 NOTHING_SCORED = (
     "no pixel was scored: none is covered (a finite, positive depth on a surface) with a finite "
@@ -106,6 +112,7 @@ def compare_job(
         files=files,
     )
     out = result.to_dict()
+    out["warnings"] = [] if frame.covered().any() else [NOTHING_COMPARED]
     if sheet:
         with tempfile.TemporaryDirectory() as tmp:
             png = contact_sheet(result, Path(tmp) / "sheet.png").read_bytes()

@@ -264,3 +264,15 @@ def test_a_pick_on_a_hole_of_the_beauty_says_so(
         "depict: error: pixel (32, 24) is a NaN or Inf pixel of the beauty (a hole the "
         "operators leave out): pick a pixel beside it\n"
     )
+
+
+def test_a_comparison_of_nothing_in_view_says_its_scores_say_nothing(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A mesh of one degenerate triangle: every score 0, which said nothing, with exit 0 and
+    no word (``score`` and ``render`` warned on the same input)."""
+    mesh = tmp_path / "line.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
+    args = ["compare", mesh, "--directions", "1", "--methods", "lambert", "--width", "32"]
+    assert depict(*args, "--height", "32") == 0
+    assert "depict: warning: no pixel was scored: none is covered" in capsys.readouterr().err

@@ -127,6 +127,7 @@ def cmd_compare(args: argparse.Namespace) -> int:
 
 
 def print_comparison(args: argparse.Namespace, data: dict[str, Any]) -> int:
+    warn(data.get("warnings", []))
     result = ComparisonResult.from_dict(data)
     if args.plot:
         plot(result, args.plot)

@@ -71,6 +71,9 @@ class Comparison(BaseModel):
     )
     seconds: dict[str, float]
     sheet_png: str | None = Field(None, description="the contact sheet, base64 PNG (sheet=true)")
+    warnings: list[str] = Field(
+        default_factory=list, description="what the scores do not say (nothing covered)"
+    )
 
 
 class CompareOptions(NumbersModel):
