@@ -70,10 +70,25 @@ def plot(result: ComparisonResult, path: str | Path, title: str | None = None) -
     fig.tight_layout()
     try:
         with atomic_path(path) as tmp:
-            fig.savefig(tmp)
+            fig.savefig(tmp, format=plot_format(path))
     finally:
         plt.close(fig)
     return path
+
+
+def plot_format(path: str | Path) -> str:
+    """The format matplotlib writes ``path`` in, from its name's suffix; ValueError naming the
+    ones it writes where the suffix is none of them (checked before a comparison runs)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    fmt = Path(path).suffix.lstrip(".").lower()
+    if fmt not in kinds:
+        raise ValueError(
+            f"--plot {path}: a plot is written as {', '.join(sorted(kinds))}; name it so (e.g. "
+            "scores.png)"
+        )
+    return fmt
 
 
 def _crop_box(mask: NDArray[np.bool_], margin: float = 0.04) -> tuple[int, int, int, int]:

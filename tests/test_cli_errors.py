@@ -138,6 +138,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
     ),
     "compare method": (["compare", "{exr}", "--methods", "lambert,foo"], "foo"),
     "compare of no method": (["compare", "{exr}", "--methods=,"], "name at least one method"),
+    "a plot named for no format": (  # (after the whole comparison: "Format 'tmp'", sheet written)
+        ["compare", "{exr}", "--directions", "1", "--sheet", "{out}", "--plot", "{out}.xyz"],
+        "--plot {out}.xyz: a plot is written as ",
+    ),
     "compare of a one-pixel render": (  # (the score's "depth must be at least 3x3")
         ["compare", "{mesh}", "--width", "1"],
         "a comparison renders at least 3x3 pixels",
@@ -163,7 +167,7 @@ def test_errors_are_one_line_and_exit_2(
     lines = captured.err.splitlines()
     assert len(lines) == 1, captured.err
     assert lines[0].startswith("depict: error: "), lines[0]
-    assert needle in lines[0]
+    assert needle.format(**values) in lines[0]
     assert "Traceback" not in captured.err + captured.out
     assert not out.exists()  # nothing half-written
 

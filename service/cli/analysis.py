@@ -14,7 +14,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from analysis.pictures import plot
+from analysis.pictures import plot, plot_format
 from analysis.result import ComparisonResult
 from gbuffer.atomic import atomic_path, check_outputs
 from service import arm
@@ -75,6 +75,10 @@ def _shading_norm(text: str) -> str | float:
 def compare_options(args: argparse.Namespace) -> tuple[bool, dict[str, Any]]:
     """Whether the input is a mesh, and the comparison options given (outputs checked)."""
     check_outputs([args.plot, args.sheet], [args.input, args.camera])
+    if args.plot:
+        plot_format(args.plot)  # (it failed after the whole comparison, the sheet written)
+    if args.sheet and Path(args.sheet).suffix.lower() != ".png":
+        warn([f"{args.sheet} is written as PNG (its name does not end in .png)"])
     is_mesh = Path(args.input).suffix.lower() in MESH_SUFFIXES
     options: dict[str, Any] = {
         "methods": [m.strip() for m in args.methods.split(",") if m.strip()],
