@@ -100,9 +100,13 @@ def auto_camera(
         raise ValueError(f"margin must be > 0, got {margin}")
     if distance is not None and not distance > 0.0:
         raise ValueError(f"distance must be > 0, got {distance}")
-    for name, degrees in (("azimuth", azimuth_deg), ("elevation", elevation_deg)):
-        if not math.isfinite(degrees):  # ("math domain error", or a NaN camera matrix)
-            raise ValueError(f"{name} must be a finite number of degrees, got {degrees}")
+    for name, degrees, bound in (("azimuth", azimuth_deg, 360), ("elevation", elevation_deg, 90)):
+        # (not finite: "math domain error", or a NaN camera matrix; past the bounds, the HTTP
+        # service's, an elevation of 120 framed the mesh from behind, upside down)
+        if not (math.isfinite(degrees) and -bound <= degrees <= bound):
+            raise ValueError(
+                f"{name} must be a finite number of degrees in [-{bound}, {bound}], got {degrees}"
+            )
     centre, radius = bounding_sphere(mesh)
     aspect = width / height
     az, el = math.radians(azimuth_deg), math.radians(elevation_deg)

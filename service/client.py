@@ -285,7 +285,10 @@ class Client:
         }
         cam = _camera_json(camera)
         if cam is not None:
-            scene["camera"] = json.loads(cam)
+            try:
+                scene["camera"] = json.loads(cam)
+            except ValueError as exc:  # (a file's text; a dict or a Camera is JSON already)
+                raise DepictError(f"cannot read camera file {camera}: {exc}") from None
         with self._stream(
             "POST", "/v1/render", files={"mesh": Path(mesh)}, data={"scene": json.dumps(scene)}
         ) as response:

@@ -128,6 +128,10 @@ ERRORS: dict[str, tuple[list[str], str]] = {
         "light intensity must be finite, >= 0 and at most 1e+15",
     ),
     "an azimuth of inf": (["render", "{mesh}", "-o", "{out}", "--azimuth", "inf"], "azimuth must"),
+    "an elevation past 90": (  # (the service refused it; here the mesh was seen upside down)
+        ["render", "{mesh}", "-o", "{out}", "--elevation", "120"],
+        "elevation must be a finite number of degrees in [-90, 90], got 120.0",
+    ),
     "a buffer mapped twice": (  # (the last --map was taken, without a word)
         ["score", "{exr}", "--map", "normal=N", "--map", "normal=P"],
         "normal is mapped twice",

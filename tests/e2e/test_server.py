@@ -284,8 +284,9 @@ def test_unreachable_server_is_one_line(
     assert err.startswith("depict: error: cannot reach") and err.count("\n") == 1
 
 
-#: A frame to send (the Blender fixture).
+#: A frame to send (the Blender fixture), and a mesh.
 FRAME = BLENDER / "cycles_multilayer.exr"
+MESH = Path(__file__).resolve().parents[2] / "examples" / "spot.obj"
 
 
 def test_what_the_client_cannot_send_is_one_line(
@@ -297,7 +298,11 @@ def test_what_the_client_cannot_send_is_one_line(
     nothing sent."""
     fifo = tmp_path / "fifo.exr"
     os.mkfifo(fifo)
+    bad_camera = tmp_path / "camera.json"
+    bad_camera.write_text("{")
     url = f"http://127.0.0.1:{free_port()}"
+    render_bad_camera = ["render", str(MESH), "-o", str(tmp_path / "r.exr"), "--server", url]
+    render_bad_camera += ["--camera", str(bad_camera)]
     for args, words in (
         (["score", str(fifo), "--server", url], "it is a FIFO (named pipe), not a regular file"),
         (["score", "/dev/zero", "--server", url], "it is a character device, not a regular"),
@@ -310,6 +315,10 @@ def test_what_the_client_cannot_send_is_one_line(
         (
             ["compare", str(FRAME), "--normal-space", "world", "--server", url],
             "--normal-space: not sent to a server by compare",
+        ),
+        (  # (the JSON error did not name the file)
+            render_bad_camera,
+            f"cannot read camera file {bad_camera}: Expecting property name",
         ),
     ):
         assert cli(args) == 2
