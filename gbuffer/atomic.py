@@ -193,12 +193,24 @@ def partial_files(paths: Iterable[str | Path] | str | Path) -> list[Path]:
         wanted.setdefault(target.parent, set()).add(target.name)
     found = []
     for folder, names in wanted.items():
-        with contextlib.suppress(OSError), os.scandir(folder) as entries:
-            for entry in entries:
-                made = _TEMPORARY.match(entry.name)
-                if made is not None and made["stem"] + made["suffix"] in names:
-                    found.append(folder / entry.name)
+        found += [path for path, output in _temporaries(folder) if output in names]
     return sorted(found)
+
+
+def partial_files_in(folder: str | Path) -> list[Path]:
+    """Every temporary file :func:`atomic_path` made in ``folder`` and did not get to remove,
+    whatever its output (a folder only Depict writes: a viewer frame's copies)."""
+    return sorted(path for path, _ in _temporaries(Path(folder)))
+
+
+def _temporaries(folder: Path) -> Iterator[tuple[Path, str]]:
+    """The files in ``folder`` named as :func:`atomic_path` names a temporary file, each with
+    the name of the output it was for (none when the folder cannot be read)."""
+    with contextlib.suppress(OSError), os.scandir(folder) as entries:
+        for entry in entries:
+            made = _TEMPORARY.match(entry.name)
+            if made is not None:
+                yield folder / entry.name, made["stem"] + made["suffix"]
 
 
 #: The name :func:`atomic_path` gives an output's temporary file: ``.{stem}.{8 hex}.tmp{suffix}``.

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from gbuffer.atomic import partial_files_in
 from service.enhance import ReadRequest
 from service.problems import Problem
 
@@ -133,7 +134,7 @@ class FrameStore:
             if frame.jobs == 0 and self._frames.get(frame.id) is not frame:
                 self.discard(frame.folder)
             elif frame.jobs == 0:
-                for partial in frame.folder.glob(".*.tmp.*"):
+                for partial in partial_files_in(frame.folder):
                     partial.unlink(missing_ok=True)
                 frame.size_bytes = folder_bytes(frame.folder)
                 self._evict()
