@@ -184,15 +184,21 @@ def resolve(
 
 
 def resolve_leniently(
-    header: Mapping[str, Any], preset: str, default: str | None, warnings: list[str]
+    explicit: str | None,
+    header: Mapping[str, Any],
+    preset: str,
+    default: str | None,
+    warnings: list[str],
 ) -> ColorSpace:
-    """:func:`resolve` with no explicit space, for a file being described (``depict
-    inspect``): a header whose colour attribute cannot be used (``chromaticities`` of no
+    """:func:`resolve`, for a file being described (``depict inspect``): where no space is
+    ``explicit``, a header whose colour attribute cannot be used (``chromaticities`` of no
     gamut, an unknown or non-linear ``colorInteropID``) is said in ``warnings``, and the
-    preset's space used, rather than refused."""
+    preset's space used, rather than refused (an explicit name that is none is refused)."""
     try:
-        return resolve(None, header, preset, default)
+        return resolve(explicit, header, preset, default)
     except OptionError as exc:
+        if explicit:
+            raise
         fallback = resolve(None, None, preset, default)
         warnings.append(f"{exc}; described as {fallback.name}, the preset's working space")
         return fallback

@@ -49,7 +49,6 @@ import OpenEXR
 
 from gbuffer import cryptomatte, exr
 from gbuffer.camera import Camera
-from gbuffer.colorspace import resolve as resolve_colorspace
 from gbuffer.colorspace import resolve_leniently
 from gbuffer.errors import FrameError
 from gbuffer.frame import LOBES, Frame, Passthrough
@@ -414,10 +413,7 @@ def inspect(
         frame = Frame(buffers={}, display_size=size, preset=name, passthrough=passthrough)
         problems = [str(exc)]
         default = find_preset(name).colorspace
-        if opts.colorspace is not None:
-            frame.colorspace = resolve_colorspace(opts.colorspace, header, name, default)
-        else:
-            frame.colorspace = resolve_leniently(header, name, default, problems)
+        frame.colorspace = resolve_leniently(opts.colorspace, header, name, default, problems)
     info = describe(frame)
     info["problems"] = problems
     return info

@@ -318,11 +318,10 @@ class _Build:
         """The working space (:func:`gbuffer.colorspace.resolve`); for an inspection (not
         ``strict``), a colour attribute of the header that cannot be used is a warning."""
         header = self.pt.parts[self.pt.primary][0]
-        if self.opts.strict or self.opts.colorspace is not None:
-            return resolve_colorspace(
-                self.opts.colorspace, header, self.preset.name, self.preset.colorspace
-            )
-        return resolve_leniently(header, self.preset.name, self.preset.colorspace, self.warnings)
+        args = (self.opts.colorspace, header, self.preset.name, self.preset.colorspace)
+        if self.opts.strict:
+            return resolve_colorspace(*args)
+        return resolve_leniently(*args, self.warnings)
 
     def planar_depth(self) -> None:
         """Step 5, depth: +inf on background, a distance along the ray made planar."""
