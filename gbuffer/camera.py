@@ -218,11 +218,11 @@ class Camera:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Camera:
         """Build a camera from the camera JSON form (see the module docstring)."""
-        known = {"world_to_camera", "fov_y_deg", "focal_px", "height", "projection"}
-        known.add("ortho_height")
-        unknown = sorted(set(data) - known)
+        unknown = sorted(set(data) - _JSON_KEYS)
         if unknown:
-            raise FrameError(f"camera JSON has unknown keys {unknown}; valid keys: {sorted(known)}")
+            raise FrameError(
+                f"camera JSON has unknown keys {unknown}; valid keys: {sorted(_JSON_KEYS)}"
+            )
         for key in ("world_to_camera", "fov_y_deg", "focal_px", "height", "ortho_height"):
             if holds_truth_value(data.get(key)):  # (JSON's true is a Python 1)
                 raise FrameError(f"camera JSON {key}: expected numbers, not true or false")
@@ -241,11 +241,8 @@ class Camera:
         if projection == "orthographic" and data.get("ortho_height") is None:
             raise FrameError("orthographic camera JSON needs ortho_height (scene units)")
         w2c = data.get("world_to_camera")
-        if (
-            w2c is not None
-            and np.asarray(w2c, dtype=object).size
-            and not all(isinstance(v, numbers.Real) for v in np.asarray(w2c, dtype=object).ravel())
-        ):
+        cells: Any = [] if w2c is None else np.asarray(w2c, dtype=object).ravel()
+        if not all(isinstance(v, numbers.Real) for v in cells):  # ("1" was converted)
             raise FrameError("camera JSON world_to_camera: expected rows of numbers")
         try:
             return cls(
@@ -379,6 +376,12 @@ class Camera:
                 source="file header (V-Ray cameraTransform)",
             )
         return None
+
+
+#: The keys of a camera JSON (:meth:`Camera.from_dict`).
+_JSON_KEYS = frozenset(
+    {"world_to_camera", "fov_y_deg", "focal_px", "height", "projection", "ortho_height"}
+)
 
 
 def _json_number(data: dict[str, Any], key: str) -> float | None:
