@@ -569,14 +569,13 @@ def run_batch(
             with _progress(progress) as bar:
                 pinned = run.frames(todo, pinned, pinned_path, bar)
         except BaseException:  # stopped (Ctrl-C, a signal): frames being written stay unwritten
-            try:
-                with contextlib.suppress(Exception):  # (the stop, not this, is what to report)
-                    _close(client, cluster)
-            finally:
-                _remove_partials(cluster, out_pattern, todo)
+            with contextlib.suppress(Exception):  # (the stop, not this, is what to report)
+                _close(client, cluster)
             raise
-        _close(client, cluster)
-        _remove_partials(cluster, out_pattern, todo)  # (a worker lost while it wrote a frame)
+        else:
+            _close(client, cluster)
+        finally:  # (a stop's frames, or a worker's lost while it wrote one)
+            _remove_partials(cluster, out_pattern, todo)
     summary.done.sort()
     summary.failed = dict(sorted(summary.failed.items()))
     summary.pinned = pinned or {}
